@@ -1,0 +1,1 @@
+//! The Vulkan device layer: the only module that uses `ash`.

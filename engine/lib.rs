@@ -1,0 +1,10 @@
+//! voxdag: store, compress, render and edit very large voxel scenes as sparse voxel DAGs.
+//!
+//! Data flows one way through the modules:
+//! `scene` (import + voxelize) -> `dag` (SVO -> SVDAG, file format, CPU queries)
+//! -> `gpu` (Vulkan device layer) -> `render` (GPU traversal, CPU reference renderer).
+
+pub mod dag;
+pub mod gpu;
+pub mod render;
+pub mod scene;

@@ -1,0 +1,1 @@
+//! Rendering: camera, GPU SVDAG traversal and its CPU reference.
