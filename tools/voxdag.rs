@@ -1,1 +1,158 @@
-fn main() {}
+//! `voxdag`: the command-line front end of the engine (build, stats, export, render, bench, demo).
+
+mod bench;
+mod commands;
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+
+/// Sparse voxel DAGs on Vulkan: import meshes and .vox files, build SVDAGs, render them on the GPU.
+#[derive(Parser)]
+#[command(name = "voxdag", version, about)]
+struct Cli {
+    /// Hide progress bars.
+    #[arg(long, short, global = true)]
+    quiet: bool,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Import a mesh (.obj/.gltf/.glb) or MagicaVoxel file (.vox), voxelize it and save an SVDAG.
+    Build(BuildArgs),
+    /// Print resolution, voxel count, bytes per encoding and per-level node counts of a .vdag file.
+    Stats(StatsArgs),
+    /// Export the occupied voxels of a .vdag file for other tools.
+    ExportVoxels(ExportArgs),
+    /// Render a .vdag file to a PNG on the GPU (or the CPU reference renderer).
+    Render(RenderArgs),
+    /// Run benchmarks and write JSON plus a Markdown table.
+    #[command(subcommand)]
+    Bench(bench::BenchCommand),
+    /// Build, render and describe the bundled default scene (assets/avocado) into an output folder.
+    Demo(DemoArgs),
+}
+
+/// Arguments of `voxdag build`.
+#[derive(Args)]
+pub struct BuildArgs {
+    /// Input scene: .obj, .gltf, .glb or .vox.
+    input: PathBuf,
+    /// Grid resolution N (power of two, 8..=65536). Default: 1024 for meshes, the model's size for .vox.
+    #[arg(long, short)]
+    resolution: Option<u32>,
+    /// Integer scale factor for .vox models.
+    #[arg(long, default_value_t = 1)]
+    vox_scale: u32,
+    /// Base-colour texture for OBJ files that have no material library.
+    #[arg(long)]
+    texture: Option<PathBuf>,
+    /// Drop voxel colours.
+    #[arg(long)]
+    no_colors: bool,
+    /// Output .vdag file.
+    #[arg(long, short)]
+    output: PathBuf,
+    /// Also write a JSON report of the build (times, peak memory, counts) to this file.
+    #[arg(long)]
+    report: Option<PathBuf>,
+}
+
+/// Arguments of `voxdag stats`.
+#[derive(Args)]
+pub struct StatsArgs {
+    /// The .vdag file.
+    file: PathBuf,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Output formats of `voxdag export-voxels`.
+#[derive(Clone, Copy, ValueEnum)]
+pub enum ExportFormat {
+    /// Raw little-endian u32 x, y, z per occupied voxel, in Morton order.
+    XyzU32,
+    /// MagicaVoxel .vox (resolution 256 at most).
+    Vox,
+}
+
+/// Arguments of `voxdag export-voxels`.
+#[derive(Args)]
+pub struct ExportArgs {
+    /// The .vdag file.
+    file: PathBuf,
+    /// Output format.
+    #[arg(long, value_enum)]
+    format: ExportFormat,
+    /// Output file.
+    #[arg(long, short)]
+    output: PathBuf,
+}
+
+/// Arguments of `voxdag render`.
+#[derive(Args)]
+pub struct RenderArgs {
+    /// The .vdag file.
+    file: PathBuf,
+    /// Image size WIDTHxHEIGHT.
+    #[arg(long, default_value = "1024x768", value_parser = commands::parse_size)]
+    size: (u32, u32),
+    /// Output PNG.
+    #[arg(long)]
+    out: PathBuf,
+    /// Camera position in grid coordinates, "x,y,z" (default: an orbit view of the whole scene).
+    #[arg(long, value_parser = commands::parse_vec3, allow_hyphen_values = true)]
+    eye: Option<[f32; 3]>,
+    /// Point the camera looks at, "x,y,z" (default: the grid centre).
+    #[arg(long, value_parser = commands::parse_vec3, allow_hyphen_values = true)]
+    target: Option<[f32; 3]>,
+    /// Vertical field of view in degrees.
+    #[arg(long)]
+    fov: Option<f32>,
+    /// Disable shadow rays.
+    #[arg(long)]
+    no_shadows: bool,
+    /// Use the CPU reference renderer instead of the GPU.
+    #[arg(long)]
+    cpu: bool,
+    /// Print a per-pass GPU timing table.
+    #[arg(long)]
+    profile: bool,
+    /// Write a Chrome trace-event JSON of the GPU passes (opens in Perfetto).
+    #[arg(long)]
+    trace: Option<PathBuf>,
+}
+
+/// Arguments of `voxdag demo`.
+#[derive(Args)]
+pub struct DemoArgs {
+    /// Folder for the outputs (scene .vdag, PNG, stats JSON).
+    #[arg(long, default_value = "out")]
+    out_dir: PathBuf,
+    /// Grid resolution of the default scene.
+    #[arg(long, default_value_t = 512)]
+    resolution: u32,
+}
+
+fn main() {
+    let cli = Cli::parse();
+    env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("voxdag=info"))
+        .format_timestamp(None)
+        .init();
+    let result = match cli.command {
+        Command::Build(args) => commands::build(&args, cli.quiet),
+        Command::Stats(args) => commands::stats(&args),
+        Command::ExportVoxels(args) => commands::export_voxels(&args),
+        Command::Render(args) => commands::render(&args),
+        Command::Bench(cmd) => bench::run(cmd, cli.quiet),
+        Command::Demo(args) => commands::demo(&args, cli.quiet),
+    };
+    if let Err(err) = result {
+        // One line: the whole cause chain, no backtrace, no panic.
+        eprintln!("error: {err:#}");
+        std::process::exit(1);
+    }
+}

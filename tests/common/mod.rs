@@ -1,0 +1,126 @@
+//! Helpers shared by the integration tests: data locations, scene building, the GPU context and
+//! image comparison with actual/difference PNGs on failure.
+#![allow(dead_code)] // each test binary uses a different subset
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use voxdag::dag::Svdag;
+use voxdag::gpu::{GpuContext, GpuOptions};
+use voxdag::render::RenderOutput;
+use voxdag::scene::{self, ImportOptions};
+
+/// The repository root.
+pub fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// `../shared/data`, or `None` after printing the one skip line the test policy asks for.
+pub fn shared_data() -> Option<PathBuf> {
+    let dir = repo().join("../shared/data");
+    if dir.is_dir() {
+        Some(dir)
+    } else {
+        println!("skipped: ../shared/data not found");
+        None
+    }
+}
+
+/// Imports and builds a scene at a resolution (no progress bar).
+pub fn build_scene(path: &Path, resolution: Option<u32>) -> Svdag {
+    let options = ImportOptions { resolution, ..Default::default() };
+    let voxels = scene::import(path, &options, &indicatif::ProgressBar::hidden())
+        .unwrap_or_else(|e| panic!("importing {}: {e}", path.display()));
+    Svdag::from_voxels(&voxels).expect("build SVDAG")
+}
+
+/// A GPU context with validation on; fails (never skips) when no Vulkan device exists.
+pub fn gpu() -> Arc<GpuContext> {
+    ensure_runtime_dir();
+    let options = GpuOptions { validation: true, ..GpuOptions::from_env() };
+    GpuContext::new(&options).expect("a Vulkan device is required for this test (lavapipe is enough)")
+}
+
+/// Mesa warns without XDG_RUNTIME_DIR; give it a private one when the environment has none.
+fn ensure_runtime_dir() {
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+        let dir = std::env::temp_dir().join(format!("voxdag-xdg-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        // Set before the first Vulkan call of this process; concurrent callers write the same value.
+        std::env::set_var("XDG_RUNTIME_DIR", &dir);
+    }
+}
+
+/// Where failing image tests write their actual and difference PNGs.
+pub fn failure_dir() -> PathBuf {
+    let dir = repo().join("target/test-failures");
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// Outcome of comparing two RGBA8 images.
+pub struct ImageDiff {
+    /// Pixels whose largest channel difference exceeds the per-channel tolerance.
+    pub differing: usize,
+    /// Largest channel difference anywhere.
+    pub max_delta: u8,
+    /// A visualisation: differing pixels red, the rest a dimmed copy of the expected image.
+    pub diff_rgba: Vec<u8>,
+}
+
+/// Compares two images of equal size channel by channel.
+pub fn compare(expected: &[u8], actual: &[u8], channel_tolerance: u8) -> ImageDiff {
+    assert_eq!(expected.len(), actual.len(), "image sizes differ");
+    let mut differing = 0;
+    let mut max_delta = 0;
+    let mut diff_rgba = Vec::with_capacity(expected.len());
+    for (e, a) in expected.chunks_exact(4).zip(actual.chunks_exact(4)) {
+        let delta = e.iter().zip(a).map(|(x, y)| x.abs_diff(*y)).max().unwrap();
+        max_delta = max_delta.max(delta);
+        if delta > channel_tolerance {
+            differing += 1;
+            diff_rgba.extend_from_slice(&[255, 0, 0, 255]);
+        } else {
+            diff_rgba.extend_from_slice(&[e[0] / 3, e[1] / 3, e[2] / 3, 255]);
+        }
+    }
+    ImageDiff { differing, max_delta, diff_rgba }
+}
+
+/// Saves an RGBA8 image as PNG.
+pub fn save_png(path: &Path, width: u32, height: u32, rgba: &[u8]) {
+    image::save_buffer(path, rgba, width, height, image::ExtendedColorType::Rgba8).unwrap();
+}
+
+/// Compares a render with `tests/golden/NAME.png`: at most `max_fraction` of the pixels may differ by
+/// more than `channel_tolerance` in some channel. On failure writes NAME.actual.png and NAME.diff.png
+/// under target/test-failures. With `VOXDAG_BLESS=1` (re)writes the golden instead.
+pub fn check_golden(name: &str, image: &RenderOutput, channel_tolerance: u8, max_fraction: f64) {
+    let golden = repo().join("tests/golden").join(format!("{name}.png"));
+    if std::env::var("VOXDAG_BLESS").as_deref() == Ok("1") {
+        save_png(&golden, image.width, image.height, &image.rgba);
+        println!("blessed {}", golden.display());
+        return;
+    }
+    let expected = image::open(&golden)
+        .unwrap_or_else(|e| panic!("golden {} unreadable ({e}); run with VOXDAG_BLESS=1 to create it", golden.display()))
+        .to_rgba8();
+    assert_eq!((expected.width(), expected.height()), (image.width, image.height), "golden {name} size");
+    let diff = compare(expected.as_raw(), &image.rgba, channel_tolerance);
+    let allowed = (max_fraction * (image.width * image.height) as f64) as usize;
+    if diff.differing > allowed {
+        let dir = failure_dir();
+        let actual = dir.join(format!("{name}.actual.png"));
+        let diff_path = dir.join(format!("{name}.diff.png"));
+        save_png(&actual, image.width, image.height, &image.rgba);
+        save_png(&diff_path, image.width, image.height, &diff.diff_rgba);
+        panic!(
+            "golden {name}: {} pixels differ by more than {channel_tolerance} (allowed {allowed}, max delta {}); \
+             wrote {} and {}",
+            diff.differing,
+            diff.max_delta,
+            actual.display(),
+            diff_path.display()
+        );
+    }
+}
