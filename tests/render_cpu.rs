@@ -405,3 +405,50 @@ fn params_reject_bad_input() {
     settings.light_dir = [0.0, 1.0, 0.0];
     assert!(render_cpu(&dag, &other, &settings).is_err());
 }
+
+/// The GLSL twins compile (glslc, as build.rs runs it) inside a minimal includer that defines
+/// the three buffer accessors the contract requires.
+#[test]
+fn glsl_includes_compile() {
+    let includer = r#"#version 460
+#extension GL_GOOGLE_include_directive : require
+layout(local_size_x = 8, local_size_y = 8) in;
+layout(std430, binding = 0) readonly buffer Words { uint words[]; };
+layout(std430, binding = 1) readonly buffer Counts { uint counts[]; };
+layout(std430, binding = 2) readonly buffer Colors { uint colors[]; };
+uint dag_word(uint i) { return words[i]; }
+uint dag_node_voxels(uint i) { return counts[i]; }
+uint dag_color(uint i) { return colors[i]; }
+#include "render/shade.glsl"
+layout(std430, binding = 3) readonly buffer Params { RenderParams params; };
+layout(std430, binding = 4) writeonly buffer Rgba { uint out_rgba[]; };
+layout(std430, binding = 5) writeonly buffer Hits { uint out_hits[]; };
+void main() {
+    uvec2 px = gl_GlobalInvocationID.xy;
+    if (px.x >= params.width || px.y >= params.height) return;
+    bool hit;
+    vec4 c = shade_pixel(px, params, hit);
+    out_rgba[px.y * params.width + px.x] = packUnorm4x8(c);
+    out_hits[px.y * params.width + px.x] = hit ? 1u : 0u;
+}
+"#;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let src = dir.path().join("includer.comp");
+    std::fs::write(&src, includer).expect("write");
+    let include = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders/glsl");
+    let out = std::process::Command::new("glslc")
+        .args(["--target-env=vulkan1.2", "-O", "-Werror", "-I"])
+        .arg(&include)
+        .arg(&src)
+        .arg("-o")
+        .arg(dir.path().join("includer.spv"))
+        .output()
+        .expect("glslc must be installed (apt-get install glslc)");
+    assert!(
+        out.status.success(),
+        "glslc failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let spv = std::fs::read(dir.path().join("includer.spv")).expect("spv");
+    assert_eq!(&spv[..4], &0x0723_0203u32.to_le_bytes());
+}

@@ -84,11 +84,11 @@ pub fn shade_pixel(
         );
     };
     let albedo = if p.has_colors() {
-        let rgba = dag
-            .colors
-            .get(hit.color_index as usize)
-            .copied()
-            .unwrap_or(0xffff_ffff);
+        // Out-of-range indices shade white, like the GPU (which checks `color_count`).
+        let rgba = match dag.colors.get(hit.color_index as usize) {
+            Some(&c) if hit.color_index < p.color_count as u64 => c,
+            _ => 0xffff_ffff,
+        };
         [0, 8, 16].map(|s| srgb_to_linear(((rgba >> s) & 0xff) as f32 / 255.0))
     } else {
         [GREY; 3]

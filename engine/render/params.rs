@@ -45,8 +45,10 @@ pub struct RenderParams {
     pub root_level: u32,
     /// `FLAG_HAS_COLORS | FLAG_SHADOWS`.
     pub flags: u32,
+    /// Entries of the colour buffer (0 without colours); larger colour indices shade white.
+    pub color_count: u32,
     /// Explicit padding to a 16-byte multiple.
-    pub _pad: [u32; 3],
+    pub _pad: [u32; 2],
 }
 
 const _: () = {
@@ -61,7 +63,8 @@ const _: () = {
     assert!(std::mem::offset_of!(RenderParams, resolution) == 88);
     assert!(std::mem::offset_of!(RenderParams, root_level) == 92);
     assert!(std::mem::offset_of!(RenderParams, flags) == 96);
-    assert!(std::mem::offset_of!(RenderParams, _pad) == 100);
+    assert!(std::mem::offset_of!(RenderParams, color_count) == 100);
+    assert!(std::mem::offset_of!(RenderParams, _pad) == 104);
 };
 
 /// Default direction towards the light (normalised when used).
@@ -111,7 +114,8 @@ impl RenderParams {
             resolution: dag.resolution,
             root_level: dag.root_level(),
             flags,
-            _pad: [0; 3],
+            color_count: dag.colors.len() as u32,
+            _pad: [0; 2],
         })
     }
 
