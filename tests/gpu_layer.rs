@@ -3,9 +3,13 @@
 
 use std::sync::Arc;
 
+use voxdag::dag::{Svdag, VoxelIndex};
 use voxdag::gpu::{
     shaders, ComputePipelineDesc, GpuContext, GpuError, GpuOptions, MemLocation, Profiler,
 };
+use voxdag::render::gpu::GpuRenderer;
+use voxdag::render::{render_cpu, Camera, RenderOutput, RenderSettings};
+use voxdag::scene::{morton, Voxels};
 
 fn context() -> Arc<GpuContext> {
     let _ = env_logger::builder().is_test(true).try_init();
@@ -330,6 +334,151 @@ fn profiler_times_each_pass_and_writes_a_trace() {
         profiler.end_pass(&mut cmd);
         cmd.submit().unwrap();
         assert_eq!(profiler.resolve().unwrap().len(), 1);
+    }
+    assert_clean(&ctx);
+}
+
+/// A floor, a sphere and a few pillars in a `n^3` grid, optionally with colours.
+fn test_scene(n: u32, colored: bool) -> Voxels {
+    let mut coords = Vec::new();
+    let c = n as f32 / 2.0;
+    let r = n as f32 * 0.3;
+    for z in 0..n {
+        for y in 0..n {
+            for x in 0..n {
+                let (fx, fy, fz) = (
+                    x as f32 + 0.5 - c,
+                    y as f32 + 0.5 - c * 0.9,
+                    z as f32 + 0.5 - c,
+                );
+                let sphere = fx * fx + fy * fy + fz * fz <= r * r;
+                let floor = y < 2;
+                let pillar = (x % 16 == 3 && z % 16 == 5) && y < n / 2;
+                if sphere || floor || pillar {
+                    coords.push([x, y, z]);
+                }
+            }
+        }
+    }
+    let mut codes: Vec<u64> = coords
+        .iter()
+        .map(|c| morton::encode(c[0], c[1], c[2]))
+        .collect();
+    codes.sort_unstable();
+    let colors = if colored {
+        codes
+            .iter()
+            .map(|&m| {
+                let [x, y, z] = morton::decode(m);
+                0xff00_0000 | (x * 4) | ((y * 4) << 8) | (((x ^ z) & 0xff) << 16)
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    Voxels {
+        resolution: n,
+        codes,
+        colors,
+    }
+}
+
+/// Pixels whose hit flags differ, and the largest / mean colour channel difference over pixels
+/// that both renderers hit or both missed.
+fn compare(cpu: &RenderOutput, gpu: &RenderOutput) -> (usize, u8, f64) {
+    assert_eq!((cpu.width, cpu.height), (gpu.width, gpu.height));
+    assert_eq!(gpu.rgba.len(), cpu.rgba.len());
+    assert_eq!(gpu.hits.len(), cpu.hits.len());
+    assert!(gpu.hits.iter().all(|&h| h <= 1));
+    let mut hit_diff = 0;
+    let (mut max, mut sum, mut n) = (0u8, 0u64, 0u64);
+    for i in 0..cpu.hits.len() {
+        if cpu.hits[i] != gpu.hits[i] {
+            hit_diff += 1;
+            continue;
+        }
+        for k in 0..4 {
+            let d = cpu.rgba[i * 4 + k].abs_diff(gpu.rgba[i * 4 + k]);
+            max = max.max(d);
+            sum += d as u64;
+            n += 1;
+        }
+    }
+    (hit_diff, max, sum as f64 / n.max(1) as f64)
+}
+
+#[test]
+fn gpu_render_matches_cpu_reference() {
+    let ctx = context();
+    {
+        let renderer = GpuRenderer::new(&ctx).unwrap();
+        let mut profiler = Profiler::new(&ctx).unwrap();
+        let n = 64;
+        for colored in [false, true] {
+            let dag = Svdag::from_voxels(&test_scene(n, colored));
+            let index = VoxelIndex::new(&dag);
+            let scene = renderer.upload(&dag).unwrap();
+            assert_eq!(scene.color_count() as usize, dag.colors.len());
+            let mut inside = Camera::orbit_default(n);
+            inside.eye = [5.5, 20.25, 60.75];
+            inside.target = [32.0, 25.0, 30.0];
+            for (camera, shadows) in [(Camera::orbit_default(n), true), (inside, false)] {
+                let mut settings = RenderSettings::new(161, 97, camera);
+                settings.shadows = shadows;
+                let cpu = render_cpu(&dag, &index, &settings).unwrap();
+                let gpu = renderer
+                    .render(&scene, &settings, Some(&mut profiler))
+                    .unwrap();
+                let (hit_diff, max, mean) = compare(&cpu, &gpu);
+                let pixels = cpu.hits.len();
+                println!(
+                    "colored {colored} shadows {shadows}: {} hits, {hit_diff} hit flags differ, \
+                     colour diff max {max} mean {mean:.4}",
+                    cpu.hit_count()
+                );
+                assert!(
+                    cpu.hit_count() > pixels / 10,
+                    "the scene should fill the view"
+                );
+                assert!(
+                    hit_diff * 1000 <= pixels,
+                    "{hit_diff} of {pixels} hit flags differ"
+                );
+                assert!(mean <= 0.05, "mean channel difference {mean}");
+                assert!(max <= 2, "max channel difference {max}");
+            }
+        }
+        let timings: Vec<&str> = profiler.passes().iter().map(|p| p.name.as_str()).collect();
+        assert_eq!(timings, ["primary rays"; 4]);
+        println!("{}", profiler.table());
+    }
+    assert_clean(&ctx);
+}
+
+#[test]
+fn gpu_render_of_empty_scene_is_all_sky() {
+    let ctx = context();
+    {
+        let renderer = GpuRenderer::new(&ctx).unwrap();
+        let dag = Svdag::from_voxels(&Voxels {
+            resolution: 8,
+            ..Voxels::default()
+        });
+        let index = VoxelIndex::new(&dag);
+        let scene = renderer.upload(&dag).unwrap();
+        let settings = RenderSettings::new(20, 12, Camera::orbit_default(8));
+        let gpu = renderer.render(&scene, &settings, None).unwrap();
+        let cpu = render_cpu(&dag, &index, &settings).unwrap();
+        assert!(gpu.hits.iter().all(|&h| h == 0));
+        let (hit_diff, max, _) = compare(&cpu, &gpu);
+        assert_eq!(
+            (hit_diff, max <= 1),
+            (0, true),
+            "max channel difference {max}"
+        );
+        // Bad settings are errors, not panics.
+        let bad = RenderSettings::new(0, 12, Camera::orbit_default(8));
+        assert!(renderer.render(&scene, &bad, None).is_err());
     }
     assert_clean(&ctx);
 }

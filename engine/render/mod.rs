@@ -6,6 +6,7 @@
 
 pub mod camera;
 pub mod cpu;
+pub mod gpu;
 pub mod params;
 
 use std::io::Write;
