@@ -17,6 +17,7 @@
 
 mod build;
 mod index;
+pub mod raycast;
 
 pub use index::VoxelIndex;
 

@@ -1,0 +1,229 @@
+//! GPU renderer: uploads an SVDAG and ray casts it with `shaders/glsl/render/primary.comp`.
+//!
+//! The shader runs the same traversal and shading as the CPU reference
+//! ([`super::cpu::render_cpu`]), built from the same [`RenderParams`]; one dispatch of 8x8
+//! workgroups writes an RGBA8 storage image and a per-pixel `u32` hit buffer, both read back.
+//! Buffers are reached through device addresses passed as push constants, so the DAG may exceed
+//! `maxStorageBufferRange` (up to `maxMemoryAllocationSize` per buffer).
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use super::params::{RenderParams, FLAG_HAS_COLORS};
+use super::{RenderOutput, RenderSettings};
+use crate::dag::{Svdag, VoxelIndex};
+use crate::gpu::{
+    shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, MemLocation,
+    Profiler,
+};
+
+/// Workgroup size of `primary.comp` (specialization constants 0 and 1).
+const WORKGROUP: [u32; 2] = [8, 8];
+
+/// Push constants of `primary.comp`: device addresses of its buffers.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct PrimaryPush {
+    params: u64,
+    words: u64,
+    node_voxels: u64,
+    colors: u64,
+    hits: u64,
+}
+
+const _: () = {
+    assert!(std::mem::size_of::<PrimaryPush>() == 40);
+    assert!(std::mem::offset_of!(PrimaryPush, params) == 0);
+    assert!(std::mem::offset_of!(PrimaryPush, words) == 8);
+    assert!(std::mem::offset_of!(PrimaryPush, node_voxels) == 16);
+    assert!(std::mem::offset_of!(PrimaryPush, colors) == 24);
+    assert!(std::mem::offset_of!(PrimaryPush, hits) == 32);
+};
+
+/// Renders SVDAGs on the GPU; holds the compiled pipeline.
+pub struct GpuRenderer {
+    ctx: Arc<GpuContext>,
+    primary: ComputePipeline,
+}
+
+/// An SVDAG uploaded to the GPU: its words, colours and per-node voxel counts.
+pub struct GpuScene {
+    words: Buffer,
+    node_voxels: Buffer,
+    colors: Buffer,
+    resolution: u32,
+    color_count: u32,
+}
+
+impl GpuScene {
+    /// Grid side length N of the uploaded DAG.
+    pub fn resolution(&self) -> u32 {
+        self.resolution
+    }
+
+    /// Number of per-voxel colours (0 when the scene has none).
+    pub fn color_count(&self) -> u32 {
+        self.color_count
+    }
+
+    /// Device memory held by the scene's buffers, in bytes.
+    pub fn gpu_bytes(&self) -> u64 {
+        self.words.size() + self.node_voxels.size() + self.colors.size()
+    }
+}
+
+impl GpuRenderer {
+    /// Builds the primary-ray pipeline.
+    pub fn new(ctx: &Arc<GpuContext>) -> Result<GpuRenderer, GpuError> {
+        let primary = ctx.create_compute_pipeline(&ComputePipelineDesc {
+            name: "primary rays",
+            spirv: shaders::RENDER_PRIMARY,
+            spec_constants: &WORKGROUP,
+            push_constant_size: std::mem::size_of::<PrimaryPush>() as u32,
+            storage_image: true,
+        })?;
+        Ok(GpuRenderer {
+            ctx: Arc::clone(ctx),
+            primary,
+        })
+    }
+
+    /// Uploads `dag.words`, its colours and the per-node voxel counts of [`VoxelIndex`] (as
+    /// `u32`). Errors when a count or the colour count exceeds `u32`, when the DAG has 2^32 or
+    /// more words (GPU indices are `uint`), or when a buffer exceeds the device's allocation limit.
+    pub fn upload(&self, dag: &Svdag) -> Result<GpuScene, GpuError> {
+        let invalid = |m: String| GpuError::InvalidArgument(m);
+        if dag.words.is_empty() || dag.words.len() as u64 > u32::MAX as u64 {
+            return Err(invalid(format!(
+                "DAG has {} words; the GPU needs 1..2^32",
+                dag.words.len()
+            )));
+        }
+        if dag.colors.len() as u64 > u32::MAX as u64 {
+            return Err(invalid(format!(
+                "{} colours exceed the 2^32 limit of GPU colour indices",
+                dag.colors.len()
+            )));
+        }
+        let index = VoxelIndex::new(dag);
+        let mut counts = Vec::with_capacity(index.node_voxels.len());
+        for (word, &n) in index.node_voxels.iter().enumerate() {
+            let n = u32::try_from(n).map_err(|_| {
+                invalid(format!(
+                    "node at word {word} holds {n} voxels, more than a GPU u32 count"
+                ))
+            })?;
+            counts.push(n);
+        }
+        let words = self.ctx.upload("dag words", &dag.words)?;
+        let node_voxels = self.ctx.upload("dag node voxel counts", &counts)?;
+        // A scene without colours still gets a one-word buffer (never read: the flag is off).
+        let colors = if dag.colors.is_empty() {
+            self.ctx.upload("dag colors (none)", &[0u32])?
+        } else {
+            self.ctx.upload("dag colors", &dag.colors)?
+        };
+        Ok(GpuScene {
+            words,
+            node_voxels,
+            colors,
+            resolution: dag.resolution,
+            color_count: dag.colors.len() as u32,
+        })
+    }
+
+    /// Frame constants for `scene`: camera and light from `settings` via [`RenderParams::new`]
+    /// (with the scene's resolution), colour fields from the uploaded scene.
+    pub fn params(
+        &self,
+        scene: &GpuScene,
+        settings: &RenderSettings,
+    ) -> Result<RenderParams, GpuError> {
+        // RenderParams::new reads only the resolution and the colour count of the DAG.
+        let header = Svdag {
+            resolution: scene.resolution,
+            words: Vec::new(),
+            level_starts: Vec::new(),
+            colors: Vec::new(),
+        };
+        let mut p = RenderParams::new(settings, &header)
+            .map_err(|e| GpuError::InvalidArgument(format!("render settings: {e}")))?;
+        if scene.color_count > 0 {
+            p.flags |= FLAG_HAS_COLORS;
+        }
+        p.color_count = scene.color_count;
+        Ok(p)
+    }
+
+    /// Renders one image: a single dispatch (profiled as "primary rays"), then readback of the
+    /// image and the hit buffer (CPU spans "readback image" / "readback hits").
+    pub fn render(
+        &self,
+        scene: &GpuScene,
+        settings: &RenderSettings,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<RenderOutput, GpuError> {
+        let ctx = &self.ctx;
+        let params = self.params(scene, settings)?;
+        let (w, h) = (settings.width, settings.height);
+        let pixels = w as u64 * h as u64;
+
+        let upload_start = Instant::now();
+        let mut params_buf = ctx.create_buffer(
+            "render params",
+            std::mem::size_of::<RenderParams>() as u64,
+            MemLocation::CpuToGpu,
+        )?;
+        ctx.write_mapped(&mut params_buf, 0, std::slice::from_ref(&params))?;
+        let image = ctx.create_storage_image("render target", w, h)?;
+        let hits = ctx.create_buffer("render hits", pixels * 4, MemLocation::GpuOnly)?;
+        if let Some(p) = profiler.as_deref_mut() {
+            p.record_cpu_span("render setup", upload_start, Instant::now());
+        }
+
+        let push = PrimaryPush {
+            params: params_buf.address(),
+            words: scene.words.address(),
+            node_voxels: scene.node_voxels.address(),
+            colors: scene.colors.address(),
+            hits: hits.address(),
+        };
+        let mut cmd = ctx.begin_commands("render")?;
+        if let Some(p) = profiler.as_deref_mut() {
+            p.begin_pass(&mut cmd, "primary rays");
+        } else {
+            cmd.begin_label("primary rays");
+        }
+        let groups = [w.div_ceil(WORKGROUP[0]), h.div_ceil(WORKGROUP[1]), 1];
+        cmd.dispatch(
+            &self.primary,
+            groups,
+            bytemuck::bytes_of(&push),
+            Some(&image),
+        )?;
+        if let Some(p) = profiler.as_deref_mut() {
+            p.end_pass(&mut cmd);
+        } else {
+            cmd.end_label();
+        }
+        cmd.submit()?;
+        if let Some(p) = profiler.as_deref_mut() {
+            p.resolve()?;
+        }
+
+        let t = Instant::now();
+        let rgba = ctx.read_image(&image)?;
+        let t2 = Instant::now();
+        let hits = ctx.download::<u32>(&hits)?;
+        if let Some(p) = profiler {
+            p.record_cpu_span("readback image", t, t2);
+            p.record_cpu_span("readback hits", t2, Instant::now());
+        }
+        Ok(RenderOutput {
+            width: w,
+            height: h,
+            rgba,
+            hits,
+        })
+    }
+}

@@ -1,0 +1,153 @@
+//! `RenderParams`: the per-frame constants shared by the CPU reference renderer and the GPU
+//! (mirror of `shaders/glsl/shared/render_params.h`; keep both in sync, the asserts below check
+//! the Rust side against the header's documented offsets).
+
+use bytemuck::{Pod, Zeroable};
+
+use super::camera::{generate_ray, normalize, pixel_scale, CameraBasis};
+use super::{RenderError, RenderSettings};
+use crate::dag::raycast::Ray;
+use crate::dag::Svdag;
+
+/// `flags` bit: the scene has per-voxel colours.
+pub const FLAG_HAS_COLORS: u32 = 1;
+/// `flags` bit: cast shadow rays.
+pub const FLAG_SHADOWS: u32 = 2;
+/// Largest grid the GPU traversal supports (its stack has `MAX_GPU_FRAMES` frames).
+pub const MAX_GPU_RESOLUTION: u32 = 1 << 16;
+/// Stack frames of the GLSL traversal (`TRAVERSE_MAX_FRAMES` in `traverse.glsl`).
+pub const MAX_GPU_FRAMES: u32 = 16;
+/// Shadow-ray start offset along the normal, as a fraction of the resolution (2^-18 N: about 32
+/// f32 ulps of the largest coordinate, 0.25 voxel at 64K^3, 3e-5 voxel at 8^3).
+pub const SHADOW_EPSILON_PER_VOXEL_SIDE: f32 = 1.0 / 262144.0;
+
+/// Frame constants, std430/scalar layout: five `vec4`s then eight `uint`s (112 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct RenderParams {
+    /// xyz: eye position (grid coordinates); w: `tan(fov_y / 2)`.
+    pub eye: [f32; 4],
+    /// xyz: unit camera right; w: pixel scale `2 tan(fov_y / 2) / height`.
+    pub right: [f32; 4],
+    /// xyz: unit camera up; w: shadow-ray offset along the normal (grid units).
+    pub up: [f32; 4],
+    /// xyz: unit viewing direction; w: 0 (reserved).
+    pub forward: [f32; 4],
+    /// xyz: unit direction towards the light; w: 0 (reserved).
+    pub light_dir: [f32; 4],
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Grid side length N.
+    pub resolution: u32,
+    /// Level of the DAG root (`log2(N) - 2`).
+    pub root_level: u32,
+    /// `FLAG_HAS_COLORS | FLAG_SHADOWS`.
+    pub flags: u32,
+    /// Entries of the colour buffer (0 without colours); larger colour indices shade white.
+    pub color_count: u32,
+    /// Explicit padding to a 16-byte multiple.
+    pub _pad: [u32; 2],
+}
+
+const _: () = {
+    assert!(std::mem::size_of::<RenderParams>() == 112);
+    assert!(std::mem::offset_of!(RenderParams, eye) == 0);
+    assert!(std::mem::offset_of!(RenderParams, right) == 16);
+    assert!(std::mem::offset_of!(RenderParams, up) == 32);
+    assert!(std::mem::offset_of!(RenderParams, forward) == 48);
+    assert!(std::mem::offset_of!(RenderParams, light_dir) == 64);
+    assert!(std::mem::offset_of!(RenderParams, width) == 80);
+    assert!(std::mem::offset_of!(RenderParams, height) == 84);
+    assert!(std::mem::offset_of!(RenderParams, resolution) == 88);
+    assert!(std::mem::offset_of!(RenderParams, root_level) == 92);
+    assert!(std::mem::offset_of!(RenderParams, flags) == 96);
+    assert!(std::mem::offset_of!(RenderParams, color_count) == 100);
+    assert!(std::mem::offset_of!(RenderParams, _pad) == 104);
+};
+
+/// Default direction towards the light (normalised when used).
+pub const DEFAULT_LIGHT_DIR: [f32; 3] = [0.4, 1.0, 0.3];
+
+impl RenderParams {
+    /// Frame constants for `settings` and `dag`. Fails on an empty image, a resolution the GPU
+    /// stack cannot hold, more than 2^32 colours (the GPU uses `uint` colour indices) or a zero
+    /// light direction.
+    pub fn new(settings: &RenderSettings, dag: &Svdag) -> Result<RenderParams, RenderError> {
+        if settings.width == 0 || settings.height == 0 {
+            return Err(RenderError::EmptyImage {
+                width: settings.width,
+                height: settings.height,
+            });
+        }
+        if !dag.resolution.is_power_of_two()
+            || dag.resolution < 8
+            || dag.resolution > MAX_GPU_RESOLUTION
+        {
+            return Err(RenderError::Resolution(dag.resolution));
+        }
+        if dag.colors.len() as u64 > u32::MAX as u64 {
+            return Err(RenderError::TooManyColors(dag.colors.len() as u64));
+        }
+        let light =
+            normalize(settings.light_dir).ok_or(RenderError::LightDir(settings.light_dir))?;
+        let cam = &settings.camera;
+        let b = cam.basis();
+        let tan = cam.tan_half_fov();
+        let v4 = |v: [f32; 3], w: f32| [v[0], v[1], v[2], w];
+        let mut flags = 0;
+        if !dag.colors.is_empty() {
+            flags |= FLAG_HAS_COLORS;
+        }
+        if settings.shadows {
+            flags |= FLAG_SHADOWS;
+        }
+        Ok(RenderParams {
+            eye: v4(cam.eye, tan),
+            right: v4(b.right, pixel_scale(tan, settings.height)),
+            up: v4(b.up, dag.resolution as f32 * SHADOW_EPSILON_PER_VOXEL_SIDE),
+            forward: v4(b.forward, 0.0),
+            light_dir: v4(light, 0.0),
+            width: settings.width,
+            height: settings.height,
+            resolution: dag.resolution,
+            root_level: dag.root_level(),
+            flags,
+            color_count: dag.colors.len() as u32,
+            _pad: [0; 2],
+        })
+    }
+
+    /// Camera frame stored in the params.
+    pub fn basis(&self) -> CameraBasis {
+        let xyz = |v: [f32; 4]| [v[0], v[1], v[2]];
+        CameraBasis {
+            right: xyz(self.right),
+            up: xyz(self.up),
+            forward: xyz(self.forward),
+        }
+    }
+
+    /// Primary ray through the centre of `pixel`, exactly as `shade.glsl` builds it.
+    pub fn primary_ray(&self, pixel: [u32; 2]) -> Ray {
+        generate_ray(
+            [self.eye[0], self.eye[1], self.eye[2]],
+            &self.basis(),
+            self.right[3],
+            pixel,
+            self.width,
+            self.height,
+        )
+    }
+
+    /// True when the scene has colours.
+    pub fn has_colors(&self) -> bool {
+        self.flags & FLAG_HAS_COLORS != 0
+    }
+
+    /// True when shadow rays are cast.
+    pub fn shadows(&self) -> bool {
+        self.flags & FLAG_SHADOWS != 0
+    }
+}

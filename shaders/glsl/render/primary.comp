@@ -1,0 +1,61 @@
+#version 460
+// Primary rays: one invocation per pixel traces the SVDAG and shades the hit
+// (render/shade.glsl, the GLSL twin of engine/render/cpu.rs), writing the sRGB colour to the
+// storage image and 1 (hit) / 0 (miss) to the hit buffer. Driven by engine/render/gpu.rs.
+// Buffers are reached through device addresses (push constants), so they may exceed
+// maxStorageBufferRange.
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
+
+// Workgroup size: specialization constants 0 and 1 (8 x 8).
+layout(local_size_x_id = 0, local_size_y_id = 1, local_size_z = 1) in;
+
+layout(set = 0, binding = 0, rgba8) uniform writeonly image2D out_image;
+
+#include "shared/render_params.h"
+
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer ParamsRef {
+    RenderParams params;
+};
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer WordsRef {
+    uint w[];
+};
+layout(buffer_reference, std430, buffer_reference_align = 4) writeonly buffer HitsRef {
+    uint h[];
+};
+
+// Mirror of `PrimaryPush` in engine/render/gpu.rs (40 bytes).
+layout(push_constant, std430) uniform Push {
+    uint64_t params;      // RenderParams
+    uint64_t words;       // Svdag::words
+    uint64_t node_voxels; // VoxelIndex::node_voxels as uint
+    uint64_t colors;      // Svdag::colors (RGBA8)
+    uint64_t hits;        // one uint per pixel
+} push;
+
+uint dag_word(uint i) {
+    return WordsRef(push.words).w[i];
+}
+
+uint dag_node_voxels(uint i) {
+    return WordsRef(push.node_voxels).w[i];
+}
+
+uint dag_color(uint i) {
+    return WordsRef(push.colors).w[i];
+}
+
+#include "render/traverse.glsl"
+#include "render/shade.glsl"
+
+void main() {
+    RenderParams p = ParamsRef(push.params).params;
+    uvec2 pixel = gl_GlobalInvocationID.xy;
+    if (pixel.x >= p.width || pixel.y >= p.height) {
+        return;
+    }
+    bool hit;
+    vec4 color = shade_pixel(pixel, p, hit);
+    imageStore(out_image, ivec2(pixel), color);
+    HitsRef(push.hits).h[pixel.y * p.width + pixel.x] = hit ? 1u : 0u;
+}
