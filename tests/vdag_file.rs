@@ -22,7 +22,7 @@ fn scene(n: u32, colored: bool) -> Voxels {
     let colors = if colored {
         codes
             .iter()
-            .map(|&c| 0xff00_0000 | (c as u32 % 7) * 0x0020_1008)
+            .map(|&c| 0xff00_0000 | ((c as u32 % 7) * 0x0020_1008))
             .collect()
     } else {
         Vec::new()
@@ -399,7 +399,7 @@ fn vox_export_round_trip() {
     v.colors = v
         .codes
         .iter()
-        .map(|&c| 0xff00_0000 | (c as u32).wrapping_mul(2_654_435_761) & 0xff_ffff)
+        .map(|&c| 0xff00_0000 | ((c as u32).wrapping_mul(2_654_435_761) & 0xff_ffff))
         .collect();
     export_vox(&Svdag::from_voxels(&v).unwrap(), &path).unwrap();
     let got = reimport(&path, 64);
@@ -425,4 +425,29 @@ fn vox_export_rejects_large_grids() {
     assert!(matches!(err, DagError::Export { .. }));
     assert!(err.to_string().contains("256"), "{err}");
     assert!(!path.exists());
+}
+
+#[test]
+fn documented_example_layout() {
+    let dag = Svdag::from_voxels(&Voxels {
+        resolution: 8,
+        codes: vec![0, 511],
+        colors: vec![],
+    })
+    .unwrap();
+    assert_eq!(dag.words, vec![0x81, 3, 5, 1, 0, 0, 0x8000_0000]);
+    assert_eq!(dag.level_starts, vec![3, 0]);
+    let b = dag.to_bytes();
+    assert_eq!(b.len(), 188);
+    assert_eq!(get_u64(&b, 32), 188);
+    let entries: Vec<(u64, u64)> = (0..3)
+        .map(|i| (get_u64(&b, 64 + 24 * i + 8), get_u64(&b, 64 + 24 * i + 16)))
+        .collect();
+    assert_eq!(entries, vec![(136, 16), (152, 28), (184, 0)]);
+    assert_eq!(&b[152..156], &0x81u32.to_le_bytes());
+    assert_eq!(get_u64(&b, 136), 3);
+    assert_eq!(
+        u32::from_le_bytes(b[184..188].try_into().unwrap()),
+        crc32fast::hash(&b[..184])
+    );
 }
