@@ -79,7 +79,10 @@ fn check(v: &Voxels, full_grid: bool) {
     assert_eq!(svo, naive_svo(v), "svo node counts");
     assert_eq!(svdag, naive_svdag(v), "svdag node counts");
     // Unshared node bytes: 8 per leaf, 4 per inner node plus 4 per child (= node below).
-    let want_bytes = 8 * svo[0] + (1..svo.len()).map(|l| 4 * svo[l] + 4 * svo[l - 1]).sum::<u64>();
+    let want_bytes = 8 * svo[0]
+        + (1..svo.len())
+            .map(|l| 4 * svo[l] + 4 * svo[l - 1])
+            .sum::<u64>();
     assert_eq!(dag.bytes_svo(), want_bytes);
     let all = dag.stats();
     assert_eq!(all.levels, stats);
@@ -135,14 +138,24 @@ fn grid(n: u32, f: impl Fn(u32, u32, u32) -> bool) -> Vec<(u32, u32, u32)> {
 #[test]
 fn structured_scenes() {
     check(&voxels(16, &grid(16, |_, _, _| true), true), true);
-    check(&voxels(32, &grid(32, |x, y, z| (x + y + z) % 2 == 0), false), true);
+    check(
+        &voxels(32, &grid(32, |x, y, z| (x + y + z) % 2 == 0), false),
+        true,
+    );
     let shell = |x: u32, y: u32, z: u32| {
         let d = |a: u32| (a as i64 * 2 - 31).pow(2);
         let r2 = d(x) + d(y) + d(z);
         (26 * 26..=30 * 30).contains(&r2)
     };
     check(&voxels(32, &grid(32, shell), true), true);
-    check(&voxels(64, &grid(64, |x, y, z| x < 40 && y == 7 && z % 3 == 0), true), false);
+    check(
+        &voxels(
+            64,
+            &grid(64, |x, y, z| x < 40 && y == 7 && z % 3 == 0),
+            true,
+        ),
+        false,
+    );
     for n in [8, 64] {
         check(&voxels(n, &[], false), n <= 32);
         for corner in 0..8 {
@@ -237,7 +250,9 @@ fn builder_rejects_bad_input() {
 fn large_sparse_scene_matches_reference() {
     // Enough voxels that the builder splits its input into several parallel chunks.
     let n = 256;
-    let coords = grid(n, |x, y, z| (x * 7 + y * 13 + z * 29) % 11 == 0 && (x ^ y) & 4 == 0);
+    let coords = grid(n, |x, y, z| {
+        (x * 7 + y * 13 + z * 29) % 11 == 0 && (x ^ y) & 4 == 0
+    });
     assert!(coords.len() > 1 << 17);
     check(&voxels(n, &coords, true), false);
 }
@@ -257,5 +272,60 @@ proptest! {
         let side = box_side.min(n);
         let coords: Vec<_> = raw.iter().map(|&(x, y, z)| (x % side, y % side, z % side)).collect();
         check(&voxels(n, &coords, colored), n <= 16);
+    }
+}
+
+/// `../shared/data` next to the package, if present.
+fn shared_data() -> Option<std::path::PathBuf> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
+    dir.is_dir().then_some(dir)
+}
+
+/// First model of a MagicaVoxel file as voxdag voxels: (x, y, z)_vox -> (x, z, N - 1 - y),
+/// N the next power of two (>= 8) of the model size, palette colours attached.
+fn load_vox(path: &std::path::Path) -> Voxels {
+    let data = dot_vox::load(path.to_str().unwrap()).unwrap();
+    let model = &data.models[0];
+    let n = model
+        .size
+        .x
+        .max(model.size.y)
+        .max(model.size.z)
+        .next_power_of_two()
+        .max(8);
+    let mut pairs: Vec<(u64, u32)> = model
+        .voxels
+        .iter()
+        .map(|v| {
+            let c = data.palette[v.i as usize];
+            let code = morton::encode(v.x as u32, v.z as u32, n - 1 - v.y as u32);
+            (code, u32::from_le_bytes([c.r, c.g, c.b, c.a]))
+        })
+        .collect();
+    pairs.sort_unstable();
+    pairs.dedup_by_key(|p| p.0);
+    Voxels {
+        resolution: n,
+        codes: pairs.iter().map(|p| p.0).collect(),
+        colors: pairs.iter().map(|p| p.1).collect(),
+    }
+}
+
+#[test]
+fn real_vox_models_match_reference() {
+    let Some(data) = shared_data() else {
+        println!("skipped: ../shared/data not found");
+        return;
+    };
+    let models = data.join("vox/voxel-model");
+    for file in [
+        "procedure/menger.vox",
+        "scan/teapot.vox",
+        "scan/dragon.vox",
+        "monument/monu1.vox",
+    ] {
+        let v = load_vox(&models.join(file));
+        assert!(!v.is_empty(), "{file}");
+        check(&v, false);
     }
 }

@@ -451,3 +451,45 @@ fn documented_example_layout() {
         crc32fast::hash(&b[..184])
     );
 }
+
+#[test]
+fn real_vox_model_round_trips() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
+    if !dir.is_dir() {
+        println!("skipped: ../shared/data not found");
+        return;
+    }
+    let src = dir.join("vox/voxel-model/monument/monu1.vox");
+    let data = dot_vox::load(src.to_str().unwrap()).unwrap();
+    let model = &data.models[0];
+    let n = model
+        .size
+        .x
+        .max(model.size.y)
+        .max(model.size.z)
+        .next_power_of_two();
+    let mut pairs: Vec<(u64, u32)> = model
+        .voxels
+        .iter()
+        .map(|v| {
+            let c = data.palette[v.i as usize];
+            let code = morton::encode(v.x as u32, v.z as u32, n - 1 - v.y as u32);
+            (code, u32::from_le_bytes([c.r, c.g, c.b, c.a]))
+        })
+        .collect();
+    pairs.sort_unstable();
+    let v = Voxels {
+        resolution: n,
+        codes: pairs.iter().map(|p| p.0).collect(),
+        colors: pairs.iter().map(|p| p.1).collect(),
+    };
+    let dag = Svdag::from_voxels(&v).unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let path = tmp.path().join("monu1.vdag");
+    dag.save(&path).unwrap();
+    assert_eq!(Svdag::load(&path).unwrap(), dag);
+    // .vox export and re-import: same voxels, exact colours (the source has <= 255 colours).
+    let vox = tmp.path().join("monu1.vox");
+    export_vox(&dag, &vox).unwrap();
+    assert_eq!(reimport(&vox, n), pairs);
+}
