@@ -13,13 +13,78 @@
 //! - Leaf at word `p`: two words, the low then the high half of a 64-bit mask whose bit
 //!   `morton(x, y, z)` (x, y, z in 0..4, see `scene::morton`) is the voxel at that position.
 //! - An empty scene is a root with child mask 0.
+//!
 //! Colours (optional) are one RGBA8 word per occupied voxel in depth-first Morton order.
 
 mod build;
+mod export;
+mod file;
 mod index;
+mod query;
 pub mod raycast;
+mod stats;
+mod validate;
 
+use std::path::PathBuf;
+
+pub use export::{export_vox, export_xyz_u32, export_xyz_u32_file};
+pub use file::{ColorFormat, Encoding, FORMAT_VERSION, MAGIC};
 pub use index::VoxelIndex;
+pub use stats::{ByteStats, DagStats, LevelStats};
+
+/// Largest supported grid side: Morton codes hold 21 bits per axis.
+pub const MAX_RESOLUTION: u32 = 1 << 21;
+
+/// Errors of SVDAG construction, validation, file I/O and export.
+#[derive(Debug, thiserror::Error)]
+pub enum DagError {
+    /// The grid side is not a power of two in `8..=MAX_RESOLUTION`.
+    #[error("invalid resolution {0}: must be a power of two between 8 and 2^21")]
+    InvalidResolution(u32),
+    /// The voxel set handed to the builder breaks its invariants.
+    #[error("invalid voxel set: {0}")]
+    InvalidVoxels(String),
+    /// The DAG needs more words than 32-bit child pointers can address.
+    #[error("SVDAG needs {words} 32-bit words, more than 32-bit pointers can address")]
+    TooLarge {
+        /// Words the DAG would need.
+        words: u64,
+    },
+    /// An in-memory `Svdag` violates the layout of the module docs.
+    #[error("invalid SVDAG structure at word {word}: {reason}")]
+    Invalid {
+        /// Word offset where the problem was found.
+        word: u64,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A `.vdag` file is malformed; `offset` is the byte offset of the offending field.
+    #[error("{}: byte offset {offset}: {reason}", path.display())]
+    Format {
+        /// File (or name given to `from_bytes`).
+        path: PathBuf,
+        /// Byte offset in the file.
+        offset: u64,
+        /// What is wrong.
+        reason: String,
+    },
+    /// An I/O error on a file.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file being read or written.
+        path: PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// The export format cannot hold this DAG.
+    #[error("{}: cannot export: {reason}", path.display())]
+    Export {
+        /// The output file.
+        path: PathBuf,
+        /// Why not.
+        reason: String,
+    },
+}
 
 /// A sparse voxel DAG with 32-bit child pointers.
 #[derive(Clone, Debug, PartialEq, Eq)]
