@@ -1,0 +1,493 @@
+//! Buffers (with device addresses), storage images, uploads and readbacks.
+
+use std::sync::Arc;
+
+use ash::vk;
+use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
+use gpu_allocator::MemoryLocation;
+
+use super::{vk_err, GpuContext, GpuError};
+
+/// Largest staging buffer used by uploads and readbacks; bigger transfers go in chunks.
+const STAGING_CHUNK: u64 = 64 << 20;
+
+/// Where a buffer's memory lives.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MemLocation {
+    /// Device-local; filled by uploads and shaders, read back through a staging buffer.
+    GpuOnly,
+    /// Host-visible, mapped, written by the CPU (staging, small parameter blocks).
+    CpuToGpu,
+    /// Host-visible, mapped, cached for CPU reads (readback).
+    GpuToCpu,
+}
+
+impl MemLocation {
+    fn to_allocator(self) -> MemoryLocation {
+        match self {
+            MemLocation::GpuOnly => MemoryLocation::GpuOnly,
+            MemLocation::CpuToGpu => MemoryLocation::CpuToGpu,
+            MemLocation::GpuToCpu => MemoryLocation::GpuToCpu,
+        }
+    }
+}
+
+/// A named storage buffer with a device address; usable as storage, transfer source and destination.
+///
+/// Shaders reach it through its device address (`GL_EXT_buffer_reference`), so it may exceed
+/// `maxStorageBufferRange`. Destroyed on drop; drop it only after the GPU is done with it (all
+/// submissions in this layer wait for their fence, so that holds once `submit` returned).
+pub struct Buffer {
+    pub(crate) raw: vk::Buffer,
+    allocation: Option<Allocation>,
+    size: u64,
+    address: u64,
+    name: String,
+    location: MemLocation,
+    ctx: Arc<GpuContext>,
+}
+
+impl std::fmt::Debug for Buffer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Buffer")
+            .field("name", &self.name)
+            .field("size", &self.size)
+            .field("address", &format_args!("{:#x}", self.address))
+            .field("location", &self.location)
+            .finish()
+    }
+}
+
+impl Buffer {
+    /// Size in bytes.
+    pub fn size(&self) -> u64 {
+        self.size
+    }
+
+    /// GPU virtual address of byte 0, for `GL_EXT_buffer_reference` (push constants or buffers).
+    pub fn address(&self) -> u64 {
+        self.address
+    }
+
+    /// Debug name (also the allocation's name).
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Memory location the buffer was created with.
+    pub fn location(&self) -> MemLocation {
+        self.location
+    }
+
+    fn check_range(&self, offset: u64, len: u64) -> Result<(), GpuError> {
+        if offset.checked_add(len).map_or(true, |end| end > self.size) {
+            return Err(GpuError::OutOfRange {
+                name: self.name.clone(),
+                offset,
+                len,
+                size: self.size,
+            });
+        }
+        Ok(())
+    }
+
+    /// Mapped bytes of a host-visible buffer.
+    fn mapped(&self) -> Option<&[u8]> {
+        self.allocation.as_ref().and_then(|a| a.mapped_slice())
+    }
+
+    fn mapped_mut(&mut self) -> Option<&mut [u8]> {
+        self.allocation.as_mut().and_then(|a| a.mapped_slice_mut())
+    }
+}
+
+impl Drop for Buffer {
+    fn drop(&mut self) {
+        // SAFETY: the buffer was created by this device and is no longer in use (submissions
+        // wait for their fences); destroyed once, then its memory is freed.
+        unsafe { self.ctx.device.destroy_buffer(self.raw, None) };
+        if let Some(a) = self.allocation.take() {
+            if let Err(e) = self.ctx.allocator().free(a) {
+                log::error!("freeing buffer '{}': {e}", self.name);
+            }
+        }
+    }
+}
+
+/// A 2D RGBA8 (unorm) storage image, kept in `GENERAL` layout; bound at set 0, binding 0.
+pub struct Image {
+    pub(crate) raw: vk::Image,
+    pub(crate) view: vk::ImageView,
+    allocation: Option<Allocation>,
+    width: u32,
+    height: u32,
+    name: String,
+    ctx: Arc<GpuContext>,
+}
+
+impl std::fmt::Debug for Image {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Image")
+            .field("name", &self.name)
+            .field("width", &self.width)
+            .field("height", &self.height)
+            .finish()
+    }
+}
+
+impl Image {
+    /// Width in pixels.
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    /// Height in pixels.
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    /// Debug name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+}
+
+impl Drop for Image {
+    fn drop(&mut self) {
+        // SAFETY: created by this device, idle (submissions wait), destroyed exactly once.
+        unsafe {
+            self.ctx.device.destroy_image_view(self.view, None);
+            self.ctx.device.destroy_image(self.raw, None);
+        }
+        if let Some(a) = self.allocation.take() {
+            if let Err(e) = self.ctx.allocator().free(a) {
+                log::error!("freeing image '{}': {e}", self.name);
+            }
+        }
+    }
+}
+
+impl GpuContext {
+    /// Creates a named buffer of `size` bytes with a device address.
+    ///
+    /// Errors: `size == 0`, or larger than `maxMemoryAllocationSize` ([`GpuError::TooLarge`]:
+    /// paging into several allocations is not implemented yet), or out of device memory.
+    pub fn create_buffer(
+        self: &Arc<Self>,
+        name: &str,
+        size: u64,
+        location: MemLocation,
+    ) -> Result<Buffer, GpuError> {
+        if size == 0 {
+            return Err(GpuError::InvalidArgument(format!(
+                "buffer '{name}': size must be non-zero"
+            )));
+        }
+        let max = self.info().max_memory_allocation_size;
+        if size > max {
+            return Err(GpuError::TooLarge {
+                name: name.to_string(),
+                size,
+                max,
+            });
+        }
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER
+            | vk::BufferUsageFlags::TRANSFER_SRC
+            | vk::BufferUsageFlags::TRANSFER_DST
+            | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS;
+        let info = vk::BufferCreateInfo::default()
+            .size(size)
+            .usage(usage)
+            .sharing_mode(vk::SharingMode::EXCLUSIVE);
+        // SAFETY: valid create info on our device; every error path below destroys the buffer.
+        unsafe {
+            let raw = self
+                .device
+                .create_buffer(&info, None)
+                .map_err(vk_err("vkCreateBuffer"))?;
+            let requirements = self.device.get_buffer_memory_requirements(raw);
+            let allocation = self.allocator().allocate(&AllocationCreateDesc {
+                name,
+                requirements,
+                location: location.to_allocator(),
+                linear: true,
+                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+            });
+            let allocation = match allocation {
+                Ok(a) => a,
+                Err(e) => {
+                    self.device.destroy_buffer(raw, None);
+                    return Err(GpuError::Allocation {
+                        name: name.to_string(),
+                        message: format!("{size} bytes: {e}"),
+                    });
+                }
+            };
+            if let Err(e) =
+                self.device
+                    .bind_buffer_memory(raw, allocation.memory(), allocation.offset())
+            {
+                self.device.destroy_buffer(raw, None);
+                let _ = self.allocator().free(allocation);
+                return Err(vk_err("vkBindBufferMemory")(e));
+            }
+            let address = self
+                .device
+                .get_buffer_device_address(&vk::BufferDeviceAddressInfo::default().buffer(raw));
+            self.set_name(raw, name);
+            Ok(Buffer {
+                raw,
+                allocation: Some(allocation),
+                size,
+                address,
+                name: name.to_string(),
+                location,
+                ctx: Arc::clone(self),
+            })
+        }
+    }
+
+    /// Creates a device-local buffer holding `data` (through a staging buffer).
+    pub fn upload<T: bytemuck::Pod>(
+        self: &Arc<Self>,
+        name: &str,
+        data: &[T],
+    ) -> Result<Buffer, GpuError> {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        let buffer = self.create_buffer(name, bytes.len() as u64, MemLocation::GpuOnly)?;
+        self.write_buffer(&buffer, 0, data)?;
+        Ok(buffer)
+    }
+
+    /// Writes `data` at byte `offset` of `dst`: memcpy when mapped, else staged in ≤ 64 MiB chunks.
+    pub fn write_buffer<T: bytemuck::Pod>(
+        self: &Arc<Self>,
+        dst: &Buffer,
+        offset: u64,
+        data: &[T],
+    ) -> Result<(), GpuError> {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        dst.check_range(offset, bytes.len() as u64)?;
+        if bytes.is_empty() {
+            return Ok(());
+        }
+        let chunk = STAGING_CHUNK.min(bytes.len() as u64);
+        let mut staging = self.create_buffer(
+            &format!("{} (upload staging)", dst.name),
+            chunk,
+            MemLocation::CpuToGpu,
+        )?;
+        let mut done = 0u64;
+        while done < bytes.len() as u64 {
+            let n = chunk.min(bytes.len() as u64 - done);
+            let src = &bytes[done as usize..(done + n) as usize];
+            staging
+                .mapped_mut()
+                .ok_or_else(|| GpuError::InvalidArgument("staging buffer is not mapped".into()))?
+                [..n as usize]
+                .copy_from_slice(src);
+            let mut cmd = self.begin_commands(&format!("upload {}", dst.name))?;
+            cmd.copy_buffer(&staging, 0, dst, offset + done, n)?;
+            cmd.submit()?;
+            done += n;
+        }
+        Ok(())
+    }
+
+    /// Writes `data` into a host-visible buffer directly through its mapping.
+    pub fn write_mapped<T: bytemuck::Pod>(
+        &self,
+        dst: &mut Buffer,
+        offset: u64,
+        data: &[T],
+    ) -> Result<(), GpuError> {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        dst.check_range(offset, bytes.len() as u64)?;
+        let name = dst.name.clone();
+        let mapped = dst.mapped_mut().ok_or_else(|| {
+            GpuError::InvalidArgument(format!("buffer '{name}' is not host-visible"))
+        })?;
+        mapped[offset as usize..offset as usize + bytes.len()].copy_from_slice(bytes);
+        Ok(())
+    }
+
+    /// Reads the whole buffer back as `T`s (its size must be a multiple of `size_of::<T>()`).
+    pub fn download<T: bytemuck::Pod>(self: &Arc<Self>, src: &Buffer) -> Result<Vec<T>, GpuError> {
+        let t = std::mem::size_of::<T>() as u64;
+        if t == 0 || src.size % t != 0 {
+            return Err(GpuError::InvalidArgument(format!(
+                "buffer '{}' of {} bytes is not a whole number of {t}-byte elements",
+                src.name, src.size
+            )));
+        }
+        self.read_buffer(src, 0, (src.size / t) as usize)
+    }
+
+    /// Reads `count` elements of type `T` starting at byte `offset` (staged in ≤ 64 MiB chunks).
+    pub fn read_buffer<T: bytemuck::Pod>(
+        self: &Arc<Self>,
+        src: &Buffer,
+        offset: u64,
+        count: usize,
+    ) -> Result<Vec<T>, GpuError> {
+        let len = (count as u64)
+            .checked_mul(std::mem::size_of::<T>() as u64)
+            .ok_or_else(|| GpuError::InvalidArgument("read size overflows".into()))?;
+        src.check_range(offset, len)?;
+        let mut out: Vec<T> = vec![T::zeroed(); count];
+        if len == 0 {
+            return Ok(out);
+        }
+        let out_bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut out);
+        if let Some(m) = src.mapped() {
+            out_bytes.copy_from_slice(&m[offset as usize..(offset + len) as usize]);
+            return Ok(out);
+        }
+        let chunk = STAGING_CHUNK.min(len);
+        let staging = self.create_buffer(
+            &format!("{} (readback staging)", src.name),
+            chunk,
+            MemLocation::GpuToCpu,
+        )?;
+        let mut done = 0u64;
+        while done < len {
+            let n = chunk.min(len - done);
+            let mut cmd = self.begin_commands(&format!("readback {}", src.name))?;
+            cmd.copy_buffer(src, offset + done, &staging, 0, n)?;
+            cmd.submit()?;
+            let m = staging
+                .mapped()
+                .ok_or_else(|| GpuError::InvalidArgument("staging buffer is not mapped".into()))?;
+            out_bytes[done as usize..(done + n) as usize].copy_from_slice(&m[..n as usize]);
+            done += n;
+        }
+        Ok(out)
+    }
+
+    /// Creates a `width` x `height` RGBA8 storage image (transitioned to `GENERAL` layout).
+    pub fn create_storage_image(
+        self: &Arc<Self>,
+        name: &str,
+        width: u32,
+        height: u32,
+    ) -> Result<Image, GpuError> {
+        if width == 0 || height == 0 {
+            return Err(GpuError::InvalidArgument(format!(
+                "image '{name}': size {width}x{height} must be non-zero"
+            )));
+        }
+        let format = vk::Format::R8G8B8A8_UNORM;
+        let info = vk::ImageCreateInfo::default()
+            .image_type(vk::ImageType::TYPE_2D)
+            .format(format)
+            .extent(vk::Extent3D {
+                width,
+                height,
+                depth: 1,
+            })
+            .mip_levels(1)
+            .array_layers(1)
+            .samples(vk::SampleCountFlags::TYPE_1)
+            .tiling(vk::ImageTiling::OPTIMAL)
+            .usage(
+                vk::ImageUsageFlags::STORAGE
+                    | vk::ImageUsageFlags::TRANSFER_SRC
+                    | vk::ImageUsageFlags::TRANSFER_DST,
+            )
+            .sharing_mode(vk::SharingMode::EXCLUSIVE)
+            .initial_layout(vk::ImageLayout::UNDEFINED);
+        // SAFETY: valid create infos; every error path destroys what was created before it.
+        let image = unsafe {
+            let raw = self.device.create_image(&info, None).map_err(|e| match e {
+                vk::Result::ERROR_OUT_OF_DEVICE_MEMORY | vk::Result::ERROR_OUT_OF_HOST_MEMORY => {
+                    GpuError::Allocation {
+                        name: name.to_string(),
+                        message: format!("{width}x{height} image: {e:?}"),
+                    }
+                }
+                e => vk_err("vkCreateImage")(e),
+            })?;
+            let requirements = self.device.get_image_memory_requirements(raw);
+            let allocation = match self.allocator().allocate(&AllocationCreateDesc {
+                name,
+                requirements,
+                location: MemoryLocation::GpuOnly,
+                linear: false,
+                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+            }) {
+                Ok(a) => a,
+                Err(e) => {
+                    self.device.destroy_image(raw, None);
+                    return Err(GpuError::Allocation {
+                        name: name.to_string(),
+                        message: e.to_string(),
+                    });
+                }
+            };
+            if let Err(e) =
+                self.device
+                    .bind_image_memory(raw, allocation.memory(), allocation.offset())
+            {
+                self.device.destroy_image(raw, None);
+                let _ = self.allocator().free(allocation);
+                return Err(vk_err("vkBindImageMemory")(e));
+            }
+            let view_info = vk::ImageViewCreateInfo::default()
+                .image(raw)
+                .view_type(vk::ImageViewType::TYPE_2D)
+                .format(format)
+                .subresource_range(color_range());
+            let view = match self.device.create_image_view(&view_info, None) {
+                Ok(v) => v,
+                Err(e) => {
+                    self.device.destroy_image(raw, None);
+                    let _ = self.allocator().free(allocation);
+                    return Err(vk_err("vkCreateImageView")(e));
+                }
+            };
+            self.set_name(raw, name);
+            self.set_name(view, &format!("{name} (view)"));
+            Image {
+                raw,
+                view,
+                allocation: Some(allocation),
+                width,
+                height,
+                name: name.to_string(),
+                ctx: Arc::clone(self),
+            }
+        };
+        let mut cmd = self.begin_commands(&format!("init {name}"))?;
+        cmd.init_image(&image);
+        cmd.submit()?;
+        Ok(image)
+    }
+
+    /// Reads an RGBA8 image back as `width * height * 4` bytes, rows top to bottom.
+    pub fn read_image(self: &Arc<Self>, image: &Image) -> Result<Vec<u8>, GpuError> {
+        let len = image.width as u64 * image.height as u64 * 4;
+        let staging = self.create_buffer(
+            &format!("{} (readback staging)", image.name),
+            len,
+            MemLocation::GpuToCpu,
+        )?;
+        let mut cmd = self.begin_commands(&format!("readback {}", image.name))?;
+        cmd.copy_image_to_buffer(image, &staging);
+        cmd.submit()?;
+        let m = staging
+            .mapped()
+            .ok_or_else(|| GpuError::InvalidArgument("staging buffer is not mapped".into()))?;
+        Ok(m[..len as usize].to_vec())
+    }
+}
+
+/// The single colour mip level and layer of our images.
+pub(crate) fn color_range() -> vk::ImageSubresourceRange {
+    vk::ImageSubresourceRange {
+        aspect_mask: vk::ImageAspectFlags::COLOR,
+        base_mip_level: 0,
+        level_count: 1,
+        base_array_layer: 0,
+        layer_count: 1,
+    }
+}

@@ -1,0 +1,191 @@
+//! Compute pipelines from embedded SPIR-V, with specialization and push constants.
+
+use std::sync::Arc;
+
+use ash::vk;
+
+use super::{vk_err, GpuContext, GpuError};
+
+/// How to build a [`ComputePipeline`].
+#[derive(Clone, Debug)]
+pub struct ComputePipelineDesc<'a> {
+    /// Debug name of the pipeline (also used in errors).
+    pub name: &'a str,
+    /// SPIR-V words, e.g. `voxdag::gpu::shaders::TEST_FILL`.
+    pub spirv: &'a [u32],
+    /// Specialization constants: entry `i` sets `layout(constant_id = i)` (u32/int/bool-sized).
+    pub spec_constants: &'a [u32],
+    /// Size of the push-constant block in bytes (0 = none; at most `maxPushConstantsSize`).
+    pub push_constant_size: u32,
+    /// Whether the shader uses one RGBA8 storage image at `set = 0, binding = 0`.
+    pub storage_image: bool,
+}
+
+/// A compute pipeline and its layout; destroyed on drop.
+pub struct ComputePipeline {
+    pub(crate) raw: vk::Pipeline,
+    pub(crate) layout: vk::PipelineLayout,
+    pub(crate) set_layout: Option<vk::DescriptorSetLayout>,
+    pub(crate) push_constant_size: u32,
+    name: String,
+    ctx: Arc<GpuContext>,
+}
+
+impl std::fmt::Debug for ComputePipeline {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ComputePipeline")
+            .field("name", &self.name)
+            .finish()
+    }
+}
+
+impl ComputePipeline {
+    /// Debug name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Whether the pipeline expects a storage image at set 0, binding 0.
+    pub fn uses_storage_image(&self) -> bool {
+        self.set_layout.is_some()
+    }
+}
+
+impl Drop for ComputePipeline {
+    fn drop(&mut self) {
+        // SAFETY: created by this device; no submission is pending (they all wait for fences).
+        unsafe {
+            self.ctx.device.destroy_pipeline(self.raw, None);
+            self.ctx.device.destroy_pipeline_layout(self.layout, None);
+            if let Some(s) = self.set_layout {
+                self.ctx.device.destroy_descriptor_set_layout(s, None);
+            }
+        }
+    }
+}
+
+impl GpuContext {
+    /// Builds a compute pipeline (entry point `main`).
+    pub fn create_compute_pipeline(
+        self: &Arc<Self>,
+        desc: &ComputePipelineDesc<'_>,
+    ) -> Result<ComputePipeline, GpuError> {
+        let name = desc.name;
+        if desc.spirv.len() < 5 || desc.spirv[0] != 0x0723_0203 {
+            return Err(GpuError::InvalidArgument(format!(
+                "pipeline '{name}': not a SPIR-V module"
+            )));
+        }
+        if desc.push_constant_size > self.info().max_push_constants_size
+            || desc.push_constant_size % 4 != 0
+        {
+            return Err(GpuError::InvalidArgument(format!(
+                "pipeline '{name}': push constant size {} must be a multiple of 4 and at most {}",
+                desc.push_constant_size,
+                self.info().max_push_constants_size
+            )));
+        }
+        let device = &self.device;
+        // SAFETY: valid create infos; on error everything created so far is destroyed.
+        unsafe {
+            let module = device
+                .create_shader_module(
+                    &vk::ShaderModuleCreateInfo::default().code(desc.spirv),
+                    None,
+                )
+                .map_err(vk_err("vkCreateShaderModule"))?;
+            let set_layout = if desc.storage_image {
+                let bindings = [vk::DescriptorSetLayoutBinding::default()
+                    .binding(0)
+                    .descriptor_type(vk::DescriptorType::STORAGE_IMAGE)
+                    .descriptor_count(1)
+                    .stage_flags(vk::ShaderStageFlags::COMPUTE)];
+                match device.create_descriptor_set_layout(
+                    &vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings),
+                    None,
+                ) {
+                    Ok(l) => Some(l),
+                    Err(e) => {
+                        device.destroy_shader_module(module, None);
+                        return Err(vk_err("vkCreateDescriptorSetLayout")(e));
+                    }
+                }
+            } else {
+                None
+            };
+            let set_layouts: Vec<vk::DescriptorSetLayout> = set_layout.into_iter().collect();
+            let ranges = [vk::PushConstantRange {
+                stage_flags: vk::ShaderStageFlags::COMPUTE,
+                offset: 0,
+                size: desc.push_constant_size,
+            }];
+            let mut layout_info = vk::PipelineLayoutCreateInfo::default().set_layouts(&set_layouts);
+            if desc.push_constant_size > 0 {
+                layout_info = layout_info.push_constant_ranges(&ranges);
+            }
+            let cleanup = |module, set_layout: Option<vk::DescriptorSetLayout>| {
+                device.destroy_shader_module(module, None);
+                if let Some(s) = set_layout {
+                    device.destroy_descriptor_set_layout(s, None);
+                }
+            };
+            let layout = match device.create_pipeline_layout(&layout_info, None) {
+                Ok(l) => l,
+                Err(e) => {
+                    cleanup(module, set_layout);
+                    return Err(vk_err("vkCreatePipelineLayout")(e));
+                }
+            };
+            let entries: Vec<vk::SpecializationMapEntry> = (0..desc.spec_constants.len())
+                .map(|i| vk::SpecializationMapEntry {
+                    constant_id: i as u32,
+                    offset: (i * 4) as u32,
+                    size: 4,
+                })
+                .collect();
+            let spec_data: &[u8] = bytemuck::cast_slice(desc.spec_constants);
+            let spec = vk::SpecializationInfo::default()
+                .map_entries(&entries)
+                .data(spec_data);
+            let entry = c"main";
+            let mut stage = vk::PipelineShaderStageCreateInfo::default()
+                .stage(vk::ShaderStageFlags::COMPUTE)
+                .module(module)
+                .name(entry);
+            if !entries.is_empty() {
+                stage = stage.specialization_info(&spec);
+            }
+            let info = vk::ComputePipelineCreateInfo::default()
+                .stage(stage)
+                .layout(layout);
+            let result = device.create_compute_pipelines(vk::PipelineCache::null(), &[info], None);
+            device.destroy_shader_module(module, None);
+            let raw = match result {
+                Ok(p) => p[0],
+                Err((_, e)) => {
+                    device.destroy_pipeline_layout(layout, None);
+                    if let Some(s) = set_layout {
+                        device.destroy_descriptor_set_layout(s, None);
+                    }
+                    return Err(GpuError::Vulkan {
+                        call: "vkCreateComputePipelines",
+                        result: format!("{e:?} (pipeline '{name}')"),
+                    });
+                }
+            };
+            self.set_name(raw, name);
+            self.set_name(layout, &format!("{name} (layout)"));
+            if let Some(s) = set_layout {
+                self.set_name(s, &format!("{name} (set layout)"));
+            }
+            Ok(ComputePipeline {
+                raw,
+                layout,
+                set_layout,
+                push_constant_size: desc.push_constant_size,
+                name: name.to_string(),
+                ctx: Arc::clone(self),
+            })
+        }
+    }
+}

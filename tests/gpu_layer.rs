@@ -1,0 +1,335 @@
+//! The Vulkan layer on a real device (lavapipe in CI). Fails, not skips, without a device.
+//! Every test ends with zero validation messages and zero live allocations.
+
+use std::sync::Arc;
+
+use voxdag::gpu::{
+    shaders, ComputePipelineDesc, GpuContext, GpuError, GpuOptions, MemLocation, Profiler,
+};
+
+fn context() -> Arc<GpuContext> {
+    let _ = env_logger::builder().is_test(true).try_init();
+    let options = GpuOptions {
+        validation: true,
+        ..GpuOptions::default()
+    };
+    GpuContext::new(&options).expect("a Vulkan 1.2 device is required (lavapipe will do)")
+}
+
+/// Drops nothing itself: call after every resource is gone.
+fn assert_clean(ctx: &Arc<GpuContext>) {
+    assert_eq!(ctx.live_allocations(), 0, "leaked GPU allocations");
+    assert_eq!(ctx.allocated_bytes(), 0);
+    assert_eq!(ctx.validation_errors(), 0, "validation messages (see log)");
+}
+
+/// Push constants of `shaders/glsl/test/fill.comp`.
+fn fill_push(out: u64, aux: u64, count: u32, seed: u32) -> Vec<u8> {
+    let mut v = Vec::with_capacity(24);
+    v.extend_from_slice(&out.to_le_bytes());
+    v.extend_from_slice(&aux.to_le_bytes());
+    v.extend_from_slice(&count.to_le_bytes());
+    v.extend_from_slice(&seed.to_le_bytes());
+    v
+}
+
+#[test]
+fn device_creation_reports_info() {
+    let ctx = context();
+    let info = ctx.info().clone();
+    println!("{info:#?}");
+    assert!(!info.name.is_empty());
+    assert!(info.api_version >= (1, 2, 0));
+    assert!(
+        info.subgroup_size.is_power_of_two(),
+        "{}",
+        info.subgroup_size
+    );
+    assert!(info.max_storage_buffer_range >= 1 << 27);
+    assert!(info.max_memory_allocation_size >= 1 << 30);
+    assert!(info.max_compute_workgroup_invocations >= 128);
+    assert!(info.timestamp_period > 0.0);
+    assert!(
+        ctx.validation_enabled(),
+        "VK_LAYER_KHRONOS_validation should be installed"
+    );
+    assert_clean(&ctx);
+}
+
+#[test]
+fn device_override_that_matches_nothing_lists_devices() {
+    let _ = env_logger::builder().is_test(true).try_init();
+    let options = GpuOptions {
+        validation: false,
+        device: Some("no such gpu 1234".into()),
+    };
+    match GpuContext::new(&options) {
+        Err(GpuError::DeviceNotFound { wanted, available }) => {
+            assert_eq!(wanted, "no such gpu 1234");
+            assert!(!available.is_empty() && available != "none", "{available}");
+        }
+        Err(e) => panic!("unexpected error {e}"),
+        Ok(_) => panic!("a device matched a nonsense name"),
+    }
+}
+
+#[test]
+fn buffer_round_trip_and_range_errors() {
+    let ctx = context();
+    {
+        let data: Vec<u32> = (0..100_003u32)
+            .map(|i| i.wrapping_mul(2_654_435_761))
+            .collect();
+        let buf = ctx.upload("round trip", &data).unwrap();
+        assert_eq!(buf.size(), 400_012);
+        assert_ne!(buf.address(), 0);
+        assert_eq!(ctx.download::<u32>(&buf).unwrap(), data);
+        // Partial write and read at an offset.
+        ctx.write_buffer(&buf, 40, &[7u32, 8, 9]).unwrap();
+        assert_eq!(
+            ctx.read_buffer::<u32>(&buf, 36, 5).unwrap(),
+            vec![data[9], 7, 8, 9, data[13]]
+        );
+        // Out of range, zero and too large sizes are errors, not panics.
+        assert!(matches!(
+            ctx.read_buffer::<u32>(&buf, 400_000, 4),
+            Err(GpuError::OutOfRange { .. })
+        ));
+        assert!(matches!(
+            ctx.write_buffer(&buf, u64::MAX - 2, &[1u32]),
+            Err(GpuError::OutOfRange { .. })
+        ));
+        assert!(ctx.create_buffer("empty", 0, MemLocation::GpuOnly).is_err());
+        let too_big = ctx.info().max_memory_allocation_size + 1;
+        match ctx.create_buffer("huge", too_big, MemLocation::GpuOnly) {
+            Err(GpuError::TooLarge { name, size, .. }) => {
+                assert_eq!(name, "huge");
+                assert_eq!(size, too_big);
+            }
+            other => panic!("expected TooLarge, got {other:?}"),
+        }
+        // Host-visible buffers are written and read through their mapping.
+        let mut host = ctx
+            .create_buffer("host", 16, MemLocation::CpuToGpu)
+            .unwrap();
+        ctx.write_mapped(&mut host, 4, &[5u32, 6]).unwrap();
+        assert_eq!(ctx.download::<u32>(&host).unwrap()[1..3], [5, 6]);
+        assert_eq!(ctx.live_allocations(), 2);
+    }
+    assert_clean(&ctx);
+}
+
+#[test]
+fn fill_shader_spec_and_push_constants_and_subgroup_size() {
+    let ctx = context();
+    {
+        let count = 10_007u32;
+        let out = ctx
+            .create_buffer("fill out", count as u64 * 4, MemLocation::GpuOnly)
+            .unwrap();
+        let aux = ctx
+            .create_buffer("fill aux", count as u64 * 4, MemLocation::GpuOnly)
+            .unwrap();
+        let subgroup = ctx.info().subgroup_size;
+        // Two specializations of the same shader: workgroup size and multiplier differ.
+        for (wg, mul, seed) in [(64u32, 3u32, 11u32), (subgroup, 1_000_003, 0xdead_beef)] {
+            let pipeline = ctx
+                .create_compute_pipeline(&ComputePipelineDesc {
+                    name: "test fill",
+                    spirv: shaders::TEST_FILL,
+                    spec_constants: &[wg, mul],
+                    push_constant_size: 24,
+                    storage_image: false,
+                })
+                .unwrap();
+            let mut cmd = ctx.begin_commands("fill").unwrap();
+            cmd.fill_buffer(&out, 0);
+            // Fewer groups than needed: the shader's grid-stride loop covers the rest.
+            let groups = (count / wg / 3).max(1);
+            let push = fill_push(out.address(), aux.address(), count, seed);
+            cmd.dispatch(&pipeline, [groups, 1, 1], &push, None)
+                .unwrap();
+            // Wrong push-constant size is rejected.
+            assert!(cmd
+                .dispatch(&pipeline, [1, 1, 1], &push[..16], None)
+                .is_err());
+            cmd.submit().unwrap();
+            let got = ctx.download::<u32>(&out).unwrap();
+            let want: Vec<u32> = (0..count)
+                .map(|i| i.wrapping_mul(mul).wrapping_add(seed))
+                .collect();
+            assert_eq!(got, want, "workgroup {wg}, multiplier {mul}");
+            let sizes = ctx.download::<u32>(&aux).unwrap();
+            assert!(
+                sizes.iter().all(|&s| s == subgroup),
+                "gl_SubgroupSize != {subgroup}"
+            );
+        }
+    }
+    assert_clean(&ctx);
+}
+
+#[test]
+fn buffer_larger_than_max_storage_range_via_device_address() {
+    let ctx = context();
+    {
+        let range = ctx.info().max_storage_buffer_range as u64;
+        // 160 MiB, or more than the range on devices where it is larger than 128 MiB.
+        let bytes = (160u64 << 20).max(range + (32 << 20));
+        let count = (bytes / 4) as u32;
+        let big = ctx
+            .create_buffer("big", bytes, MemLocation::GpuOnly)
+            .unwrap();
+        let pipeline = ctx
+            .create_compute_pipeline(&ComputePipelineDesc {
+                name: "test fill big",
+                spirv: shaders::TEST_FILL,
+                spec_constants: &[256, 5],
+                push_constant_size: 24,
+                storage_image: false,
+            })
+            .unwrap();
+        let mut cmd = ctx.begin_commands("fill big").unwrap();
+        cmd.dispatch(
+            &pipeline,
+            [1024, 1, 1],
+            &fill_push(big.address(), 0, count, 1),
+            None,
+        )
+        .unwrap();
+        cmd.submit().unwrap();
+        let got = ctx.download::<u32>(&big).unwrap();
+        assert_eq!(got.len(), count as usize);
+        let bad = got
+            .iter()
+            .enumerate()
+            .position(|(i, &v)| v != (i as u32).wrapping_mul(5).wrapping_add(1));
+        assert_eq!(bad, None, "first wrong word");
+        // The tail beyond maxStorageBufferRange was written too.
+        let tail = ctx.read_buffer::<u32>(&big, bytes - 8, 2).unwrap();
+        assert_eq!(tail, vec![(count - 2) * 5 + 1, (count - 1) * 5 + 1]);
+    }
+    assert_clean(&ctx);
+}
+
+#[test]
+fn storage_image_readback() {
+    let ctx = context();
+    {
+        let (w, h, seed) = (37u32, 23u32, 9u32);
+        let image = ctx.create_storage_image("test image", w, h).unwrap();
+        let pipeline = ctx
+            .create_compute_pipeline(&ComputePipelineDesc {
+                name: "test image",
+                spirv: shaders::TEST_IMAGE,
+                spec_constants: &[],
+                push_constant_size: 12,
+                storage_image: true,
+            })
+            .unwrap();
+        // A fresh image reads back as zeros.
+        assert!(ctx.read_image(&image).unwrap().iter().all(|&b| b == 0));
+        let mut cmd = ctx.begin_commands("image").unwrap();
+        let push: Vec<u8> = [w, h, seed].iter().flat_map(|v| v.to_le_bytes()).collect();
+        assert!(
+            cmd.dispatch(&pipeline, [1, 1, 1], &push, None).is_err(),
+            "image missing"
+        );
+        cmd.dispatch(
+            &pipeline,
+            [w.div_ceil(8), h.div_ceil(8), 1],
+            &push,
+            Some(&image),
+        )
+        .unwrap();
+        cmd.submit().unwrap();
+        let rgba = ctx.read_image(&image).unwrap();
+        assert_eq!(rgba.len(), (w * h * 4) as usize);
+        for y in 0..h {
+            for x in 0..w {
+                let i = ((y * w + x) * 4) as usize;
+                let want = [x as u8, y as u8, (x + y + seed) as u8, 255];
+                assert_eq!(rgba[i..i + 4], want, "pixel ({x}, {y})");
+            }
+        }
+        assert!(ctx.create_storage_image("zero", 0, 4).is_err());
+    }
+    assert_clean(&ctx);
+}
+
+#[test]
+fn profiler_times_each_pass_and_writes_a_trace() {
+    let ctx = context();
+    {
+        let mut profiler = Profiler::new(&ctx).unwrap();
+        assert!(profiler.is_available(), "lavapipe supports timestamps");
+        let count = 1 << 20;
+        let out = ctx
+            .create_buffer("profiled", count as u64 * 4, MemLocation::GpuOnly)
+            .unwrap();
+        let pipeline = ctx
+            .create_compute_pipeline(&ComputePipelineDesc {
+                name: "test fill",
+                spirv: shaders::TEST_FILL,
+                spec_constants: &[64, 1],
+                push_constant_size: 24,
+                storage_image: false,
+            })
+            .unwrap();
+        let push = fill_push(out.address(), 0, count, 0);
+        for frame in 0..2 {
+            let mut cmd = ctx.begin_commands("profiled").unwrap();
+            profiler.begin_pass(&mut cmd, "clear");
+            cmd.fill_buffer(&out, 0);
+            profiler.end_pass(&mut cmd);
+            profiler.begin_pass(&mut cmd, "fill");
+            cmd.dispatch(&pipeline, [256, 1, 1], &push, None).unwrap();
+            profiler.end_pass(&mut cmd);
+            profiler.cpu_span("submit", || cmd.submit()).unwrap();
+            let timings = profiler.resolve().unwrap();
+            let names: Vec<&str> = timings.iter().map(|t| t.name.as_str()).collect();
+            assert_eq!(names, ["clear", "fill"], "frame {frame}");
+            for t in &timings {
+                assert!(t.gpu_ms >= 0.0 && t.gpu_ms < 10_000.0, "{t:?}");
+                assert!(t.cpu_start_ms >= 0.0);
+            }
+            assert!(timings[1].cpu_start_ms >= timings[0].cpu_start_ms);
+            // Filling 4 MiB in a shader takes measurable time.
+            assert!(timings[1].gpu_ms > 0.0, "{timings:?}");
+        }
+        let _ = profiler
+            .cpu_span("readback", || ctx.download::<u32>(&out))
+            .unwrap();
+        assert_eq!(profiler.passes().len(), 4);
+        let table = profiler.table();
+        println!("{table}");
+        let fill_row = table.lines().find(|l| l.starts_with("gpu: fill")).unwrap();
+        assert_eq!(fill_row.split_whitespace().nth(2), Some("2"), "{fill_row}");
+        assert!(table.contains("cpu: readback"));
+
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("trace.json");
+        profiler.write_chrome_trace(&path).unwrap();
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        let events = json["traceEvents"].as_array().unwrap();
+        let complete: Vec<&serde_json::Value> = events.iter().filter(|e| e["ph"] == "X").collect();
+        assert_eq!(complete.len(), 4 + 3);
+        for e in &complete {
+            assert!(e["ts"].as_f64().unwrap() >= 0.0);
+            assert!(e["dur"].as_f64().unwrap() >= 0.0);
+            assert_eq!(e["pid"], 1);
+        }
+        let gpu = complete.iter().filter(|e| e["tid"] == 1).count();
+        let cpu = complete.iter().filter(|e| e["tid"] == 2).count();
+        assert_eq!((gpu, cpu), (4, 3));
+        // Resolving with a pass still open is an error, not a hang.
+        let mut cmd = ctx.begin_commands("unbalanced").unwrap();
+        profiler.begin_pass(&mut cmd, "open");
+        assert!(profiler.resolve().is_err());
+        profiler.end_pass(&mut cmd);
+        cmd.submit().unwrap();
+        assert_eq!(profiler.resolve().unwrap().len(), 1);
+    }
+    assert_clean(&ctx);
+}
