@@ -19,7 +19,7 @@ struct RenderParams {
     uint resolution; // offset 88: grid side N
     uint root_level; // offset 92: log2(N) - 2
     uint flags;      // offset 96: RENDER_FLAG_*
-    uint color_count;// offset 100: entries of the colour buffer (0 without colours)
+    uint color_count; // offset 100: entries of the colour buffer (0 without colours)
     uint pad0;       // offset 104: explicit padding
     uint pad1;       // offset 108: explicit padding
 };
