@@ -415,7 +415,7 @@ fn gpu_render_matches_cpu_reference() {
         let mut profiler = Profiler::new(&ctx).unwrap();
         let n = 64;
         for colored in [false, true] {
-            let dag = Svdag::from_voxels(&test_scene(n, colored));
+            let dag = Svdag::from_voxels(&test_scene(n, colored)).unwrap();
             let index = VoxelIndex::new(&dag);
             let scene = renderer.upload(&dag).unwrap();
             assert_eq!(scene.color_count() as usize, dag.colors.len());
@@ -463,7 +463,7 @@ fn gpu_render_of_empty_scene_is_all_sky() {
         let dag = Svdag::from_voxels(&Voxels {
             resolution: 8,
             ..Voxels::default()
-        });
+        }).unwrap();
         let index = VoxelIndex::new(&dag);
         let scene = renderer.upload(&dag).unwrap();
         let settings = RenderSettings::new(20, 12, Camera::orbit_default(8));

@@ -138,7 +138,7 @@ proptest! {
 
     #[test]
     fn raycast_matches_dda(scene in arb_scene(), rays in prop::collection::vec(arb_ray(), 200)) {
-        let dag = Svdag::from_voxels(&scene);
+        let dag = Svdag::from_voxels(&scene).unwrap();
         let index = VoxelIndex::new(&dag);
         let mut differ = 0;
         for (i, &(origin, dir, zero_mask, t_rel)) in rays.iter().enumerate() {
@@ -161,7 +161,7 @@ fn axis_aligned_rays_along_edges_are_exact() {
         coords.push([(i * 13) % n, (i * 9) % n, i]);
     }
     let scene = voxels_from(n, coords, true);
-    let dag = Svdag::from_voxels(&scene);
+    let dag = Svdag::from_voxels(&scene).unwrap();
     let index = VoxelIndex::new(&dag);
     let mut hits = 0;
     for a in 0..=n {
@@ -189,7 +189,7 @@ fn axis_aligned_rays_along_edges_are_exact() {
 #[test]
 fn rays_starting_inside_voxels_hit_at_zero() {
     let scene = voxels_from(8, vec![[3, 4, 5], [0, 0, 0], [7, 7, 7]], true);
-    let dag = Svdag::from_voxels(&scene);
+    let dag = Svdag::from_voxels(&scene).unwrap();
     let index = VoxelIndex::new(&dag);
     let ray = Ray {
         origin: [3.5, 4.25, 5.75],
@@ -215,7 +215,7 @@ fn rays_starting_inside_voxels_hit_at_zero() {
     assert_eq!((hit.t, hit.voxel, hit.normal), (1.5, [0, 0, 0], [-1, 0, 0]));
     assert_eq!(dag.raycast(&index, &toward, 1.5), None);
     // Empty scene.
-    let empty = Svdag::from_voxels(&voxels_from(8, vec![], false));
+    let empty = Svdag::from_voxels(&voxels_from(8, vec![], false)).unwrap();
     let empty_index = VoxelIndex::new(&empty);
     assert_eq!(empty.raycast(&empty_index, &toward, T_UNBOUNDED), None);
 }
@@ -244,7 +244,7 @@ fn default_camera_frames_the_grid() {
 #[test]
 fn camera_and_params_build_identical_rays() {
     let scene = voxels_from(32, vec![[1, 2, 3]], false);
-    let dag = Svdag::from_voxels(&scene);
+    let dag = Svdag::from_voxels(&scene).unwrap();
     let mut cam = Camera::orbit_default(32);
     cam.eye[1] += 3.0;
     let settings = RenderSettings::new(37, 23, cam);
@@ -288,7 +288,7 @@ fn floor_and_block(colored: bool) -> Voxels {
 fn cpu_render_matches_reference_rays() {
     for colored in [false, true] {
         let scene = floor_and_block(colored);
-        let dag = Svdag::from_voxels(&scene);
+        let dag = Svdag::from_voxels(&scene).unwrap();
         let index = VoxelIndex::new(&dag);
         let mut settings = RenderSettings::new(96, 64, Camera::orbit_default(16));
         // Light from behind the block so that its shadow falls towards the camera.
@@ -379,7 +379,7 @@ fn cpu_render_matches_reference_rays() {
 #[test]
 fn save_png_round_trip() {
     let scene = floor_and_block(true);
-    let dag = Svdag::from_voxels(&scene);
+    let dag = Svdag::from_voxels(&scene).unwrap();
     let index = VoxelIndex::new(&dag);
     let settings = RenderSettings::new(40, 30, Camera::orbit_default(16));
     let out: RenderOutput = render_cpu(&dag, &index, &settings).expect("render");
@@ -394,14 +394,14 @@ fn save_png_round_trip() {
 
 #[test]
 fn params_reject_bad_input() {
-    let dag = Svdag::from_voxels(&voxels_from(8, vec![[1, 1, 1]], false));
+    let dag = Svdag::from_voxels(&voxels_from(8, vec![[1, 1, 1]], false)).unwrap();
     let index = VoxelIndex::new(&dag);
     let settings = RenderSettings::new(0, 10, Camera::orbit_default(8));
     assert!(render_cpu(&dag, &index, &settings).is_err());
     let mut settings = RenderSettings::new(10, 10, Camera::orbit_default(8));
     settings.light_dir = [0.0; 3];
     assert!(RenderParams::new(&settings, &dag).is_err());
-    let other = VoxelIndex::new(&Svdag::from_voxels(&floor_and_block(false)));
+    let other = VoxelIndex::new(&Svdag::from_voxels(&floor_and_block(false)).unwrap());
     settings.light_dir = [0.0, 1.0, 0.0];
     assert!(render_cpu(&dag, &other, &settings).is_err());
 }

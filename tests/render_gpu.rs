@@ -39,12 +39,12 @@ fn sphere_scene(n: u32) -> Svdag {
 fn render_both(dag: &Svdag, settings: &RenderSettings) -> (RenderOutput, RenderOutput) {
     let context = gpu();
     let renderer = GpuRenderer::new(&context).unwrap();
-    let scene = renderer.upload(dag, None).unwrap();
+    let scene = renderer.upload(dag).unwrap();
     let gpu_image = renderer.render(&scene, settings, None).unwrap();
     drop(scene);
     drop(renderer);
     assert_eq!(context.validation_errors(), 0, "Vulkan validation reported problems");
-    let cpu_image = render_cpu(dag, &VoxelIndex::new(dag), settings);
+    let cpu_image = render_cpu(dag, &VoxelIndex::new(dag), settings).unwrap();
     (gpu_image, cpu_image)
 }
 
@@ -93,7 +93,7 @@ fn golden(name: &str, dag: &Svdag) {
     let settings = RenderSettings::new(256, 256, Camera::orbit_default(dag.resolution));
     let context = gpu();
     let renderer = GpuRenderer::new(&context).unwrap();
-    let scene = renderer.upload(dag, None).unwrap();
+    let scene = renderer.upload(dag).unwrap();
     let image = renderer.render(&scene, &settings, None).unwrap();
     check_golden(name, &image, 8, 0.005);
 }

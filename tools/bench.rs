@@ -193,16 +193,16 @@ fn bench_render(args: &BenchRenderArgs, quiet: bool) -> Result<()> {
     settings.shadows = false;
     let rays = (args.size.0 * args.size.1) as f64;
 
-    let context = GpuContext::new(&GpuOptions::from_env())?;
+    let context = GpuContext::new(&GpuOptions::default())?;
     let renderer = GpuRenderer::new(&context)?;
-    let scene = renderer.upload(&dag, None)?;
+    let scene = renderer.upload(&dag)?;
     // Warm-up (pipeline compilation, first-touch of memory), then the measured run.
     renderer.render(&scene, &settings, None)?;
     let mut profiler = Profiler::new(&context)?;
     let start = Instant::now();
     let gpu_image = renderer.render(&scene, &settings, Some(&mut profiler))?;
     let gpu_wall = start.elapsed();
-    let gpu_pass_ms = profiler.total_ms("primary rays");
+    let gpu_pass_ms: f64 = profiler.passes().iter().filter(|p| p.name == "primary rays").map(|p| p.gpu_ms).sum();
     let device = context.info().name.clone();
     drop(scene);
     drop(renderer);
@@ -211,7 +211,7 @@ fn bench_render(args: &BenchRenderArgs, quiet: bool) -> Result<()> {
 
     let index = VoxelIndex::new(&dag);
     let start = Instant::now();
-    let cpu_image = render_cpu(&dag, &index, &settings);
+    let cpu_image = render_cpu(&dag, &index, &settings)?;
     let cpu_time = start.elapsed();
     let mismatch = gpu_image.hits.iter().zip(&cpu_image.hits).filter(|(a, b)| a != b).count();
 

@@ -8,8 +8,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use serde::Serialize;
-use voxdag::dag::{export, DagStats, Svdag, VoxelIndex};
+use serde::{Deserialize, Serialize};
+use voxdag::dag::{export_vox, export_xyz_u32_file, DagStats, Svdag, VoxelIndex};
 use voxdag::gpu::{GpuContext, GpuOptions, Profiler};
 use voxdag::render::gpu::GpuRenderer;
 use voxdag::render::{render_cpu, Camera, RenderSettings};
@@ -18,7 +18,7 @@ use voxdag::scene::{self, ImportOptions};
 use crate::{BuildArgs, DemoArgs, ExportArgs, ExportFormat, RenderArgs, StatsArgs};
 
 /// What `voxdag build --report` writes: the inputs, the outcome and the cost of one build.
-#[derive(Serialize)]
+#[derive(Serialize, Deserialize)]
 pub struct BuildReport {
     /// Input scene path.
     pub input: PathBuf,
@@ -176,8 +176,8 @@ pub fn export_voxels(args: &ExportArgs) -> Result<()> {
     let dag = Svdag::load(&args.file)?;
     check_output_dir(&args.output)?;
     match args.format {
-        ExportFormat::XyzU32 => export::export_xyz_u32_file(&dag, &args.output)?,
-        ExportFormat::Vox => export::export_vox(&dag, &args.output)?,
+        ExportFormat::XyzU32 => export_xyz_u32_file(&dag, &args.output)?,
+        ExportFormat::Vox => export_vox(&dag, &args.output)?,
     }
     println!("{}: wrote {} voxels", args.output.display(), dag.stats().voxels);
     Ok(())
@@ -216,9 +216,9 @@ pub fn render(args: &RenderArgs) -> Result<()> {
     let start = Instant::now();
     let image = if args.cpu {
         let index = VoxelIndex::new(&dag);
-        render_cpu(&dag, &index, &settings)
+        render_cpu(&dag, &index, &settings)?
     } else {
-        let context = GpuContext::new(&GpuOptions::from_env())?;
+        let context = GpuContext::new(&GpuOptions::default())?;
         let image = render_gpu(&context, &dag, &settings, args.profile, args.trace.as_deref())?;
         drop(context);
         image
@@ -238,7 +238,7 @@ fn render_gpu(
 ) -> Result<voxdag::render::RenderOutput> {
     let renderer = GpuRenderer::new(context)?;
     let mut profiler = Profiler::new(context)?;
-    let scene = renderer.upload(dag, Some(&mut profiler))?;
+    let scene = profiler.cpu_span("upload", || renderer.upload(dag))?;
     let image = renderer.render(&scene, settings, Some(&mut profiler))?;
     if print_profile {
         print!("{}", profiler.table());

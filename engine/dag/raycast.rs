@@ -230,20 +230,14 @@ impl Svdag {
                 // Leaf child: its sub-block occupancy.
                 let rank = (state & 0xff & ((1 << c) - 1)).count_ones();
                 let ptr = self.words[(node + 1 + rank) as usize];
-                (ptr, leaf_block_mask(self.leaf_mask(ptr)))
+                (ptr, leaf_block_mask(self.leaf_mask(ptr as usize)))
             } else {
                 // Sub-block c of the leaf at `node`: byte c of its mask.
-                (node, ((self.leaf_mask(node) >> (8 * c)) & 0xff) as u32)
+                (node, ((self.leaf_mask(node as usize) >> (8 * c)) & 0xff) as u32)
             };
             depth += 1;
             stack[depth] = pushed;
         }
-    }
-
-    /// 64-bit occupancy mask of the leaf at word `ptr`.
-    #[inline]
-    fn leaf_mask(&self, ptr: u32) -> u64 {
-        self.words[ptr as usize] as u64 | (self.words[ptr as usize + 1] as u64) << 32
     }
 
     /// Colour index of the voxel reached through `frames` (root to sub-block; the child being
@@ -264,7 +258,7 @@ impl Svdag {
         let voxel_state = frames[leaf_depth + 1].1;
         let code = ((((block_state >> 8) - 1) ^ mirror) << 3) | (((voxel_state >> 8) - 1) ^ mirror);
         let below = (1u64 << code) - 1;
-        color + (self.leaf_mask(leaf) & below).count_ones() as u64
+        color + (self.leaf_mask(leaf as usize) & below).count_ones() as u64
     }
 }
 

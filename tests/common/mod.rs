@@ -37,7 +37,7 @@ pub fn build_scene(path: &Path, resolution: Option<u32>) -> Svdag {
 /// A GPU context with validation on; fails (never skips) when no Vulkan device exists.
 pub fn gpu() -> Arc<GpuContext> {
     ensure_runtime_dir();
-    let options = GpuOptions { validation: true, ..GpuOptions::from_env() };
+    let options = GpuOptions { validation: true, ..GpuOptions::default() };
     GpuContext::new(&options).expect("a Vulkan device is required for this test (lavapipe is enough)")
 }
 
