@@ -145,7 +145,7 @@ fn edges_and_corners_touching_voxel_faces() {
     assert!(c.contains(&[2, 6, 6]));
     // The axis-aligned segment on the line x = 1, y = 1 touches the 4 columns around it.
     for (x, y) in [(0, 0), (0, 1), (1, 0), (1, 1)] {
-        for z in 0..=4u32.min(7) {
+        for z in 0..=4u32 {
             assert!(c.contains(&[x, y, z]), "{x} {y} {z}");
         }
     }

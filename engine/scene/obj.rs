@@ -133,7 +133,7 @@ pub(crate) fn load_obj(path: &Path, opts: &ImportOptions) -> Result<Mesh, SceneE
                 mesh.uvs
                     .extend(m.texcoords.chunks_exact(2).map(|t| [t[0], 1.0 - t[1]]));
             } else {
-                mesh.uvs.extend(std::iter::repeat_n([0.0, 0.0], nv));
+                mesh.uvs.extend(std::iter::repeat([0.0, 0.0]).take(nv));
             }
         }
         if any_vertex_colors {
@@ -144,7 +144,7 @@ pub(crate) fn load_obj(path: &Path, opts: &ImportOptions) -> Result<Mesh, SceneE
                         .map(|c| [c[0], c[1], c[2], 1.0]),
                 );
             } else {
-                mesh.colors.extend(std::iter::repeat_n([1.0; 4], nv));
+                mesh.colors.extend(std::iter::repeat([1.0; 4]).take(nv));
             }
         }
         let material = if override_material_present(opts) {

@@ -403,7 +403,7 @@ fn for_candidates(t: &GridTriangle, lo: [u32; 3], hi: [u32; 3], mut f: impl FnMu
             // centre c_w = k + 0.5 in [a, b]
             let k_lo = (a - MARGIN - 0.5).ceil().max(lo[w] as f64);
             let k_hi = (b + MARGIN - 0.5).floor().min(hi[w] as f64);
-            if !(k_lo <= k_hi) {
+            if k_lo.is_nan() || k_hi.is_nan() || k_lo > k_hi {
                 continue;
             }
             for k in k_lo as u32..=k_hi as u32 {
