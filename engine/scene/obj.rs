@@ -1,0 +1,198 @@
+//! Wavefront OBJ (+ .mtl) loading with `tobj`.
+//!
+//! Colours: `Kd` (linear) times the `map_Kd` texture times vertex colours (`v x y z r g b`,
+//! linear). Textures that are missing or cannot be decoded are reported once per file with
+//! `log::warn!` and the material falls back to `Kd`. OBJ texture coordinates have v = 0 at the
+//! bottom of the image; they are flipped to the image convention of [`Mesh::uvs`].
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use super::mesh::{Material, Mesh, Wrap};
+use super::{guard, load_texture, ImportOptions, SceneError};
+
+/// Loads `path` as an OBJ mesh.
+pub(crate) fn load_obj(path: &Path, opts: &ImportOptions) -> Result<Mesh, SceneError> {
+    // tobj reports a missing file only as "OpenFileFailed": check first for a proper io error.
+    std::fs::metadata(path).map_err(|e| SceneError::Io {
+        path: path.to_path_buf(),
+        source: e,
+    })?;
+    let load_opts = tobj::LoadOptions {
+        single_index: true,
+        triangulate: true,
+        ignore_points: true,
+        ignore_lines: true,
+    };
+    let (models, materials) = guard(path, "obj", || {
+        tobj::load_obj(path, &load_opts).map_err(|e| SceneError::Parse {
+            path: path.to_path_buf(),
+            format: "obj",
+            message: e.to_string(),
+        })
+    })?;
+    let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let mut mesh = Mesh {
+        source: path.to_path_buf(),
+        ..Mesh::default()
+    };
+
+    // Materials.
+    let obj_materials = match materials {
+        Ok(m) => m,
+        Err(e) => {
+            log::warn!(
+                "{}: material library unusable ({e}); no materials",
+                path.display()
+            );
+            Vec::new()
+        }
+    };
+    let mut texture_cache: HashMap<PathBuf, Option<u32>> = HashMap::new();
+    let mut get_texture = |mesh: &mut Mesh, file: &Path| -> Option<u32> {
+        if let Some(&t) = texture_cache.get(file) {
+            return t;
+        }
+        let t = match load_texture(file) {
+            Ok(tex) => {
+                mesh.textures.push(tex);
+                Some(mesh.textures.len() as u32 - 1)
+            }
+            Err(e) => {
+                log::warn!(
+                    "{}: texture {} unusable ({e}); using the material's Kd",
+                    path.display(),
+                    file.display()
+                );
+                None
+            }
+        };
+        texture_cache.insert(file.to_path_buf(), t);
+        t
+    };
+    let override_material = match &opts.texture_override {
+        Some(file) => {
+            let t = get_texture(&mut mesh, file);
+            if t.is_none() {
+                return Err(SceneError::Io {
+                    path: file.clone(),
+                    source: std::io::Error::other("texture override could not be loaded"),
+                });
+            }
+            Some(Material {
+                base_color: [1.0; 4],
+                texture: t,
+                wrap: [Wrap::Repeat; 2],
+            })
+        }
+        None => None,
+    };
+    if let Some(m) = override_material {
+        mesh.materials.push(m);
+    } else {
+        for m in &obj_materials {
+            let kd = m.diffuse.unwrap_or([1.0; 3]);
+            let alpha = m.dissolve.unwrap_or(1.0);
+            let texture = m.diffuse_texture.as_ref().and_then(|name| {
+                let name = name.replace('\\', "/");
+                // `map_Kd` may carry options before the file name; the file is the last token.
+                let file = name.split_whitespace().last().unwrap_or("");
+                if file.is_empty() {
+                    None
+                } else {
+                    get_texture(&mut mesh, &dir.join(file))
+                }
+            });
+            mesh.materials.push(Material {
+                base_color: [kd[0], kd[1], kd[2], alpha],
+                texture,
+                wrap: [Wrap::Repeat; 2],
+            });
+        }
+    }
+    let default_material = mesh.materials.len() as u32;
+    let mut need_default = false;
+
+    // Geometry.
+    let any_vertex_colors = models.iter().any(|m| !m.mesh.vertex_color.is_empty());
+    let any_uvs = models.iter().any(|m| !m.mesh.texcoords.is_empty());
+    for model in &models {
+        let m = &model.mesh;
+        let first = mesh.positions.len() as u64;
+        let nv = m.positions.len() / 3;
+        if first + nv as u64 >= u32::MAX as u64 {
+            return Err(SceneError::TooLarge {
+                path: path.to_path_buf(),
+                reason: "more than 2^32 vertices".into(),
+            });
+        }
+        mesh.positions
+            .extend(m.positions.chunks_exact(3).map(|p| [p[0], p[1], p[2]]));
+        if any_uvs {
+            if m.texcoords.len() == nv * 2 {
+                mesh.uvs
+                    .extend(m.texcoords.chunks_exact(2).map(|t| [t[0], 1.0 - t[1]]));
+            } else {
+                mesh.uvs.extend(std::iter::repeat([0.0, 0.0]).take(nv));
+            }
+        }
+        if any_vertex_colors {
+            if m.vertex_color.len() == nv * 3 {
+                mesh.colors.extend(
+                    m.vertex_color
+                        .chunks_exact(3)
+                        .map(|c| [c[0], c[1], c[2], 1.0]),
+                );
+            } else {
+                mesh.colors.extend(std::iter::repeat([1.0; 4]).take(nv));
+            }
+        }
+        let material = if override_material_present(opts) {
+            0
+        } else {
+            match m.material_id {
+                Some(id) if id < obj_materials.len() => id as u32,
+                _ => {
+                    need_default = true;
+                    default_material
+                }
+            }
+        };
+        for t in m.indices.chunks_exact(3) {
+            if t.iter().any(|&i| i as usize >= nv) {
+                return Err(SceneError::Parse {
+                    path: path.to_path_buf(),
+                    format: "obj",
+                    message: format!("face index {t:?} out of range ({nv} vertices)"),
+                });
+            }
+            mesh.triangles.push([
+                t[0] + first as u32,
+                t[1] + first as u32,
+                t[2] + first as u32,
+            ]);
+            mesh.tri_materials.push(material);
+        }
+    }
+    if need_default {
+        mesh.materials.push(Material::default());
+    }
+    mesh.has_colors =
+        !obj_materials.is_empty() || opts.texture_override.is_some() || any_vertex_colors;
+    if !mesh.has_colors {
+        mesh.materials.clear();
+        mesh.tri_materials.clear();
+    }
+    if mesh.triangles.is_empty() {
+        return Err(SceneError::InvalidMesh {
+            path: path.to_path_buf(),
+            reason: "no triangles".into(),
+        });
+    }
+    Ok(mesh)
+}
+
+/// True when an override texture replaces the OBJ materials.
+fn override_material_present(opts: &ImportOptions) -> bool {
+    opts.texture_override.is_some()
+}
