@@ -395,7 +395,18 @@ fn for_candidates(t: &GridTriangle, lo: [u32; 3], hi: [u32; 3], mut f: impl FnMu
     const MARGIN: f64 = 1e-3;
     for cu in lo[u]..=hi[u] {
         let su = n[u] * (cu as f64 + 0.5);
-        for cv in lo[v]..=hi[v] {
+        // Columns of this row that the triangle's projection can touch: the v-extent of the
+        // triangle clipped to the slab u in [cu, cu + 1] (with margins).
+        let Some((v_lo, v_hi)) = slab_range(t, u, v, cu as f64 - MARGIN, cu as f64 + 1.0 + MARGIN)
+        else {
+            continue;
+        };
+        let cv_lo = ((v_lo - MARGIN - 1.0).ceil().max(lo[v] as f64)) as u32;
+        let cv_hi = (v_hi + MARGIN).floor().min(hi[v] as f64);
+        if cv_hi < cv_lo as f64 {
+            continue;
+        }
+        for cv in cv_lo..=cv_hi as u32 {
             let s = su + n[v] * (cv as f64 + 0.5);
             let a = (pmin - s) / n[w];
             let b = (pmax - s) / n[w];
@@ -415,6 +426,42 @@ fn for_candidates(t: &GridTriangle, lo: [u32; 3], hi: [u32; 3], mut f: impl FnMu
             }
         }
     }
+}
+
+/// Range of coordinate `v` over the part of triangle `t` whose coordinate `u` lies in
+/// `[a, b]`; `None` if that part is empty.
+#[inline]
+fn slab_range(t: &GridTriangle, u: usize, v: usize, a: f64, b: f64) -> Option<(f64, f64)> {
+    let mut lo = f64::INFINITY;
+    let mut hi = f64::NEG_INFINITY;
+    for k in 0..3 {
+        let p = t.v[k];
+        let q = t.v[(k + 1) % 3];
+        let (pu, qu) = (p[u], q[u]);
+        let du = qu - pu;
+        let (t0, t1) = if du == 0.0 {
+            if pu < a || pu > b {
+                continue;
+            }
+            (0.0, 1.0)
+        } else {
+            let ta = (a - pu) / du;
+            let tb = (b - pu) / du;
+            let (ta, tb) = if ta <= tb { (ta, tb) } else { (tb, ta) };
+            let (t0, t1) = (ta.max(0.0), tb.min(1.0));
+            if t0 > t1 {
+                continue;
+            }
+            (t0, t1)
+        };
+        let dv = q[v] - p[v];
+        for tt in [t0, t1] {
+            let pv = p[v] + tt * dv;
+            lo = lo.min(pv);
+            hi = hi.max(pv);
+        }
+    }
+    (lo <= hi).then_some((lo, hi))
 }
 
 /// Voxelizes one brick (Morton code `brick` of the brick grid) from its triangle list.
