@@ -15,18 +15,30 @@ fn voxdag(args: &[&str]) -> Output {
 /// Asserts a clean failure: non-zero exit, one `error:` line containing every `needle`, no panic.
 fn assert_clean_error(out: &Output, needles: &[&str]) {
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success(), "expected failure, got success; stderr: {stderr}");
+    assert!(
+        !out.status.success(),
+        "expected failure, got success; stderr: {stderr}"
+    );
     assert_eq!(out.status.code(), Some(1), "stderr: {stderr}");
     assert!(!stderr.contains("panicked"), "panic: {stderr}");
     let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error:")).collect();
-    assert_eq!(errors.len(), 1, "want exactly one error line, got: {stderr}");
+    assert_eq!(
+        errors.len(),
+        1,
+        "want exactly one error line, got: {stderr}"
+    );
     for needle in needles {
-        assert!(errors[0].contains(needle), "error line {:?} lacks {needle:?}", errors[0]);
+        assert!(
+            errors[0].contains(needle),
+            "error line {:?} lacks {needle:?}",
+            errors[0]
+        );
     }
 }
 
 /// A closed tetrahedron as OBJ text.
-const TETRAHEDRON: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+const TETRAHEDRON: &str =
+    "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
 
 fn write(dir: &Path, name: &str, bytes: &[u8]) -> PathBuf {
     let path = dir.join(name);
@@ -43,15 +55,35 @@ fn build_stats_export_round_trip() {
     let dir = tempfile::tempdir().unwrap();
     let obj = write(dir.path(), "tetra.obj", TETRAHEDRON.as_bytes());
     let vdag = dir.path().join("tetra.vdag");
-    let out = voxdag(&["build", s(&obj), "--resolution", "64", "-o", s(&vdag), "--quiet"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = voxdag(&[
+        "build",
+        s(&obj),
+        "--resolution",
+        "64",
+        "-o",
+        s(&vdag),
+        "--quiet",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 
     let out = voxdag(&["stats", s(&vdag), "--json"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("stats --json is JSON");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value =
+        serde_json::from_slice(&out.stdout).expect("stats --json is JSON");
     assert_eq!(json["resolution"], 64);
     let voxels = json["voxels"].as_u64().unwrap();
-    assert!(voxels > 64 * 64, "a tetrahedron's surface at 64^3 has thousands of voxels, got {voxels}");
+    assert!(
+        voxels > 64 * 64,
+        "a tetrahedron's surface at 64^3 has thousands of voxels, got {voxels}"
+    );
     assert!(json["bytes"]["svo"].as_u64().unwrap() >= json["bytes"]["svdag32"].as_u64().unwrap());
     let levels = json["levels"].as_array().unwrap();
     assert_eq!(levels.len(), 5, "levels 0 (4^3) .. 4 (root of 64^3)");
@@ -63,15 +95,32 @@ fn build_stats_export_round_trip() {
     assert_eq!(levels[4]["svdag"], 1);
 
     let xyz = dir.path().join("tetra.xyz");
-    let out = voxdag(&["export-voxels", s(&vdag), "--format", "xyz-u32", "-o", s(&xyz)]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = voxdag(&[
+        "export-voxels",
+        s(&vdag),
+        "--format",
+        "xyz-u32",
+        "-o",
+        s(&xyz),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let bytes = std::fs::read(&xyz).unwrap();
     assert_eq!(bytes.len() as u64, voxels * 12);
-    assert!(bytes.chunks_exact(4).all(|c| u32::from_le_bytes(c.try_into().unwrap()) < 64));
+    assert!(bytes
+        .chunks_exact(4)
+        .all(|c| u32::from_le_bytes(c.try_into().unwrap()) < 64));
 
     let vox = dir.path().join("tetra.vox");
     let out = voxdag(&["export-voxels", s(&vdag), "--format", "vox", "-o", s(&vox)]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let reimported = dot_vox_count(&vox);
     assert_eq!(reimported, voxels);
 }
@@ -80,7 +129,11 @@ fn dot_vox_count(path: &Path) -> u64 {
     // Re-import through voxdag itself: build from the .vox at native size and read the voxel count.
     let vdag = path.with_extension("back.vdag");
     let out = voxdag(&["build", s(path), "-o", s(&vdag), "--quiet"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let out = voxdag(&["stats", s(&vdag), "--json"]);
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     json["voxels"].as_u64().unwrap()
@@ -94,32 +147,76 @@ fn bad_inputs_fail_cleanly_without_output() {
     let obj = write(dir.path(), "tetra.obj", TETRAHEDRON.as_bytes());
 
     let missing = dir.path().join("missing.obj");
-    assert_clean_error(&voxdag(&["build", s(&missing), "-r", "64", "-o", out, "-q"]), &["missing.obj"]);
+    assert_clean_error(
+        &voxdag(&["build", s(&missing), "-r", "64", "-o", out, "-q"]),
+        &["missing.obj"],
+    );
 
     let txt = write(dir.path(), "notes.txt", b"hello");
-    assert_clean_error(&voxdag(&["build", s(&txt), "-r", "64", "-o", out, "-q"]), &["notes.txt"]);
+    assert_clean_error(
+        &voxdag(&["build", s(&txt), "-r", "64", "-o", out, "-q"]),
+        &["notes.txt"],
+    );
 
-    let bad_obj = write(dir.path(), "bad.obj", b"v 0 0 0\nf 1 2 3\nthis is not obj \xff\xfe\n");
-    assert_clean_error(&voxdag(&["build", s(&bad_obj), "-r", "64", "-o", out, "-q"]), &["bad.obj"]);
+    let bad_obj = write(
+        dir.path(),
+        "bad.obj",
+        b"v 0 0 0\nf 1 2 3\nthis is not obj \xff\xfe\n",
+    );
+    assert_clean_error(
+        &voxdag(&["build", s(&bad_obj), "-r", "64", "-o", out, "-q"]),
+        &["bad.obj"],
+    );
 
     let bad_vox = write(dir.path(), "bad.vox", b"VOX \x96\x00\x00\x00MAIN\xff\xff");
-    assert_clean_error(&voxdag(&["build", s(&bad_vox), "-o", out, "-q"]), &["bad.vox"]);
+    assert_clean_error(
+        &voxdag(&["build", s(&bad_vox), "-o", out, "-q"]),
+        &["bad.vox"],
+    );
 
-    let bad_glb = write(dir.path(), "bad.glb", b"glTF\x02\x00\x00\x00\x10\x00\x00\x00");
-    assert_clean_error(&voxdag(&["build", s(&bad_glb), "-r", "64", "-o", out, "-q"]), &["bad.glb"]);
+    let bad_glb = write(
+        dir.path(),
+        "bad.glb",
+        b"glTF\x02\x00\x00\x00\x10\x00\x00\x00",
+    );
+    assert_clean_error(
+        &voxdag(&["build", s(&bad_glb), "-r", "64", "-o", out, "-q"]),
+        &["bad.glb"],
+    );
 
-    assert_clean_error(&voxdag(&["build", s(&obj), "-r", "100", "-o", out, "-q"]), &["power of two"]);
-    assert_clean_error(&voxdag(&["build", s(&obj), "-r", "4", "-o", out, "-q"]), &["4"]);
-    assert_clean_error(&voxdag(&["build", s(&obj), "-r", "1048576", "-o", out, "-q"]), &["1048576"]);
-    assert!(!out_path.exists(), "a failed build must not leave an output file");
+    assert_clean_error(
+        &voxdag(&["build", s(&obj), "-r", "100", "-o", out, "-q"]),
+        &["power of two"],
+    );
+    assert_clean_error(
+        &voxdag(&["build", s(&obj), "-r", "4", "-o", out, "-q"]),
+        &["4"],
+    );
+    assert_clean_error(
+        &voxdag(&["build", s(&obj), "-r", "1048576", "-o", out, "-q"]),
+        &["1048576"],
+    );
+    assert!(
+        !out_path.exists(),
+        "a failed build must not leave an output file"
+    );
 
     let garbage = write(dir.path(), "garbage.vdag", &[7u8; 300]);
     assert_clean_error(&voxdag(&["stats", s(&garbage)]), &["garbage.vdag"]);
     let png = dir.path().join("img.png");
-    assert_clean_error(&voxdag(&["render", s(&garbage), "--out", s(&png)]), &["garbage.vdag"]);
-    assert_clean_error(&voxdag(&["render", s(&missing), "--out", s(&png)]), &["missing"]);
+    assert_clean_error(
+        &voxdag(&["render", s(&garbage), "--out", s(&png)]),
+        &["garbage.vdag"],
+    );
+    assert_clean_error(
+        &voxdag(&["render", s(&missing), "--out", s(&png)]),
+        &["missing"],
+    );
     assert!(!png.exists());
 
     let nowhere = dir.path().join("no/such/dir/out.vdag");
-    assert_clean_error(&voxdag(&["build", s(&obj), "-r", "64", "-o", s(&nowhere), "-q"]), &["no/such/dir"]);
+    assert_clean_error(
+        &voxdag(&["build", s(&obj), "-r", "64", "-o", s(&nowhere), "-q"]),
+        &["no/such/dir"],
+    );
 }

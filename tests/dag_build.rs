@@ -118,6 +118,29 @@ fn check(v: &Voxels, full_grid: bool) {
         let [x, y, z] = morton::decode(code);
         assert_eq!(dag.color_index(x, y, z), Some(v.len() as u64 - 1));
     }
+    check_bounds(&dag, v);
+}
+
+/// `occupied_bounds` is the exact bounding box rounded outward to cells of max(4, N/64) voxels.
+fn check_bounds(dag: &Svdag, v: &Voxels) {
+    let cell = (v.resolution / 64).max(4);
+    let Some((min, max)) = dag.occupied_bounds() else {
+        assert!(v.is_empty(), "bounds missing for a non-empty scene");
+        return;
+    };
+    let mut exact_min = [u32::MAX; 3];
+    let mut exact_max = [0u32; 3];
+    for &code in &v.codes {
+        let p = morton::decode(code);
+        for a in 0..3 {
+            exact_min[a] = exact_min[a].min(p[a]);
+            exact_max[a] = exact_max[a].max(p[a] + 1);
+        }
+    }
+    for a in 0..3 {
+        assert_eq!(min[a], exact_min[a] / cell * cell, "min axis {a}");
+        assert_eq!(max[a], exact_max[a].div_ceil(cell) * cell, "max axis {a}");
+    }
 }
 
 /// All cells of an n^3 grid for which `f` holds.

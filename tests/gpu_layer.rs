@@ -463,7 +463,8 @@ fn gpu_render_of_empty_scene_is_all_sky() {
         let dag = Svdag::from_voxels(&Voxels {
             resolution: 8,
             ..Voxels::default()
-        }).unwrap();
+        })
+        .unwrap();
         let index = VoxelIndex::new(&dag);
         let scene = renderer.upload(&dag).unwrap();
         let settings = RenderSettings::new(20, 12, Camera::orbit_default(8));

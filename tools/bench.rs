@@ -29,7 +29,11 @@ pub enum BenchCommand {
 pub struct BenchBuildArgs {
     /// Scenes: names in the shared data set (bunny, dragon, buddha, horse, teapot, sponza-crytek,
     /// sponza-dabrovic) or paths to scene files.
-    #[arg(long, value_delimiter = ',', default_value = "bunny,dragon,sponza-crytek")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "bunny,dragon,sponza-crytek"
+    )]
     scenes: Vec<String>,
     /// Grid resolutions.
     #[arg(long, value_delimiter = ',', default_value = "2048,8192")]
@@ -78,13 +82,18 @@ pub fn run(command: BenchCommand, quiet: bool) -> Result<()> {
 /// Resolves a scene name of the shared data set, or takes the argument as a path.
 fn scene_path(data: &Path, name: &str) -> Result<PathBuf> {
     let known = match name {
-        "bunny" | "dragon" | "buddha" | "horse" | "teapot" | "sponza-dabrovic" => format!("meshes/{name}.obj"),
+        "bunny" | "dragon" | "buddha" | "horse" | "teapot" | "sponza-dabrovic" => {
+            format!("meshes/{name}.obj")
+        }
         "sponza-crytek" => "meshes/sponza-crytek/sponza_crytek_noleaf.obj".to_string(),
         _ => return Ok(PathBuf::from(name)),
     };
     let path = data.join(known);
     if !path.exists() {
-        bail!("scene {name}: {} not found (pass --data DIR)", path.display());
+        bail!(
+            "scene {name}: {} not found (pass --data DIR)",
+            path.display()
+        );
     }
     Ok(path)
 }
@@ -118,10 +127,16 @@ fn bench_build(args: &BenchBuildArgs) -> Result<()> {
                 .status()
                 .context("starting voxdag build")?;
             if !status.success() {
-                bail!("voxdag build {} at {resolution} failed ({status})", input.display());
+                bail!(
+                    "voxdag build {} at {resolution} failed ({status})",
+                    input.display()
+                );
             }
             let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&report_path)?)?;
-            rows.push(BuildRow { scene: name.clone(), report });
+            rows.push(BuildRow {
+                scene: name.clone(),
+                report,
+            });
             std::fs::remove_file(&out).ok();
         }
     }
@@ -183,13 +198,16 @@ fn bench_render(args: &BenchRenderArgs, quiet: bool) -> Result<()> {
     let dag = if path.extension().is_some_and(|e| e == "vdag") {
         Svdag::load(&path)?
     } else {
-        let options = ImportOptions { resolution: Some(args.resolution), ..Default::default() };
+        let options = ImportOptions {
+            resolution: Some(args.resolution),
+            ..Default::default()
+        };
         let bar = progress_bar(quiet);
         let voxels = scene::import(&path, &options, &bar)?;
         bar.finish_and_clear();
         Svdag::from_voxels(&voxels)?
     };
-    let mut settings = RenderSettings::new(args.size.0, args.size.1, Camera::orbit_default(dag.resolution));
+    let mut settings = RenderSettings::new(args.size.0, args.size.1, Camera::frame(&dag));
     settings.shadows = false;
     let rays = (args.size.0 * args.size.1) as f64;
 
@@ -202,7 +220,12 @@ fn bench_render(args: &BenchRenderArgs, quiet: bool) -> Result<()> {
     let start = Instant::now();
     let gpu_image = renderer.render(&scene, &settings, Some(&mut profiler))?;
     let gpu_wall = start.elapsed();
-    let gpu_pass_ms: f64 = profiler.passes().iter().filter(|p| p.name == "primary rays").map(|p| p.gpu_ms).sum();
+    let gpu_pass_ms: f64 = profiler
+        .passes()
+        .iter()
+        .filter(|p| p.name == "primary rays")
+        .map(|p| p.gpu_ms)
+        .sum();
     let device = context.info().name.clone();
     drop(scene);
     drop(renderer);
@@ -213,7 +236,12 @@ fn bench_render(args: &BenchRenderArgs, quiet: bool) -> Result<()> {
     let start = Instant::now();
     let cpu_image = render_cpu(&dag, &index, &settings)?;
     let cpu_time = start.elapsed();
-    let mismatch = gpu_image.hits.iter().zip(&cpu_image.hits).filter(|(a, b)| a != b).count();
+    let mismatch = gpu_image
+        .hits
+        .iter()
+        .zip(&cpu_image.hits)
+        .filter(|(a, b)| a != b)
+        .count();
 
     let cpu_ms = cpu_time.as_secs_f64() * 1e3;
     let result = RenderBench {
@@ -246,7 +274,11 @@ fn bench_render(args: &BenchRenderArgs, quiet: bool) -> Result<()> {
         result.gpu_over_cpu
     );
     print!("{md}");
-    eprintln!("peak RSS {:.0} MiB, GPU wall {}", peak_rss_bytes() as f64 / 1048576.0, seconds(gpu_wall));
+    eprintln!(
+        "peak RSS {:.0} MiB, GPU wall {}",
+        peak_rss_bytes() as f64 / 1048576.0,
+        seconds(gpu_wall)
+    );
     write_outputs(&args.json, &result, &args.markdown, &md)
 }
 

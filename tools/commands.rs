@@ -43,8 +43,10 @@ pub fn progress_bar(quiet: bool) -> ProgressBar {
     }
     let bar = ProgressBar::new(0);
     bar.set_style(
-        ProgressStyle::with_template("{msg:>12} [{elapsed_precise}] {wide_bar} {pos}/{len} ({eta})")
-            .expect("valid progress template"),
+        ProgressStyle::with_template(
+            "{msg:>12} [{elapsed_precise}] {wide_bar} {pos}/{len} ({eta})",
+        )
+        .expect("valid progress template"),
     );
     bar
 }
@@ -63,11 +65,19 @@ pub fn peak_rss_bytes() -> u64 {
 
 /// Parses "WIDTHxHEIGHT".
 pub fn parse_size(text: &str) -> Result<(u32, u32), String> {
-    let (w, h) = text.split_once(['x', 'X']).ok_or("expected WIDTHxHEIGHT, e.g. 1024x768")?;
-    let parse = |s: &str| s.trim().parse::<u32>().map_err(|e| format!("bad size {s:?}: {e}"));
+    let (w, h) = text
+        .split_once(['x', 'X'])
+        .ok_or("expected WIDTHxHEIGHT, e.g. 1024x768")?;
+    let parse = |s: &str| {
+        s.trim()
+            .parse::<u32>()
+            .map_err(|e| format!("bad size {s:?}: {e}"))
+    };
     let (w, h) = (parse(w)?, parse(h)?);
     if w == 0 || h == 0 || w > 16384 || h > 16384 {
-        return Err(format!("image size {w}x{h} out of range (1..=16384 per side)"));
+        return Err(format!(
+            "image size {w}x{h} out of range (1..=16384 per side)"
+        ));
     }
     Ok((w, h))
 }
@@ -80,7 +90,10 @@ pub fn parse_vec3(text: &str) -> Result<[f32; 3], String> {
     }
     let mut v = [0f32; 3];
     for (out, part) in v.iter_mut().zip(parts) {
-        *out = part.trim().parse().map_err(|e| format!("bad number {part:?}: {e}"))?;
+        *out = part
+            .trim()
+            .parse()
+            .map_err(|e| format!("bad number {part:?}: {e}"))?;
         if !out.is_finite() {
             return Err(format!("{part:?} is not a finite number"));
         }
@@ -166,7 +179,13 @@ pub fn stats_table(file: &Path, stats: &DagStats) -> String {
     );
     for level in &stats.levels {
         let size = 4u64 << level.level;
-        out += &format!("  {:>5}  {:>9} {:>10} {:>10}\n", level.level, format!("{size}^3"), level.svo, level.svdag);
+        out += &format!(
+            "  {:>5}  {:>9} {:>10} {:>10}\n",
+            level.level,
+            format!("{size}^3"),
+            level.svo,
+            level.svdag
+        );
     }
     out
 }
@@ -179,13 +198,17 @@ pub fn export_voxels(args: &ExportArgs) -> Result<()> {
         ExportFormat::XyzU32 => export_xyz_u32_file(&dag, &args.output)?,
         ExportFormat::Vox => export_vox(&dag, &args.output)?,
     }
-    println!("{}: wrote {} voxels", args.output.display(), dag.stats().voxels);
+    println!(
+        "{}: wrote {} voxels",
+        args.output.display(),
+        dag.stats().voxels
+    );
     Ok(())
 }
 
 /// Builds render settings from the CLI camera flags.
 fn render_settings(args: &RenderArgs, dag: &Svdag) -> RenderSettings {
-    let mut camera = Camera::orbit_default(dag.resolution);
+    let mut camera = Camera::frame(dag);
     if let Some(eye) = args.eye {
         camera.eye = eye;
     }
@@ -219,12 +242,24 @@ pub fn render(args: &RenderArgs) -> Result<()> {
         render_cpu(&dag, &index, &settings)?
     } else {
         let context = GpuContext::new(&GpuOptions::default())?;
-        let image = render_gpu(&context, &dag, &settings, args.profile, args.trace.as_deref())?;
+        let image = render_gpu(
+            &context,
+            &dag,
+            &settings,
+            args.profile,
+            args.trace.as_deref(),
+        )?;
         drop(context);
         image
     };
     image.save_png(&args.out)?;
-    println!("{}: {}x{} in {}", args.out.display(), args.size.0, args.size.1, seconds(start.elapsed()));
+    println!(
+        "{}: {}x{} in {}",
+        args.out.display(),
+        args.size.0,
+        args.size.1,
+        seconds(start.elapsed())
+    );
     Ok(())
 }
 
@@ -245,7 +280,10 @@ fn render_gpu(
     }
     if let Some(path) = trace {
         profiler.write_chrome_trace(path)?;
-        println!("{}: Chrome trace written (open in Perfetto)", path.display());
+        println!(
+            "{}: Chrome trace written (open in Perfetto)",
+            path.display()
+        );
     }
     Ok(image)
 }
@@ -253,7 +291,8 @@ fn render_gpu(
 /// `voxdag demo`: the README's quick start.
 pub fn demo(args: &DemoArgs, quiet: bool) -> Result<()> {
     let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/avocado/Avocado.gltf");
-    std::fs::create_dir_all(&args.out_dir).with_context(|| format!("creating {}", args.out_dir.display()))?;
+    std::fs::create_dir_all(&args.out_dir)
+        .with_context(|| format!("creating {}", args.out_dir.display()))?;
     let vdag = args.out_dir.join("avocado.vdag");
     let build_args = BuildArgs {
         input,
@@ -278,15 +317,24 @@ pub fn demo(args: &DemoArgs, quiet: bool) -> Result<()> {
         trace: Some(args.out_dir.join("avocado-trace.json")),
     };
     render(&render_args)?;
-    let stats_args = StatsArgs { file: vdag.clone(), json: false };
+    let stats_args = StatsArgs {
+        file: vdag.clone(),
+        json: false,
+    };
     stats(&stats_args)?;
-    write_json(&args.out_dir.join("avocado-stats.json"), &Svdag::load(&vdag)?.stats())?;
+    write_json(
+        &args.out_dir.join("avocado-stats.json"),
+        &Svdag::load(&vdag)?.stats(),
+    )?;
     Ok(())
 }
 
 /// Fails early, before any work, when the output's folder does not exist.
 fn check_output_dir(output: &Path) -> Result<()> {
-    let dir = output.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let dir = output
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
     if !dir.is_dir() {
         bail!("output folder {} does not exist", dir.display());
     }
@@ -296,7 +344,8 @@ fn check_output_dir(output: &Path) -> Result<()> {
 /// Writes pretty JSON atomically enough for reports (create + write; reports are not scenes).
 pub fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
     let file = File::create(path).with_context(|| format!("creating {}", path.display()))?;
-    serde_json::to_writer_pretty(BufWriter::new(file), value).with_context(|| format!("writing {}", path.display()))?;
+    serde_json::to_writer_pretty(BufWriter::new(file), value)
+        .with_context(|| format!("writing {}", path.display()))?;
     Ok(())
 }
 

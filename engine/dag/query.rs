@@ -7,6 +7,36 @@ use super::{Svdag, VoxelIndex};
 use crate::scene::{morton, Voxels};
 
 impl Svdag {
+    /// Bounding box `(min, max)` (max exclusive, in voxels) of the occupied space, rounded outward
+    /// to cells of `N / 64` voxels (whole leaves for small grids); `None` for an empty scene.
+    /// Cheap (it visits at most 64^3 cells), meant for camera framing.
+    pub fn occupied_bounds(&self) -> Option<([u32; 3], [u32; 3])> {
+        let stop_level = self.root_level().saturating_sub(6);
+        let mut min = [u32::MAX; 3];
+        let mut max = [0u32; 3];
+        // Depth-first over paths down to `stop_level`: (node, level, corner).
+        let mut stack = vec![(0usize, self.root_level(), [0u32; 3])];
+        while let Some((node, level, corner)) = stack.pop() {
+            let size = 4u32 << level;
+            if level == stop_level {
+                for a in 0..3 {
+                    min[a] = min[a].min(corner[a]);
+                    max[a] = max[a].max(corner[a] + size);
+                }
+                continue;
+            }
+            let half = size / 2;
+            for octant in 0..8 {
+                if let Some(child) = self.child(node, octant) {
+                    let offset = [octant & 1, (octant >> 1) & 1, octant >> 2];
+                    let child_corner = [0, 1, 2].map(|a| corner[a] + offset[a] * half);
+                    stack.push((child, level - 1, child_corner));
+                }
+            }
+        }
+        (min[0] != u32::MAX).then_some((min, max))
+    }
+
     /// Word offset of the child in octant `octant` of the inner node at `node`, if present.
     #[inline]
     pub fn child(&self, node: usize, octant: u32) -> Option<usize> {

@@ -233,7 +233,10 @@ impl Svdag {
                 (ptr, leaf_block_mask(self.leaf_mask(ptr as usize)))
             } else {
                 // Sub-block c of the leaf at `node`: byte c of its mask.
-                (node, ((self.leaf_mask(node as usize) >> (8 * c)) & 0xff) as u32)
+                (
+                    node,
+                    ((self.leaf_mask(node as usize) >> (8 * c)) & 0xff) as u32,
+                )
             };
             depth += 1;
             stack[depth] = pushed;

@@ -4,6 +4,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use crate::dag::raycast::Ray;
+use crate::dag::Svdag;
 
 /// A look-at pinhole camera in grid coordinates.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -63,13 +64,26 @@ pub(crate) fn normalize(a: [f32; 3]) -> Option<[f32; 3]> {
 }
 
 impl Camera {
-    /// A pleasing framing of the whole `resolution^3` grid: looks at its centre from azimuth 35°,
-    /// elevation 25°, far enough that the grid's bounding sphere fits the vertical field of view
-    /// (so the whole grid is visible at any aspect ratio >= 1).
+    /// [`Camera::orbit`] around the whole `resolution^3` grid.
     pub fn orbit_default(resolution: u32) -> Camera {
-        let n = resolution as f32;
-        let centre = [0.5 * n; 3];
-        let radius = 0.5 * n * 3f32.sqrt();
+        Camera::orbit([0.0; 3], [resolution as f32; 3])
+    }
+
+    /// The default view of a scene: [`Camera::orbit`] around its occupied bounds, or the whole
+    /// grid when it is empty.
+    pub fn frame(dag: &Svdag) -> Camera {
+        match dag.occupied_bounds() {
+            Some((min, max)) => Camera::orbit(min.map(|v| v as f32), max.map(|v| v as f32)),
+            None => Camera::orbit_default(dag.resolution),
+        }
+    }
+
+    /// Looks at the centre of the box `min..max` from azimuth 35°, elevation 25°, far enough that
+    /// the box's bounding sphere fits the vertical field of view (so the whole box is visible at
+    /// any aspect ratio >= 1).
+    pub fn orbit(min: [f32; 3], max: [f32; 3]) -> Camera {
+        let centre = [0, 1, 2].map(|a| 0.5 * (min[a] + max[a]));
+        let radius = 0.5 * length(sub(max, min));
         let half_fov = (0.5 * DEFAULT_FOV_Y_DEG).to_radians();
         let distance = 1.1 * radius / half_fov.sin();
         let (az, el) = (

@@ -2,7 +2,8 @@
 //!
 //! Colours: `Kd` (linear) times the `map_Kd` texture times vertex colours (`v x y z r g b`,
 //! linear). Textures that are missing or cannot be decoded are reported once per file with
-//! `log::warn!` and the material falls back to `Kd`. OBJ texture coordinates have v = 0 at the
+//! `log::warn!` and the material falls back to `Kd` (a `Kd` of zero next to a `map_Kd` counts as 1:
+//! the exporters' "texture only" convention). OBJ texture coordinates have v = 0 at the
 //! bottom of the image; they are flipped to the image convention of [`Mesh::uvs`].
 
 use std::collections::HashMap;
@@ -91,7 +92,12 @@ pub(crate) fn load_obj(path: &Path, opts: &ImportOptions) -> Result<Mesh, SceneE
         mesh.materials.push(m);
     } else {
         for m in &obj_materials {
-            let kd = m.diffuse.unwrap_or([1.0; 3]);
+            let mut kd = m.diffuse.unwrap_or([1.0; 3]);
+            // Exporters such as Maya write `Kd 0 0 0` next to `map_Kd` meaning "the texture
+            // alone"; read that as Kd = 1 so that a textured (or texture-less) material is not black.
+            if m.diffuse_texture.is_some() && kd == [0.0; 3] {
+                kd = [1.0; 3];
+            }
             let alpha = m.dissolve.unwrap_or(1.0);
             let texture = m.diffuse_texture.as_ref().and_then(|name| {
                 let name = name.replace('\\', "/");

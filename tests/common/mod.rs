@@ -28,7 +28,10 @@ pub fn shared_data() -> Option<PathBuf> {
 
 /// Imports and builds a scene at a resolution (no progress bar).
 pub fn build_scene(path: &Path, resolution: Option<u32>) -> Svdag {
-    let options = ImportOptions { resolution, ..Default::default() };
+    let options = ImportOptions {
+        resolution,
+        ..Default::default()
+    };
     let voxels = scene::import(path, &options, &indicatif::ProgressBar::hidden())
         .unwrap_or_else(|e| panic!("importing {}: {e}", path.display()));
     Svdag::from_voxels(&voxels).expect("build SVDAG")
@@ -37,8 +40,12 @@ pub fn build_scene(path: &Path, resolution: Option<u32>) -> Svdag {
 /// A GPU context with validation on; fails (never skips) when no Vulkan device exists.
 pub fn gpu() -> Arc<GpuContext> {
     ensure_runtime_dir();
-    let options = GpuOptions { validation: true, ..GpuOptions::default() };
-    GpuContext::new(&options).expect("a Vulkan device is required for this test (lavapipe is enough)")
+    let options = GpuOptions {
+        validation: true,
+        ..GpuOptions::default()
+    };
+    GpuContext::new(&options)
+        .expect("a Vulkan device is required for this test (lavapipe is enough)")
 }
 
 /// Mesa warns without XDG_RUNTIME_DIR; give it a private one when the environment has none.
@@ -84,7 +91,11 @@ pub fn compare(expected: &[u8], actual: &[u8], channel_tolerance: u8) -> ImageDi
             diff_rgba.extend_from_slice(&[e[0] / 3, e[1] / 3, e[2] / 3, 255]);
         }
     }
-    ImageDiff { differing, max_delta, diff_rgba }
+    ImageDiff {
+        differing,
+        max_delta,
+        diff_rgba,
+    }
 }
 
 /// Saves an RGBA8 image as PNG.
@@ -103,9 +114,18 @@ pub fn check_golden(name: &str, image: &RenderOutput, channel_tolerance: u8, max
         return;
     }
     let expected = image::open(&golden)
-        .unwrap_or_else(|e| panic!("golden {} unreadable ({e}); run with VOXDAG_BLESS=1 to create it", golden.display()))
+        .unwrap_or_else(|e| {
+            panic!(
+                "golden {} unreadable ({e}); run with VOXDAG_BLESS=1 to create it",
+                golden.display()
+            )
+        })
         .to_rgba8();
-    assert_eq!((expected.width(), expected.height()), (image.width, image.height), "golden {name} size");
+    assert_eq!(
+        (expected.width(), expected.height()),
+        (image.width, image.height),
+        "golden {name} size"
+    );
     let diff = compare(expected.as_raw(), &image.rgba, channel_tolerance);
     let allowed = (max_fraction * (image.width * image.height) as f64) as usize;
     if diff.differing > allowed {
