@@ -220,3 +220,72 @@ fn bad_inputs_fail_cleanly_without_output() {
         &["no/such/dir"],
     );
 }
+
+#[test]
+fn render_writes_png_profile_and_trace() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = write(dir.path(), "tetra.obj", TETRAHEDRON.as_bytes());
+    let vdag = dir.path().join("tetra.vdag");
+    assert!(
+        voxdag(&["build", s(&obj), "-r", "64", "-o", s(&vdag), "-q"])
+            .status
+            .success()
+    );
+    let png = dir.path().join("tetra.png");
+    let trace = dir.path().join("trace.json");
+    let out = voxdag(&[
+        "render",
+        s(&vdag),
+        "--size",
+        "96x64",
+        "--out",
+        s(&png),
+        "--profile",
+        "--trace",
+        s(&trace),
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("primary rays"),
+        "the profile table names the pass: {stdout}"
+    );
+    let image = image::open(&png).unwrap().to_rgba8();
+    assert_eq!((image.width(), image.height()), (96, 64));
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&trace).unwrap()).unwrap();
+    let events = json["traceEvents"].as_array().unwrap();
+    assert!(events.iter().any(|e| e["name"] == "primary rays"
+        && e["ph"] == "X"
+        && e["dur"].as_f64().unwrap() > 0.0));
+
+    // The CPU reference renderer gives the same hit pixels as the GPU (within the edge tolerance).
+    let cpu_png = dir.path().join("tetra-cpu.png");
+    let out = voxdag(&[
+        "render",
+        s(&vdag),
+        "--size",
+        "96x64",
+        "--out",
+        s(&cpu_png),
+        "--cpu",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let cpu = image::open(&cpu_png).unwrap().to_rgba8();
+    let differing = image
+        .pixels()
+        .zip(cpu.pixels())
+        .filter(|(a, b)| a.0.iter().zip(b.0).any(|(x, y)| x.abs_diff(y) > 4))
+        .count();
+    assert!(
+        differing <= 96 * 64 / 200,
+        "{differing} pixels differ between GPU and CPU renders"
+    );
+}
