@@ -493,3 +493,20 @@ fn real_vox_model_round_trips() {
     export_vox(&dag, &vox).unwrap();
     assert_eq!(reimport(&vox, n), pairs);
 }
+
+/// The fuzz property above must not pass by rejecting everything: a colour byte changed under a
+/// repaired checksum is a valid file and loads with exactly that colour changed.
+#[test]
+fn repaired_colour_edit_is_accepted() {
+    let original = dag(16, true);
+    let mut bytes = original.to_bytes();
+    let colors_len = original.colors.len() * 4;
+    let at = bytes.len() - 4 - colors_len; // colours are the last section, before the CRC
+    bytes[at] ^= 0x5a;
+    fix_crc(&mut bytes);
+    let loaded =
+        Svdag::from_bytes(&bytes, "edited.vdag").expect("a colour edit keeps the file valid");
+    assert_eq!(loaded.words, original.words);
+    assert_eq!(loaded.colors[0], original.colors[0] ^ 0x5a);
+    assert_eq!(loaded.colors[1..], original.colors[1..]);
+}

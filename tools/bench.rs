@@ -1,5 +1,6 @@
 //! `voxdag bench ...`: benchmarks writing JSON plus a Markdown table (never timed unit tests).
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
@@ -7,6 +8,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use serde::{Deserialize, Serialize};
+use voxdag::atomic_file::write_atomic;
 use voxdag::dag::{Svdag, VoxelIndex};
 use voxdag::gpu::{GpuContext, GpuOptions, Profiler};
 use voxdag::render::gpu::GpuRenderer;
@@ -290,7 +292,8 @@ fn write_outputs(json: &Path, value: &impl Serialize, markdown: &Path, md: &str)
         }
     }
     write_json(json, value)?;
-    std::fs::write(markdown, md).with_context(|| format!("writing {}", markdown.display()))?;
+    write_atomic(markdown, |w| w.write_all(md.as_bytes()))
+        .with_context(|| format!("writing {}", markdown.display()))?;
     eprintln!("wrote {} and {}", json.display(), markdown.display());
     Ok(())
 }

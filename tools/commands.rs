@@ -1,7 +1,5 @@
 //! The subcommands of the `voxdag` CLI (everything but the benchmarks).
 
-use std::fs::File;
-use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -9,6 +7,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
+use voxdag::atomic_file::write_atomic;
 use voxdag::dag::{export_vox, export_xyz_u32_file, DagStats, Svdag, VoxelIndex};
 use voxdag::gpu::{GpuContext, GpuOptions, Profiler};
 use voxdag::render::gpu::GpuRenderer;
@@ -136,6 +135,9 @@ pub fn build_scene(args: &BuildArgs, quiet: bool) -> Result<(Svdag, BuildReport)
 /// `voxdag build`.
 pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
     check_output_dir(&args.output)?;
+    if let Some(report) = &args.report {
+        check_output_dir(report)?;
+    }
     let (dag, report) = build_scene(args, quiet)?;
     dag.save(&args.output)?;
     println!(
@@ -201,7 +203,7 @@ pub fn export_voxels(args: &ExportArgs) -> Result<()> {
     println!(
         "{}: wrote {} voxels",
         args.output.display(),
-        dag.stats().voxels
+        dag.voxel_count()
     );
     Ok(())
 }
@@ -341,12 +343,10 @@ fn check_output_dir(output: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Writes pretty JSON atomically enough for reports (create + write; reports are not scenes).
+/// Writes pretty JSON atomically.
 pub fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
-    let file = File::create(path).with_context(|| format!("creating {}", path.display()))?;
-    serde_json::to_writer_pretty(BufWriter::new(file), value)
-        .with_context(|| format!("writing {}", path.display()))?;
-    Ok(())
+    write_atomic(path, |w| Ok(serde_json::to_writer_pretty(w, value)?))
+        .with_context(|| format!("writing {}", path.display()))
 }
 
 /// "1.23 s" or "45.6 ms".

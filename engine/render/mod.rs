@@ -9,7 +9,7 @@ pub mod cpu;
 pub mod gpu;
 pub mod params;
 
-use std::io::Write;
+use std::io;
 use std::path::{Path, PathBuf};
 
 pub use camera::Camera;
@@ -101,14 +101,6 @@ pub enum RenderError {
         /// Underlying error.
         source: std::io::Error,
     },
-    /// PNG encoding failed.
-    #[error("cannot encode PNG {path}: {source}")]
-    Png {
-        /// File being written.
-        path: PathBuf,
-        /// Underlying error.
-        source: image::ImageError,
-    },
 }
 
 impl RenderOutput {
@@ -127,35 +119,19 @@ impl RenderOutput {
                 height: self.height,
             });
         }
-        let io = |source| RenderError::Io {
-            path: path.to_path_buf(),
-            source,
-        };
-        let mut tmp_name = path.file_name().unwrap_or_default().to_os_string();
-        tmp_name.push(format!(".tmp{}", std::process::id()));
-        let tmp = path.with_file_name(tmp_name);
-        let result = (|| {
-            let file = std::fs::File::create(&tmp).map_err(io)?;
-            let mut writer = std::io::BufWriter::new(file);
+        let encoded = crate::atomic_file::write_atomic(path, |writer| {
             image::ImageEncoder::write_image(
-                image::codecs::png::PngEncoder::new(&mut writer),
+                image::codecs::png::PngEncoder::new(writer),
                 &self.rgba,
                 self.width,
                 self.height,
                 image::ExtendedColorType::Rgba8,
             )
-            .map_err(|source| RenderError::Png {
-                path: path.to_path_buf(),
-                source,
-            })?;
-            writer.flush().map_err(io)?;
-            let file = writer.into_inner().map_err(|e| io(e.into_error()))?;
-            file.sync_all().map_err(io)?;
-            std::fs::rename(&tmp, path).map_err(io)
-        })();
-        if result.is_err() {
-            let _ = std::fs::remove_file(&tmp);
-        }
-        result
+            .map_err(io::Error::other)
+        });
+        encoded.map_err(|source| RenderError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
     }
 }

@@ -109,6 +109,10 @@ pub fn save_png(path: &Path, width: u32, height: u32, rgba: &[u8]) {
 pub fn check_golden(name: &str, image: &RenderOutput, channel_tolerance: u8, max_fraction: f64) {
     let golden = repo().join("tests/golden").join(format!("{name}.png"));
     if std::env::var("VOXDAG_BLESS").as_deref() == Ok("1") {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "VOXDAG_BLESS must not be set in CI: goldens would not be checked"
+        );
         save_png(&golden, image.width, image.height, &image.rgba);
         println!("blessed {}", golden.display());
         return;
