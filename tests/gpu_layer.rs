@@ -173,6 +173,61 @@ fn fill_shader_spec_and_push_constants_and_subgroup_size() {
     assert_clean(&ctx);
 }
 
+/// Several threads record and submit at once on one shared context (each `Commands` must own
+/// what Vulkan requires to be externally synchronised); every result is checked exactly.
+#[test]
+fn commands_record_and_submit_from_several_threads_at_once() {
+    let ctx = context();
+    {
+        let pipeline = ctx
+            .create_compute_pipeline(&ComputePipelineDesc {
+                name: "test fill threads",
+                spirv: shaders::TEST_FILL,
+                spec_constants: &[64, 7],
+                push_constant_size: 24,
+                storage_image: false,
+            })
+            .unwrap();
+        let (threads, submissions) = (4u32, 10u32);
+        let start = std::sync::Barrier::new(threads as usize);
+        std::thread::scope(|s| {
+            for t in 0..threads {
+                let (ctx, pipeline, start) = (&ctx, &pipeline, &start);
+                s.spawn(move || {
+                    // Different sizes per thread so that mixed-up results cannot match.
+                    let count = 40_000 + 1_013 * t;
+                    let out = ctx
+                        .create_buffer(
+                            &format!("thread {t}"),
+                            count as u64 * 4,
+                            MemLocation::GpuOnly,
+                        )
+                        .unwrap();
+                    start.wait();
+                    for i in 0..submissions {
+                        let seed = t * 1_000 + i;
+                        let mut cmd = ctx.begin_commands(&format!("thread {t} #{i}")).unwrap();
+                        cmd.fill_buffer(&out, 0xffff_ffff);
+                        cmd.dispatch(
+                            pipeline,
+                            [8 + t, 1, 1],
+                            &fill_push(out.address(), 0, count, seed),
+                            None,
+                        )
+                        .unwrap();
+                        cmd.submit().unwrap();
+                        let got = ctx.download::<u32>(&out).unwrap();
+                        let bad = (0..count)
+                            .position(|j| got[j as usize] != j.wrapping_mul(7).wrapping_add(seed));
+                        assert_eq!(bad, None, "thread {t}, submission {i}: first wrong word");
+                    }
+                });
+            }
+        });
+    }
+    assert_clean(&ctx);
+}
+
 #[test]
 fn buffer_larger_than_max_storage_range_via_device_address() {
     let ctx = context();
