@@ -2,7 +2,9 @@
 //!
 //! Output: `$OUT_DIR/shaders.rs` with one `pub const NAME: &[u32]` per shader, named after its
 //! path below `shaders/glsl` (`render/primary.comp` -> `RENDER_PRIMARY`), included by
-//! `engine/gpu/shaders.rs`. Includes are tracked through glslc's `-MD` depfiles so cargo reruns
+//! `engine/gpu/shaders.rs`. Each constant gets a `///` doc line naming its source file; shaders
+//! under `shaders/glsl/test/` (`TEST_*`) are compiled into the library too, for the GPU-layer
+//! tests, and say so in their docs. Includes are tracked through glslc's `-MD` depfiles so cargo reruns
 //! this script when any source or header changes. Any glslc error or warning fails the build.
 
 use std::fmt::Write as _;
@@ -98,11 +100,16 @@ fn main() {
                 bytes.len()
             );
         }
-        let _ = writeln!(
-            generated,
-            "/// SPIR-V of `shaders/glsl/{}`.\npub const {name}: &[u32] = &[",
-            rel.to_string_lossy().replace('\\', "/")
-        );
+        let rel_str = rel.to_string_lossy().replace('\\', "/");
+        let _ = writeln!(generated, "/// SPIR-V of `shaders/glsl/{rel_str}`.");
+        if rel_str.starts_with("test/") {
+            let _ = writeln!(
+                generated,
+                "///\n/// Test-only shader, compiled into the library for the GPU-layer tests \
+                 (`tests/gpu_layer.rs`)."
+            );
+        }
+        let _ = writeln!(generated, "pub const {name}: &[u32] = &[");
         for chunk in bytes.chunks(4 * 8) {
             generated.push_str("   ");
             for w in chunk.chunks(4) {

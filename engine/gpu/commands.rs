@@ -2,6 +2,7 @@
 
 use std::ffi::CString;
 use std::marker::PhantomData;
+use std::sync::atomic::{AtomicU8, Ordering};
 use std::sync::Arc;
 
 use ash::vk;
@@ -9,63 +10,116 @@ use ash::vk;
 use super::memory::color_range;
 use super::{vk_err, Buffer, ComputePipeline, GpuContext, GpuError, Image};
 
+/// Where a [`Commands`] is in its life; shared with the [`super::Profiler`], which discards the
+/// passes of a command buffer that was dropped without a successful submit instead of waiting
+/// for timestamps that will never be written.
+#[derive(Debug, Default)]
+pub(crate) struct Lifecycle(AtomicU8);
+
+/// States stored in a [`Lifecycle`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum CommandsState {
+    /// Being recorded (or submitted and not yet waited on).
+    Recording,
+    /// Submitted, and the GPU has finished it.
+    Finished,
+    /// Dropped without a completed submission: nothing it recorded ran (or will be read).
+    Abandoned,
+}
+
+impl Lifecycle {
+    /// The current state.
+    pub(crate) fn get(&self) -> CommandsState {
+        match self.0.load(Ordering::Acquire) {
+            0 => CommandsState::Recording,
+            1 => CommandsState::Finished,
+            _ => CommandsState::Abandoned,
+        }
+    }
+
+    fn set(&self, state: CommandsState) {
+        let v = match state {
+            CommandsState::Recording => 0,
+            CommandsState::Finished => 1,
+            CommandsState::Abandoned => 2,
+        };
+        self.0.store(v, Ordering::Release);
+    }
+}
+
 /// A command buffer being recorded. Resources passed by reference must outlive it (`'a`);
 /// buffers reached only through device addresses must be kept alive by the caller until
 /// [`Commands::submit`] returns. Dropping it unsubmitted frees it without running anything.
+///
+/// Thread safety: Vulkan requires a command pool to be externally synchronised while any of its
+/// command buffers is allocated, recorded, ended or freed. Rather than one pool in the shared
+/// [`GpuContext`] whose mutex would have to stay locked for the whole life of every recorder
+/// (serialising all threads, and deadlocking a thread that starts an upload while it records),
+/// each `Commands` creates its own transient pool and destroys it on drop. Nothing else ever
+/// touches that pool, so recorders on different threads need no lock at all; only the queue is
+/// locked, for the submit itself. A pool per one-shot submission costs far less than the fence
+/// wait that follows it.
 pub struct Commands<'a> {
     pub(crate) raw: vk::CommandBuffer,
+    pool: vk::CommandPool,
     fence: vk::Fence,
     descriptor_pool: vk::DescriptorPool,
     name: String,
     /// Submitted and not yet known to be finished.
     pending: bool,
+    /// Shared with the profiler's passes recorded here.
+    pub(crate) lifecycle: Arc<Lifecycle>,
     pub(crate) ctx: Arc<GpuContext>,
     _resources: PhantomData<&'a ()>,
 }
 
 impl GpuContext {
-    /// Starts recording a named one-shot command buffer.
+    /// Starts recording a named one-shot command buffer (any thread may record its own at once).
     pub fn begin_commands<'a>(self: &Arc<Self>, name: &str) -> Result<Commands<'a>, GpuError> {
         let device = &self.device;
-        // SAFETY: the command pool is externally synchronized by its mutex.
+        // Null handles until created: `Drop` destroys whatever exists if a step below fails.
+        let mut cmd = Commands {
+            raw: vk::CommandBuffer::null(),
+            pool: vk::CommandPool::null(),
+            fence: vk::Fence::null(),
+            descriptor_pool: vk::DescriptorPool::null(),
+            name: name.to_string(),
+            pending: false,
+            lifecycle: Arc::new(Lifecycle::default()),
+            ctx: Arc::clone(self),
+            _resources: PhantomData,
+        };
+        // SAFETY: the pool, its command buffer and the fence are created here and owned by `cmd`
+        // alone (see the type's docs), so no other thread can use them.
         unsafe {
-            let raw = {
-                let pool = self.command_pool();
-                let info = vk::CommandBufferAllocateInfo::default()
-                    .command_pool(*pool)
-                    .level(vk::CommandBufferLevel::PRIMARY)
-                    .command_buffer_count(1);
-                device
-                    .allocate_command_buffers(&info)
-                    .map_err(vk_err("vkAllocateCommandBuffers"))?[0]
-            };
-            let fence = match device.create_fence(&vk::FenceCreateInfo::default(), None) {
-                Ok(f) => f,
-                Err(e) => {
-                    device.free_command_buffers(*self.command_pool(), &[raw]);
-                    return Err(vk_err("vkCreateFence")(e));
-                }
-            };
-            let cmd = Commands {
-                raw,
-                fence,
-                descriptor_pool: vk::DescriptorPool::null(),
-                name: name.to_string(),
-                pending: false,
-                ctx: Arc::clone(self),
-                _resources: PhantomData,
-            };
+            let pool_info = vk::CommandPoolCreateInfo::default()
+                .queue_family_index(self.queue_family)
+                .flags(vk::CommandPoolCreateFlags::TRANSIENT);
+            cmd.pool = device
+                .create_command_pool(&pool_info, None)
+                .map_err(vk_err("vkCreateCommandPool"))?;
+            let info = vk::CommandBufferAllocateInfo::default()
+                .command_pool(cmd.pool)
+                .level(vk::CommandBufferLevel::PRIMARY)
+                .command_buffer_count(1);
+            cmd.raw = device
+                .allocate_command_buffers(&info)
+                .map_err(vk_err("vkAllocateCommandBuffers"))?[0];
+            cmd.fence = device
+                .create_fence(&vk::FenceCreateInfo::default(), None)
+                .map_err(vk_err("vkCreateFence"))?;
             device
                 .begin_command_buffer(
-                    raw,
+                    cmd.raw,
                     &vk::CommandBufferBeginInfo::default()
                         .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
                 )
                 .map_err(vk_err("vkBeginCommandBuffer"))?;
-            self.set_name(raw, name);
-            self.set_name(fence, &format!("{name} (fence)"));
-            Ok(cmd)
         }
+        self.set_name(cmd.pool, &format!("{name} (pool)"));
+        self.set_name(cmd.raw, name);
+        self.set_name(cmd.fence, &format!("{name} (fence)"));
+        Ok(cmd)
     }
 }
 
@@ -441,15 +495,21 @@ impl<'a> Commands<'a> {
                 .map_err(vk_err("vkWaitForFences"))?;
             self.pending = false;
         }
+        self.lifecycle.set(CommandsState::Finished);
         Ok(())
     }
 }
 
 impl Drop for Commands<'_> {
     fn drop(&mut self) {
+        if self.lifecycle.get() != CommandsState::Finished {
+            self.lifecycle.set(CommandsState::Abandoned);
+        }
         let device = &self.ctx.device;
         // SAFETY: either never submitted, or submitted and waited on (submit returns only after
-        // the fence signalled; on a failed wait we wait for the whole device before freeing).
+        // the fence signalled; on a failed wait we wait for the whole device before destroying).
+        // Null handles (creation failed half-way) are valid arguments to the destroy calls, and
+        // destroying the pool frees its command buffer.
         unsafe {
             if self.pending {
                 // Submitted but the wait failed (device lost?): make sure nothing runs any more.
@@ -457,10 +517,8 @@ impl Drop for Commands<'_> {
                 let _ = device.device_wait_idle();
             }
             device.destroy_fence(self.fence, None);
-            if self.descriptor_pool != vk::DescriptorPool::null() {
-                device.destroy_descriptor_pool(self.descriptor_pool, None);
-            }
-            device.free_command_buffers(*self.ctx.command_pool(), &[self.raw]);
+            device.destroy_descriptor_pool(self.descriptor_pool, None);
+            device.destroy_command_pool(self.pool, None);
         }
     }
 }

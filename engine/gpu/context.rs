@@ -129,7 +129,8 @@ pub struct GpuContext {
     pub(crate) device: ash::Device,
     pub(crate) debug_device: Option<ash::ext::debug_utils::Device>,
     queue: Mutex<vk::Queue>,
-    command_pool: Mutex<vk::CommandPool>,
+    /// Family of `queue`; every [`super::Commands`] creates its own command pool for it.
+    pub(crate) queue_family: u32,
     allocator: ManuallyDrop<Mutex<Allocator>>,
     info: DeviceInfo,
     validation: bool,
@@ -390,16 +391,6 @@ impl GpuContext {
             .map_err(vk_err("vkCreateDevice"))?;
         let queue = device.get_device_queue(queue_family, 0);
 
-        let pool_info = vk::CommandPoolCreateInfo::default()
-            .queue_family_index(queue_family)
-            .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER);
-        let command_pool = match device.create_command_pool(&pool_info, None) {
-            Ok(p) => p,
-            Err(e) => {
-                device.destroy_device(None);
-                return Err(vk_err("vkCreateCommandPool")(e));
-            }
-        };
         let allocator = match Allocator::new(&AllocatorCreateDesc {
             instance: instance.clone(),
             device: device.clone(),
@@ -415,7 +406,6 @@ impl GpuContext {
         }) {
             Ok(a) => a,
             Err(e) => {
-                device.destroy_command_pool(command_pool, None);
                 device.destroy_device(None);
                 return Err(GpuError::Allocation {
                     name: "allocator".into(),
@@ -482,13 +472,12 @@ impl GpuContext {
             device,
             debug_device,
             queue: Mutex::new(queue),
-            command_pool: Mutex::new(command_pool),
+            queue_family,
             allocator: ManuallyDrop::new(Mutex::new(allocator)),
             info,
             validation,
         };
         ctx.set_name(queue, "main queue");
-        ctx.set_name(command_pool, "main command pool");
         Ok(Arc::new(ctx))
     }
 
@@ -543,10 +532,6 @@ impl GpuContext {
         self.queue.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    pub(crate) fn command_pool(&self) -> MutexGuard<'_, vk::CommandPool> {
-        self.command_pool.lock().unwrap_or_else(|p| p.into_inner())
-    }
-
     /// Names a Vulkan object for validation messages, RenderDoc and Nsight (no-op without debug utils).
     pub(crate) fn set_name<H: vk::Handle>(&self, handle: H, name: &str) {
         let Some(du) = &self.debug_device else {
@@ -577,8 +562,6 @@ impl Drop for GpuContext {
                 }
             }
             ManuallyDrop::drop(&mut self.allocator);
-            let pool = *self.command_pool();
-            self.device.destroy_command_pool(pool, None);
             self.device.destroy_device(None);
             if let Some(di) = &self.debug_instance {
                 di.destroy_debug_utils_messenger(self.messenger, None);

@@ -12,6 +12,9 @@
 //! on drop; submissions wait for their fence, so nothing is in flight when a resource drops.
 //! See `docs/gpu.md`.
 
+// Every public item of the GPU layer (generated shader constants included) is documented.
+#![warn(missing_docs)]
+
 mod commands;
 mod context;
 mod memory;

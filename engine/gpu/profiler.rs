@@ -7,6 +7,7 @@ use std::time::Instant;
 
 use ash::vk;
 
+use super::commands::{CommandsState, Lifecycle};
 use super::{vk_err, Commands, GpuContext, GpuError};
 
 /// Timestamp queries in the pool (two per pass); passes beyond this before a `resolve` are
@@ -41,11 +42,16 @@ struct PendingPass {
     name: String,
     begin_query: Option<u32>,
     end_query: Option<u32>,
+    /// The command buffer the pass is recorded in: its timestamps exist only once it finished,
+    /// and never if it was dropped unsubmitted.
+    lifecycle: Arc<Lifecycle>,
 }
 
 /// Times GPU passes (timestamp queries + debug labels) and CPU spans.
 ///
 /// Use: `begin_pass(&mut cmd, "name")` ... `end_pass(&mut cmd)`, submit, then `resolve()`.
+/// Passes recorded into a [`Commands`] that is dropped without being submitted (an error path)
+/// are discarded, open or closed, so later passes resolve normally.
 pub struct Profiler {
     ctx: Arc<GpuContext>,
     pool: vk::QueryPool,
@@ -139,16 +145,35 @@ impl Profiler {
             name: name.to_string(),
             begin_query: q,
             end_query: None,
+            lifecycle: Arc::clone(&cmd.lifecycle),
         });
         self.open.push(self.pending.len() - 1);
     }
 
-    /// Closes the innermost open pass: end timestamp + end of its debug label.
+    /// Forgets open passes whose command buffer was dropped unsubmitted: they can never be closed.
+    fn prune_abandoned_open(&mut self) {
+        let pending = &self.pending;
+        self.open
+            .retain(|&i| pending[i].lifecycle.get() != CommandsState::Abandoned);
+    }
+
+    /// Closes the innermost open pass: end timestamp + end of its debug label. The pass must have
+    /// been opened in the same `cmd`; otherwise this logs a warning and records nothing.
     pub fn end_pass(&mut self, cmd: &mut Commands<'_>) {
-        let Some(i) = self.open.pop() else {
+        self.prune_abandoned_open();
+        let Some(&i) = self.open.last() else {
             log::warn!("Profiler::end_pass without begin_pass");
             return;
         };
+        if !Arc::ptr_eq(&self.pending[i].lifecycle, &cmd.lifecycle) {
+            log::warn!(
+                "Profiler::end_pass: pass '{}' was opened in another command buffer than '{}'",
+                self.pending[i].name,
+                cmd.name()
+            );
+            return;
+        }
+        self.open.pop();
         if self.pending[i].begin_query.is_some() {
             let q = self.take_query(cmd);
             if let Some(q) = q {
@@ -169,56 +194,87 @@ impl Profiler {
 
     /// Reads the timestamps of all passes closed since the last call (their command buffers must
     /// have been submitted) and returns their timings, also kept for [`Profiler::table`].
+    ///
+    /// Passes of command buffers dropped without a submit are discarded. A pass still open, or
+    /// closed in a command buffer not submitted yet, is an error that changes nothing: submit
+    /// (or drop) that command buffer and call `resolve` again.
     pub fn resolve(&mut self) -> Result<Vec<PassTiming>, GpuError> {
+        self.prune_abandoned_open();
         if !self.open.is_empty() {
             return Err(GpuError::InvalidArgument(format!(
                 "Profiler::resolve with {} pass(es) still open",
                 self.open.len()
             )));
         }
+        if let Some(p) = self
+            .pending
+            .iter()
+            .find(|p| p.lifecycle.get() == CommandsState::Recording)
+        {
+            return Err(GpuError::InvalidArgument(format!(
+                "Profiler::resolve: pass '{}' is in a command buffer that was not submitted yet",
+                p.name
+            )));
+        }
         let resolved_at = self.now_ms();
-        let mut stamps = vec![0u64; self.next_query as usize];
-        if self.next_query > 0 {
-            // SAFETY: queries 0..next_query were written by submitted, finished command buffers.
-            unsafe {
-                self.ctx.device.get_query_pool_results(
-                    self.pool,
-                    0,
-                    &mut stamps,
-                    vk::QueryResultFlags::TYPE_64,
-                )
+        // (name, begin, end) raw timestamps of the finished, timed passes.
+        let mut timed = Vec::new();
+        let mut read = Ok(());
+        for p in &self.pending {
+            if p.lifecycle.get() == CommandsState::Abandoned {
+                log::debug!("profiler: pass '{}' discarded (never submitted)", p.name);
+                continue;
             }
-            .map_err(|e| match e {
-                vk::Result::NOT_READY => GpuError::InvalidArgument(
-                    "Profiler::resolve: timestamps not ready (was every command buffer with \
-                     profiled passes submitted?)"
-                        .into(),
-                ),
-                e => vk_err("vkGetQueryPoolResults")(e),
-            })?;
-        }
-        for s in &mut stamps {
-            *s &= self.valid_mask;
-        }
-        let last = stamps.iter().copied().max().unwrap_or(0);
-        let to_ms = self.period_ns / 1e6;
-        let mut out = Vec::new();
-        for p in self.pending.drain(..) {
             let (Some(b), Some(e)) = (p.begin_query, p.end_query) else {
                 continue;
             };
-            let (tb, te) = (stamps[b as usize], stamps[e as usize]);
-            let gpu_ms = te.wrapping_sub(tb) as f64 * to_ms;
-            let cpu_start_ms = (resolved_at - last.wrapping_sub(tb) as f64 * to_ms).max(0.0);
-            out.push(PassTiming {
-                name: p.name,
-                gpu_ms,
-                cpu_start_ms,
-            });
+            match (self.read_query(b), self.read_query(e)) {
+                (Ok(tb), Ok(te)) => timed.push((p.name.clone(), tb, te)),
+                (Err(err), _) | (_, Err(err)) => {
+                    read = Err(err);
+                    break;
+                }
+            }
         }
+        // The batch is consumed even if reading failed (device lost?), so that later passes
+        // do not inherit the failure.
+        self.pending.clear();
         self.next_query = 0;
+        read?;
+        let last = timed.iter().map(|t| t.2).max().unwrap_or(0);
+        let to_ms = self.period_ns / 1e6;
+        let out: Vec<PassTiming> = timed
+            .into_iter()
+            .map(|(name, tb, te)| PassTiming {
+                name,
+                gpu_ms: te.wrapping_sub(tb) as f64 * to_ms,
+                cpu_start_ms: (resolved_at - last.wrapping_sub(tb) as f64 * to_ms).max(0.0),
+            })
+            .collect();
         self.passes.extend(out.iter().cloned());
         Ok(out)
+    }
+
+    /// One timestamp, masked to the valid bits.
+    fn read_query(&self, q: u32) -> Result<u64, GpuError> {
+        let mut stamp = [0u64];
+        // SAFETY: query `q` was reset and written by a command buffer that finished (its
+        // lifecycle says so, and submit waited on its fence).
+        unsafe {
+            self.ctx.device.get_query_pool_results(
+                self.pool,
+                q,
+                &mut stamp,
+                vk::QueryResultFlags::TYPE_64,
+            )
+        }
+        .map_err(|e| match e {
+            vk::Result::NOT_READY => {
+                GpuError::InvalidArgument(format!("Profiler::resolve: timestamp {q} not ready"))
+            }
+            e => vk_err("vkGetQueryPoolResults")(e),
+        })?;
+        Ok(stamp[0] & self.valid_mask)
     }
 
     /// Runs `f` and records it as a CPU span named `name`.
