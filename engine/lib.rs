@@ -4,6 +4,8 @@
 //! `scene` (import + voxelize) -> `dag` (SVO -> SVDAG, file format, CPU queries)
 //! -> `gpu` (Vulkan device layer) -> `render` (GPU traversal, CPU reference renderer).
 
+#![warn(missing_docs)]
+
 pub mod atomic_file;
 pub mod dag;
 pub mod gpu;
