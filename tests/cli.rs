@@ -196,6 +196,20 @@ fn bad_inputs_fail_cleanly_without_output() {
         &voxdag(&["build", s(&obj), "-r", "1048576", "-o", out, "-q"]),
         &["1048576"],
     );
+    // 65536^3 is a valid resolution, but 64 stacked full-size planes there need ~2 TiB of voxels:
+    // refused up front, before any allocation.
+    let mut planes = String::new();
+    for i in 0..64 {
+        let y = i as f32 / 63.0;
+        planes += &format!("v 0 {y} 0\nv 1 {y} 0\nv 1 {y} 1\nv 0 {y} 1\n");
+        let v = 4 * i + 1;
+        planes += &format!("f {} {} {}\nf {} {} {}\n", v, v + 1, v + 2, v, v + 2, v + 3);
+    }
+    let planes = write(dir.path(), "planes.obj", planes.as_bytes());
+    assert_clean_error(
+        &voxdag(&["build", s(&planes), "-r", "65536", "-o", out, "-q"]),
+        &["planes.obj", "memory"],
+    );
     assert!(
         !out_path.exists(),
         "a failed build must not leave an output file"
