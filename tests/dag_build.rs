@@ -3,9 +3,11 @@
 
 use std::collections::{BTreeMap, HashSet};
 
+mod common;
+
 use proptest::prelude::*;
 use voxdag::dag::{DagError, Svdag};
-use voxdag::scene::{morton, Voxels};
+use voxdag::scene::{load_vox, morton, ImportOptions, Voxels};
 
 /// A voxel set from coordinates (duplicates removed); colours derived from the code when asked.
 fn voxels(n: u32, coords: &[(u32, u32, u32)], colored: bool) -> Voxels {
@@ -298,46 +300,9 @@ proptest! {
     }
 }
 
-/// `../shared/data` next to the package, if present.
-fn shared_data() -> Option<std::path::PathBuf> {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
-    dir.is_dir().then_some(dir)
-}
-
-/// First model of a MagicaVoxel file as voxdag voxels: (x, y, z)_vox -> (x, z, N - 1 - y),
-/// N the next power of two (>= 8) of the model size, palette colours attached.
-fn load_vox(path: &std::path::Path) -> Voxels {
-    let data = dot_vox::load(path.to_str().unwrap()).unwrap();
-    let model = &data.models[0];
-    let n = model
-        .size
-        .x
-        .max(model.size.y)
-        .max(model.size.z)
-        .next_power_of_two()
-        .max(8);
-    let mut pairs: Vec<(u64, u32)> = model
-        .voxels
-        .iter()
-        .map(|v| {
-            let c = data.palette[v.i as usize];
-            let code = morton::encode(v.x as u32, v.z as u32, n - 1 - v.y as u32);
-            (code, u32::from_le_bytes([c.r, c.g, c.b, c.a]))
-        })
-        .collect();
-    pairs.sort_unstable();
-    pairs.dedup_by_key(|p| p.0);
-    Voxels {
-        resolution: n,
-        codes: pairs.iter().map(|p| p.0).collect(),
-        colors: pairs.iter().map(|p| p.1).collect(),
-    }
-}
-
 #[test]
 fn real_vox_models_match_reference() {
-    let Some(data) = shared_data() else {
-        println!("skipped: ../shared/data not found");
+    let Some(data) = common::shared_data() else {
         return;
     };
     let models = data.join("vox/voxel-model");
@@ -347,7 +312,7 @@ fn real_vox_models_match_reference() {
         "scan/dragon.vox",
         "monument/monu1.vox",
     ] {
-        let v = load_vox(&models.join(file));
+        let v = load_vox(&models.join(file), &ImportOptions::default()).unwrap();
         assert!(!v.is_empty(), "{file}");
         check(&v, false);
     }

@@ -2,9 +2,11 @@
 
 use std::path::Path;
 
+mod common;
+
 use proptest::prelude::*;
 use voxdag::dag::{export_vox, export_xyz_u32, export_xyz_u32_file, DagError, Svdag, MAGIC};
-use voxdag::scene::{morton, Voxels};
+use voxdag::scene::{load_vox, morton, ImportOptions, Voxels};
 
 /// A small scene with some sharing: a few slabs and scattered voxels.
 fn scene(n: u32, colored: bool) -> Voxels {
@@ -454,35 +456,18 @@ fn documented_example_layout() {
 
 #[test]
 fn real_vox_model_round_trips() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
-    if !dir.is_dir() {
-        println!("skipped: ../shared/data not found");
+    let Some(dir) = common::shared_data() else {
         return;
-    }
-    let src = dir.join("vox/voxel-model/monument/monu1.vox");
-    let data = dot_vox::load(src.to_str().unwrap()).unwrap();
-    let model = &data.models[0];
-    let n = model
-        .size
-        .x
-        .max(model.size.y)
-        .max(model.size.z)
-        .next_power_of_two();
-    let mut pairs: Vec<(u64, u32)> = model
-        .voxels
-        .iter()
-        .map(|v| {
-            let c = data.palette[v.i as usize];
-            let code = morton::encode(v.x as u32, v.z as u32, n - 1 - v.y as u32);
-            (code, u32::from_le_bytes([c.r, c.g, c.b, c.a]))
-        })
-        .collect();
-    pairs.sort_unstable();
-    let v = Voxels {
-        resolution: n,
-        codes: pairs.iter().map(|p| p.0).collect(),
-        colors: pairs.iter().map(|p| p.1).collect(),
     };
+    let src = dir.join("vox/voxel-model/monument/monu1.vox");
+    let v = load_vox(&src, &ImportOptions::default()).unwrap();
+    let n = v.resolution;
+    let pairs: Vec<(u64, u32)> = v
+        .codes
+        .iter()
+        .copied()
+        .zip(v.colors.iter().copied())
+        .collect();
     let dag = Svdag::from_voxels(&v).unwrap();
     let tmp = tempfile::tempdir().unwrap();
     let path = tmp.path().join("monu1.vdag");
