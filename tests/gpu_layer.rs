@@ -5,7 +5,8 @@ use std::sync::Arc;
 
 use voxdag::dag::{Svdag, VoxelIndex};
 use voxdag::gpu::{
-    shaders, ComputePipelineDesc, GpuContext, GpuError, GpuOptions, MemLocation, Profiler,
+    shaders, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, GpuOptions, MemLocation,
+    Profiler,
 };
 use voxdag::render::gpu::GpuRenderer;
 use voxdag::render::{render_cpu, Camera, RenderOutput, RenderSettings};
@@ -28,6 +29,18 @@ fn assert_clean(ctx: &Arc<GpuContext>) {
 }
 
 /// Push constants of `shaders/glsl/test/fill.comp`.
+/// The test fill shader with specialization constants `[workgroup size, multiplier]`.
+fn fill_pipeline(ctx: &Arc<GpuContext>, name: &str, spec: [u32; 2]) -> ComputePipeline {
+    ctx.create_compute_pipeline(&ComputePipelineDesc {
+        name,
+        spirv: shaders::TEST_FILL,
+        spec_constants: &spec,
+        push_constant_size: 24,
+        storage_image: false,
+    })
+    .unwrap()
+}
+
 fn fill_push(out: u64, aux: u64, count: u32, seed: u32) -> Vec<u8> {
     let mut v = Vec::with_capacity(24);
     v.extend_from_slice(&out.to_le_bytes());
@@ -137,15 +150,7 @@ fn fill_shader_spec_and_push_constants_and_subgroup_size() {
         let subgroup = ctx.info().subgroup_size;
         // Two specializations of the same shader: workgroup size and multiplier differ.
         for (wg, mul, seed) in [(64u32, 3u32, 11u32), (subgroup, 1_000_003, 0xdead_beef)] {
-            let pipeline = ctx
-                .create_compute_pipeline(&ComputePipelineDesc {
-                    name: "test fill",
-                    spirv: shaders::TEST_FILL,
-                    spec_constants: &[wg, mul],
-                    push_constant_size: 24,
-                    storage_image: false,
-                })
-                .unwrap();
+            let pipeline = fill_pipeline(&ctx, "test fill", [wg, mul]);
             let mut cmd = ctx.begin_commands("fill").unwrap();
             cmd.fill_buffer(&out, 0);
             // Fewer groups than needed: the shader's grid-stride loop covers the rest.
@@ -179,15 +184,7 @@ fn fill_shader_spec_and_push_constants_and_subgroup_size() {
 fn commands_record_and_submit_from_several_threads_at_once() {
     let ctx = context();
     {
-        let pipeline = ctx
-            .create_compute_pipeline(&ComputePipelineDesc {
-                name: "test fill threads",
-                spirv: shaders::TEST_FILL,
-                spec_constants: &[64, 7],
-                push_constant_size: 24,
-                storage_image: false,
-            })
-            .unwrap();
+        let pipeline = fill_pipeline(&ctx, "test fill threads", [64, 7]);
         let (threads, submissions) = (4u32, 10u32);
         let start = std::sync::Barrier::new(threads as usize);
         std::thread::scope(|s| {
@@ -239,15 +236,7 @@ fn buffer_larger_than_max_storage_range_via_device_address() {
         let big = ctx
             .create_buffer("big", bytes, MemLocation::GpuOnly)
             .unwrap();
-        let pipeline = ctx
-            .create_compute_pipeline(&ComputePipelineDesc {
-                name: "test fill big",
-                spirv: shaders::TEST_FILL,
-                spec_constants: &[256, 5],
-                push_constant_size: 24,
-                storage_image: false,
-            })
-            .unwrap();
+        let pipeline = fill_pipeline(&ctx, "test fill big", [256, 5]);
         let mut cmd = ctx.begin_commands("fill big").unwrap();
         cmd.dispatch(
             &pipeline,
@@ -326,15 +315,7 @@ fn profiler_times_each_pass_and_writes_a_trace() {
         let out = ctx
             .create_buffer("profiled", count as u64 * 4, MemLocation::GpuOnly)
             .unwrap();
-        let pipeline = ctx
-            .create_compute_pipeline(&ComputePipelineDesc {
-                name: "test fill",
-                spirv: shaders::TEST_FILL,
-                spec_constants: &[64, 1],
-                push_constant_size: 24,
-                storage_image: false,
-            })
-            .unwrap();
+        let pipeline = fill_pipeline(&ctx, "test fill", [64, 1]);
         let push = fill_push(out.address(), 0, count, 0);
         for frame in 0..2 {
             let mut cmd = ctx.begin_commands("profiled").unwrap();
@@ -458,15 +439,7 @@ fn profiler_recovers_from_command_buffers_dropped_unsubmitted() {
         let out = ctx
             .create_buffer("profiled", count as u64 * 4, MemLocation::GpuOnly)
             .unwrap();
-        let pipeline = ctx
-            .create_compute_pipeline(&ComputePipelineDesc {
-                name: "test fill",
-                spirv: shaders::TEST_FILL,
-                spec_constants: &[64, 1],
-                push_constant_size: 24,
-                storage_image: false,
-            })
-            .unwrap();
+        let pipeline = fill_pipeline(&ctx, "test fill", [64, 1]);
         let push = fill_push(out.address(), 0, count, 3);
         // A pass left open, plus a closed one, in a command buffer that is never submitted.
         {

@@ -103,16 +103,7 @@ impl Svdag {
 
     /// Per-level SVO and SVDAG node counts, level 0 (leaves) first, root level last.
     pub fn level_stats(&self) -> Vec<LevelStats> {
-        self.path_counts()
-            .levels
-            .iter()
-            .enumerate()
-            .map(|(l, &(svo, svdag, _))| LevelStats {
-                level: l as u32,
-                svo,
-                svdag,
-            })
-            .collect()
+        self.stats().levels
     }
 
     /// Number of occupied voxels (leaf popcounts times path counts).
@@ -122,10 +113,7 @@ impl Svdag {
 
     /// Bytes of the equivalent SVO in the same node format without sharing.
     pub fn bytes_svo(&self) -> u64 {
-        self.path_counts()
-            .levels
-            .iter()
-            .fold(0u64, |a, l| a.saturating_add(l.2))
+        self.stats().bytes.svo
     }
 
     /// Bytes of this DAG's node array (`words.len() * 4`).
