@@ -4,6 +4,7 @@
 //! `scene` (import + voxelize) -> `dag` (SVO -> SVDAG, file format, CPU queries)
 //! -> `gpu` (Vulkan device layer) -> `render` (GPU traversal, CPU reference renderer).
 
+pub mod color;
 pub mod dag;
 pub mod gpu;
 pub mod render;
