@@ -405,3 +405,220 @@ fn bad_input_is_an_error() {
         }
     }
 }
+
+#[test]
+fn huge_vox_scales_are_errors() {
+    // Scaled voxel counts and extents are checked products: no panic, no wrap-around.
+    let f = bundled("ff3.vox");
+    for scale in [u32::MAX, 1 << 22, 65537, 40_000] {
+        let opts = ImportOptions {
+            vox_scale: scale,
+            ..ImportOptions::default()
+        };
+        let e = load_vox(&f, &opts).expect_err("scale too large");
+        assert!(matches!(e, SceneError::TooLarge { .. }), "{scale}: {e}");
+        assert!(e.to_string().contains("ff3.vox"), "{scale}: {e}");
+    }
+    // Two one-voxel shapes 2^33 apart (nested i32 translations) at scale 2^31: the scaled
+    // extent 2^64 and the voxel count 2 * 2^93 wrap to 0 in unchecked u64 arithmetic.
+    use dot_vox::{DotVoxData, Frame, Model, SceneNode, ShapeModel, Size, Voxel};
+    type Dict = dot_vox::Dict;
+    let translate = |t: &str, child: u32| {
+        let mut a = Dict::default();
+        a.insert("_t".to_string(), t.to_string());
+        SceneNode::Transform {
+            attributes: Dict::default(),
+            frames: vec![Frame::new(a)],
+            child,
+            layer_id: u32::MAX,
+        }
+    };
+    let shape = || SceneNode::Shape {
+        attributes: Dict::default(),
+        models: vec![ShapeModel {
+            model_id: 0,
+            attributes: Dict::default(),
+        }],
+    };
+    let scenes = vec![
+        translate("0 0 0", 1),
+        SceneNode::Group {
+            attributes: Dict::default(),
+            children: vec![2, 6],
+        },
+        translate("2147483647 0 0", 3),
+        translate("2147483647 0 0", 4),
+        translate("1 0 0", 5),
+        shape(),
+        translate("-2147483648 0 0", 7),
+        translate("-2147483648 0 0", 8),
+        shape(),
+    ];
+    let data = DotVoxData {
+        version: 150,
+        index_map: (0..=255).collect(),
+        models: vec![Model {
+            size: Size { x: 1, y: 1, z: 1 },
+            voxels: vec![Voxel {
+                x: 0,
+                y: 0,
+                z: 0,
+                i: 1,
+            }],
+        }],
+        palette: dot_vox::DEFAULT_PALETTE.to_vec(),
+        materials: Vec::new(),
+        scenes,
+        layers: Vec::new(),
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let f = dir.path().join("far.vox");
+    let mut out = std::fs::File::create(&f).unwrap();
+    data.write_vox(&mut out).unwrap();
+    drop(out);
+    for scale in [1, 1 << 31] {
+        let opts = ImportOptions {
+            vox_scale: scale,
+            ..ImportOptions::default()
+        };
+        let e = load_vox(&f, &opts).expect_err("extent 2^33");
+        assert!(matches!(e, SceneError::TooLarge { .. }), "{scale}: {e}");
+        assert!(e.to_string().contains("far.vox"), "{scale}: {e}");
+    }
+}
+
+#[test]
+fn exponentially_branching_vox_scene_graph_is_rejected_quickly() {
+    use dot_vox::{DotVoxData, Frame, Model, SceneNode, ShapeModel, Size, Voxel};
+    type Dict = dot_vox::Dict;
+    // Node 0: transform -> group 1; group i (1..=40) lists group i + 1 twice; node 41 is a
+    // shape: 2^40 paths to one shape in a file of a few hundred bytes.
+    let mut scenes = vec![SceneNode::Transform {
+        attributes: Dict::default(),
+        frames: vec![Frame::new(Dict::default())],
+        child: 1,
+        layer_id: u32::MAX,
+    }];
+    for i in 1..=40u32 {
+        scenes.push(SceneNode::Group {
+            attributes: Dict::default(),
+            children: vec![i + 1, i + 1],
+        });
+    }
+    scenes.push(SceneNode::Shape {
+        attributes: Dict::default(),
+        models: vec![ShapeModel {
+            model_id: 0,
+            attributes: Dict::default(),
+        }],
+    });
+    let data = DotVoxData {
+        version: 150,
+        index_map: (0..=255).collect(),
+        models: vec![Model {
+            size: Size { x: 1, y: 1, z: 1 },
+            voxels: vec![Voxel {
+                x: 0,
+                y: 0,
+                z: 0,
+                i: 1,
+            }],
+        }],
+        palette: dot_vox::DEFAULT_PALETTE.to_vec(),
+        materials: Vec::new(),
+        scenes,
+        layers: Vec::new(),
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let f = dir.path().join("branching.vox");
+    let mut out = std::fs::File::create(&f).unwrap();
+    data.write_vox(&mut out).unwrap();
+    drop(out);
+    let start = std::time::Instant::now();
+    let e = load_vox(&f, &ImportOptions::default()).expect_err("2^40 placements");
+    assert!(matches!(e, SceneError::Parse { .. }), "{e}");
+    assert!(e.to_string().contains("branching.vox"), "{e}");
+    assert!(start.elapsed().as_secs() < 10, "took {:?}", start.elapsed());
+}
+
+/// Writes a .gltf with one triangle (0,0,0), (1,0,0), (0,1,0) as mesh 0 and the given
+/// `nodes` / `scenes` JSON (`scenes` may be empty: no scene).
+fn write_gltf(dir: &Path, name: &str, nodes: &str, scenes: &str) -> PathBuf {
+    let tri: Vec<u8> = [0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    std::fs::write(dir.join("tri.bin"), tri).unwrap();
+    let json = format!(
+        r#"{{"asset":{{"version":"2.0"}},
+        "buffers":[{{"uri":"tri.bin","byteLength":36}}],
+        "bufferViews":[{{"buffer":0,"byteLength":36}}],
+        "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3",
+                       "min":[0,0,0],"max":[1,1,0]}}],
+        "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}}}}]}}],
+        "nodes":[{nodes}]{scenes}}}"#
+    );
+    let f = dir.join(name);
+    std::fs::write(&f, json).unwrap();
+    f
+}
+
+#[test]
+fn gltf_nodes_must_form_a_tree() {
+    let dir = tempfile::tempdir().unwrap();
+    // A ladder of 40 layers of two nodes, each listing both nodes of the next layer: 2^40
+    // paths to the meshes of the last layer.
+    let layers = 40;
+    let nodes: Vec<String> = (0..2 * layers)
+        .map(|i| {
+            let layer = i / 2;
+            if layer + 1 < layers {
+                format!(r#"{{"children":[{},{}]}}"#, 2 * layer + 2, 2 * layer + 3)
+            } else {
+                r#"{"mesh":0}"#.to_string()
+            }
+        })
+        .collect();
+    let f = write_gltf(
+        dir.path(),
+        "ladder.gltf",
+        &nodes.join(","),
+        r#","scenes":[{"nodes":[0,1]}],"scene":0"#,
+    );
+    let start = std::time::Instant::now();
+    let e = load_mesh(&f, &ImportOptions::default()).expect_err("shared children");
+    assert!(matches!(e, SceneError::Parse { .. }), "{e}");
+    assert!(e.to_string().contains("ladder.gltf"), "{e}");
+    assert!(start.elapsed().as_secs() < 10, "took {:?}", start.elapsed());
+    // A cycle and a root listed twice are rejected the same way.
+    for (name, nodes, scenes) in [
+        (
+            "cycle.gltf",
+            r#"{"mesh":0,"children":[1]},{"children":[0]}"#,
+            r#","scenes":[{"nodes":[0]}]"#,
+        ),
+        (
+            "twice.gltf",
+            r#"{"mesh":0}"#,
+            r#","scenes":[{"nodes":[0,0]}]"#,
+        ),
+    ] {
+        let f = write_gltf(dir.path(), name, nodes, scenes);
+        let e = load_mesh(&f, &ImportOptions::default()).expect_err(name);
+        assert!(e.to_string().contains(name), "{e}");
+    }
+    // Without a scene, the roots are the nodes without a parent: the child is instanced once,
+    // with its parent's transform (translate 10 after scale 2).
+    let f = write_gltf(
+        dir.path(),
+        "noscene.gltf",
+        r#"{"translation":[10,0,0],"children":[1]},{"mesh":0,"scale":[2,2,2]}"#,
+        "",
+    );
+    let m = load_mesh(&f, &ImportOptions::default()).unwrap();
+    assert_eq!(m.triangle_count(), 1);
+    assert_eq!(
+        m.positions,
+        vec![[10.0, 0.0, 0.0], [12.0, 0.0, 0.0], [10.0, 2.0, 0.0]]
+    );
+}

@@ -247,6 +247,67 @@ fn larger_resolution_spans_several_bricks() {
     assert_eq!(xs.last(), Some(&511));
 }
 
+#[test]
+fn degenerate_segments_across_bricks_match_brute_force() {
+    // N = 256: 2^3 bricks of 128. Segments and points on and across the brick boundaries
+    // x, y, z = 128, off-grid ones, and a long one crossing all eight bricks.
+    let tris = [
+        // Point on the corner shared by all eight bricks.
+        [[128.0, 128.0, 128.0]; 3],
+        // Segment lying in the brick boundary plane x = 128, along a grid line.
+        [
+            [128.0, 3.0, 127.0],
+            [128.0, 250.0, 127.0],
+            [128.0, 100.0, 127.0],
+        ],
+        // Off-grid, through all eight bricks, repeated vertex.
+        [[3.3, 7.7, 250.1], [251.9, 249.2, 1.7], [3.3, 7.7, 250.1]],
+        // Collinear with a midpoint, crossing one boundary.
+        [
+            [120.25, 60.5, 60.5],
+            [140.75, 61.5, 62.5],
+            [130.5, 61.0, 61.5],
+        ],
+        // Short segment ending exactly on the boundary y = 128.
+        [
+            [40.5, 120.0, 200.25],
+            [40.5, 128.0, 200.25],
+            [40.5, 124.0, 200.25],
+        ],
+    ];
+    // Coloured: the comparison covers the voxel set and the colour rule.
+    assert_same(&grid_mesh(256, &tris, true), 256);
+}
+
+#[test]
+fn long_diagonal_segment_at_65536_is_fast_and_exact() {
+    // A zero-area sliver along the main diagonal at the largest resolution. Testing every
+    // voxel of its bounding box would take ~10^14 predicate calls; walking the segment visits
+    // a few per voxel it touches. Closed voxel [i, i+1]^3 meets {(s, s, s)} iff every
+    // coordinate is m or m + 1 for some m.
+    const N: u32 = 65536;
+    let nf = N as f32;
+    let t = [[0.0; 3], [nf; 3], [nf * 0.5; 3]];
+    let start = std::time::Instant::now();
+    let v = fast(&grid_mesh(N, &[t], false), N);
+    let elapsed = start.elapsed();
+    let mut want: Vec<u64> = (0..N)
+        .flat_map(|m| {
+            (0..8u32).filter_map(move |b| {
+                let c = [m + (b & 1), m + (b >> 1 & 1), m + (b >> 2 & 1)];
+                c.iter()
+                    .all(|&x| x < N)
+                    .then(|| morton::encode(c[0], c[1], c[2]))
+            })
+        })
+        .collect();
+    want.sort_unstable();
+    want.dedup();
+    assert_eq!(v.codes.len(), want.len());
+    assert!(v.codes == want, "voxel set of the diagonal");
+    assert!(elapsed.as_secs() < 30, "took {elapsed:?}");
+}
+
 /// Coordinates that often hit grid lines and half-voxels exactly.
 fn coord(n: u32) -> impl Strategy<Value = f32> {
     let nf = n as f32;

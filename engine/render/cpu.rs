@@ -13,6 +13,9 @@ use super::{RenderError, RenderOutput, RenderSettings};
 use crate::dag::raycast::{Ray, T_UNBOUNDED};
 use crate::dag::{Svdag, VoxelIndex};
 
+// The sRGB curve lives in `crate::color` (shared with import); re-exported for callers here.
+pub use crate::color::{linear_to_srgb, srgb_to_linear};
+
 /// Ambient light strength (before the per-axis factor).
 pub const AMBIENT: f32 = 0.25;
 /// Ambient factor per normal axis (x, y, z), so that flat areas of different orientation read.
@@ -27,25 +30,6 @@ pub const SKY_HORIZON: [f32; 3] = [0.75, 0.82, 0.9];
 pub const SKY_ZENITH: [f32; 3] = [0.22, 0.42, 0.78];
 /// Linear ground colour straight down.
 pub const SKY_GROUND: [f32; 3] = [0.32, 0.3, 0.28];
-
-/// sRGB-encoded channel in `[0, 1]` to linear.
-pub fn srgb_to_linear(c: f32) -> f32 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
-}
-
-/// Linear channel to sRGB encoding (clamped to `[0, 1]` first).
-pub fn linear_to_srgb(l: f32) -> f32 {
-    let l = l.clamp(0.0, 1.0);
-    if l <= 0.003_130_8 {
-        l * 12.92
-    } else {
-        1.055 * l.powf(1.0 / 2.4) - 0.055
-    }
-}
 
 /// Linear sky colour seen along `dir` (not necessarily normalised).
 pub fn sky(dir: [f32; 3]) -> [f32; 3] {

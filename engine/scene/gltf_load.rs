@@ -3,7 +3,8 @@
 //! The default scene (or scene 0, or all root nodes when there is no scene) is flattened with
 //! the node hierarchy transforms; skins and morph targets are ignored (rest pose). Colours:
 //! `baseColorFactor` times the base-colour texture (`TEXCOORD_n` of the texture info, sampler
-//! wrap modes) times `COLOR_0`. Only the base-colour images are decoded.
+//! wrap modes) times `COLOR_0`. Only the base-colour images are decoded. The nodes must form
+//! a tree (glTF 2.0 rule): a node reached twice (two parents, a cycle) is a parse error.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -115,20 +116,41 @@ pub(crate) fn load_gltf(path: &Path) -> Result<Mesh, SceneError> {
         let mut any_uv = false;
         let mut any_color = false;
 
-        // Collect (node mesh, world matrix) from the scene graph.
+        // Collect (node mesh, world matrix) from the scene graph. glTF requires the nodes to
+        // form a strict forest (one parent at most, no cycles): a node reached twice is an
+        // error, so that shared children cannot expand into exponentially many instances.
+        let node_count = document.nodes().len();
         let roots: Vec<gltf::Node> = match document
             .default_scene()
             .or_else(|| document.scenes().next())
         {
             Some(s) => s.nodes().collect(),
-            None => document.nodes().collect(),
+            None => {
+                // No scene: every node that is no other node's child.
+                let mut is_child = vec![false; node_count];
+                for n in document.nodes() {
+                    for c in n.children() {
+                        if let Some(f) = is_child.get_mut(c.index()) {
+                            *f = true;
+                        }
+                    }
+                }
+                document.nodes().filter(|n| !is_child[n.index()]).collect()
+            }
         };
-        let mut stack: Vec<(gltf::Node, Mat4, usize)> =
-            roots.into_iter().map(|n| (n, IDENTITY, 0)).collect();
+        let mut visited = vec![false; node_count];
+        let mut stack: Vec<(gltf::Node, Mat4)> = roots.into_iter().map(|n| (n, IDENTITY)).collect();
         let mut instances: Vec<(gltf::Mesh, Mat4)> = Vec::new();
-        while let Some((node, parent, depth)) = stack.pop() {
-            if depth > 1024 {
-                return Err(parse_err("node hierarchy deeper than 1024 (cycle?)".into()));
+        while let Some((node, parent)) = stack.pop() {
+            let seen = visited
+                .get_mut(node.index())
+                .ok_or_else(|| parse_err(format!("node {} does not exist", node.index())))?;
+            if std::mem::replace(seen, true) {
+                return Err(parse_err(format!(
+                    "node {} is reached twice in the scene (several parents, a cycle or a \
+                     repeated root); glTF requires a node tree",
+                    node.index()
+                )));
             }
             let local = node.transform().matrix().map(|c| c.map(|v| v as f64));
             let world = mul(&parent, &local);
@@ -136,7 +158,7 @@ pub(crate) fn load_gltf(path: &Path) -> Result<Mesh, SceneError> {
                 instances.push((m, world));
             }
             for child in node.children() {
-                stack.push((child, world, depth + 1));
+                stack.push((child, world));
             }
         }
         // Deterministic order: by depth-first discovery reversed is fine but sort by mesh index

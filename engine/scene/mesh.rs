@@ -9,6 +9,7 @@ use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use super::SceneError;
+use crate::color::{linear_to_srgb, srgb_to_linear};
 
 /// Texture coordinate wrap mode (glTF sampler semantics).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -62,24 +63,6 @@ fn srgb_lut() -> &'static [f32; 256] {
         }
         t
     })
-}
-
-/// Converts one sRGB-encoded channel in [0, 1] to linear.
-pub fn srgb_to_linear(c: f32) -> f32 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
-}
-
-/// Converts one linear channel in [0, 1] to sRGB encoding.
-pub fn linear_to_srgb(c: f32) -> f32 {
-    if c <= 0.003_130_8 {
-        c * 12.92
-    } else {
-        1.055 * c.powf(1.0 / 2.4) - 0.055
-    }
 }
 
 /// Encodes a linear RGBA colour as packed sRGB RGBA8 (`r | g << 8 | b << 16 | a << 24`).

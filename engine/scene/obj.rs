@@ -1,8 +1,9 @@
 //! Wavefront OBJ (+ .mtl) loading with `tobj`.
 //!
 //! Colours: `Kd` (linear) times the `map_Kd` texture times vertex colours (`v x y z r g b`,
-//! linear). Textures that are missing or cannot be decoded are reported once per file with
-//! `log::warn!` and the material falls back to `Kd` (a `Kd` of zero next to a `map_Kd` counts as 1:
+//! linear). A texture that is missing or cannot be decoded is reported with `log::warn!` once
+//! per distinct texture path (per load; materials sharing it are not reported again) and the
+//! material falls back to `Kd` (a `Kd` of zero next to a `map_Kd` counts as 1:
 //! the exporters' "texture only" convention). OBJ texture coordinates have v = 0 at the
 //! bottom of the image; they are flipped to the image convention of [`Mesh::uvs`].
 
@@ -153,7 +154,7 @@ pub(crate) fn load_obj(path: &Path, opts: &ImportOptions) -> Result<Mesh, SceneE
                 mesh.colors.extend(std::iter::repeat([1.0; 4]).take(nv));
             }
         }
-        let material = if override_material_present(opts) {
+        let material = if opts.texture_override.is_some() {
             0
         } else {
             match m.material_id {
@@ -196,9 +197,4 @@ pub(crate) fn load_obj(path: &Path, opts: &ImportOptions) -> Result<Mesh, SceneE
         });
     }
     Ok(mesh)
-}
-
-/// True when an override texture replaces the OBJ materials.
-fn override_material_present(opts: &ImportOptions) -> bool {
-    opts.texture_override.is_some()
 }

@@ -11,11 +11,15 @@
 //!   translated so that the minimum corner is 0, i.e. `(x, z, extent_y - 1 - y)`.
 //! * Overlapping voxels: the shape visited last in depth-first scene order wins.
 //! * Colours: the palette entry of the voxel (sRGB RGBA8).
+//! * Limits (errors, never a panic or a wrap): at most 2^20 scene-graph node visits (a node
+//!   shared by several groups is expanded once per path) and 2^40 scaled voxels; the memory
+//!   need is estimated with checked arithmetic and compared with `MemAvailable` before the
+//!   voxel lists are allocated.
 
 use std::path::Path;
 
 use super::morton;
-use super::voxelize::check_resolution;
+use super::voxelize::{check_resolution, mem_available};
 use super::{guard, ImportOptions, SceneError, Voxels};
 
 /// Integer rigid transform: `p -> r * p + t`, `r` a signed permutation matrix (row-major).
@@ -85,6 +89,14 @@ fn parse_translation(s: &str) -> Option<[i64; 3]> {
 /// One placed model: model index and its world transform.
 type Placement = (usize, Xform);
 
+/// Most scene-graph nodes [`placements`] visits. A node listed by several groups is expanded
+/// once per path, so a small file can describe exponentially many placements (40 groups each
+/// listing the next one twice: 2^40); real scenes visit each node once (thousands at most).
+const MAX_NODE_VISITS: usize = 1 << 20;
+
+/// Most voxels (after scaling, before removing overlaps) [`load_vox`] accepts.
+const MAX_VOXELS: u64 = 1 << 40;
+
 /// Walks the scene graph from node 0 and lists the placed models.
 fn placements(path: &Path, data: &dot_vox::DotVoxData) -> Result<Vec<Placement>, SceneError> {
     use dot_vox::SceneNode;
@@ -97,7 +109,15 @@ fn placements(path: &Path, data: &dot_vox::DotVoxData) -> Result<Vec<Placement>,
     // Explicit stack: (node, parent transform, depth); children pushed in reverse so the
     // visiting order is depth-first in file order.
     let mut stack = vec![(0usize, Xform::IDENTITY, 0usize)];
+    let mut visits = 0usize;
     while let Some((id, parent, depth)) = stack.pop() {
+        visits += 1;
+        if visits > MAX_NODE_VISITS {
+            return Err(perr(format!(
+                "the scene graph expands to more than {MAX_NODE_VISITS} nodes \
+                 (nodes shared by several groups?)"
+            )));
+        }
         if depth > 4096 {
             return Err(perr("scene graph deeper than 4096 nodes (cycle?)".into()));
         }
@@ -184,11 +204,40 @@ pub fn load_vox(path: &Path, opts: &ImportOptions) -> Result<Voxels, SceneError>
         placements(path, &data)?
     };
 
+    // Memory guard before any allocation that grows with the voxel count: the world list (one
+    // entry per placed model voxel), the scaled Morton list and the output (one entry each per
+    // output voxel before deduplication). All products are checked: `vox_scale` is arbitrary.
+    let too_large = |reason: String| SceneError::TooLarge {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let s = opts.vox_scale as u64;
+    let total: u64 = placed.iter().fold(0u64, |acc, (m, _)| {
+        acc.saturating_add(data.models[*m].voxels.len() as u64)
+    });
+    let count = s
+        .checked_mul(s)
+        .and_then(|s2| s2.checked_mul(s))
+        .and_then(|s3| total.checked_mul(s3))
+        .ok_or_else(|| {
+            too_large(format!(
+                "{total} voxels at scale {s}: the scaled voxel count overflows 64 bits"
+            ))
+        })?;
+    const WORLD_BYTES: u64 = std::mem::size_of::<([i64; 3], u32)>() as u64;
+    const CODED_BYTES: u64 = std::mem::size_of::<(u64, u32)>() as u64;
+    const OUT_BYTES: u64 = 8 + 4;
+    let bytes_needed = total
+        .saturating_mul(WORLD_BYTES)
+        .saturating_add(count.saturating_mul(CODED_BYTES + OUT_BYTES));
+    if count > MAX_VOXELS || mem_available().is_some_and(|a| bytes_needed > a) {
+        return Err(too_large(format!(
+            "{count} voxels at scale {s} need about {} MiB",
+            bytes_needed >> 20
+        )));
+    }
+
     // World voxel positions (MagicaVoxel z-up) with palette colours.
-    let total: u64 = placed
-        .iter()
-        .map(|(m, _)| data.models[*m].voxels.len() as u64)
-        .sum();
     let mut world: Vec<([i64; 3], u32)> = Vec::with_capacity(total as usize);
     for (mi, xf) in &placed {
         let model = &data.models[*mi];
@@ -230,12 +279,15 @@ pub fn load_vox(path: &Path, opts: &ImportOptions) -> Result<Voxels, SceneError>
             hi[a] = hi[a].max(p[a]);
         }
     }
-    let s = opts.vox_scale as u64;
-    let extent = (0..3)
+    let native_extent = (0..3)
         .map(|a| (hi[a] - lo[a] + 1) as u64)
         .max()
-        .unwrap_or(1)
-        * s;
+        .unwrap_or(1);
+    let extent = native_extent.checked_mul(s).ok_or_else(|| {
+        too_large(format!(
+            "extent {native_extent} at scale {s} overflows 64 bits"
+        ))
+    })?;
     let resolution = match opts.resolution {
         Some(r) => {
             if extent > r as u64 {
@@ -247,33 +299,15 @@ pub fn load_vox(path: &Path, opts: &ImportOptions) -> Result<Voxels, SceneError>
             r
         }
         None => {
-            let r = extent.max(8).next_power_of_two();
-            if r > 65536 {
+            if extent > 65536 {
                 return Err(SceneError::TooLarge {
                     path: path.to_path_buf(),
                     reason: format!("scaled extent {extent} exceeds the maximum resolution 65536"),
                 });
             }
-            r as u32
+            extent.max(8).next_power_of_two() as u32
         }
     };
-    let count = (world.len() as u64).saturating_mul(s * s * s);
-    let bytes_needed = count.saturating_mul(12 + 16);
-    let avail = std::fs::read_to_string("/proc/meminfo").ok().and_then(|m| {
-        m.lines()
-            .find(|l| l.starts_with("MemAvailable:"))
-            .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
-            .map(|kb| kb * 1024)
-    });
-    if avail.is_some_and(|a| bytes_needed > a) || count > (1u64 << 40) {
-        return Err(SceneError::TooLarge {
-            path: path.to_path_buf(),
-            reason: format!(
-                "{count} voxels at scale {s} need about {} MiB",
-                bytes_needed >> 20
-            ),
-        });
-    }
     // Morton codes; the stable sort keeps scene order among duplicates, the last one wins.
     let mut coded: Vec<(u64, u32)> = Vec::with_capacity(count as usize);
     for (p, col) in &world {

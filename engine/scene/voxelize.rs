@@ -318,28 +318,40 @@ fn voxel_range(t: &GridTriangle, resolution: u32) -> Option<([u32; 3], [u32; 3])
     Some((l, h))
 }
 
-/// Rough memory need of a voxelization, in bytes: the surface area in voxel units divided by
-/// sqrt(2) (the largest cross-section of a unit cube) is a lower bound on the voxel count of
-/// a non-overlapping surface.
+/// Rough memory need of a voxelization, as `(voxels, bytes)`: the surface area in voxel units
+/// divided by sqrt(2) (the largest cross-section of a unit cube) is a lower bound on the voxel
+/// count of a non-overlapping surface. A degenerate triangle (zero normal: a segment or a
+/// point) has no area but still sets voxels: it counts the longest side of its bounding box
+/// (a connected set spanning a length `l` along an axis meets at least `l` voxel slabs), at
+/// least one voxel.
 fn estimate_bytes(tris: &[GridTriangle], has_colors: bool) -> (f64, f64) {
-    let area: f64 = tris
+    let voxels: f64 = tris
         .par_iter()
         .map(|t| {
-            let n = t.n;
-            0.5 * dot(n, n).sqrt()
+            if is_degenerate(t) {
+                let (lo, hi) = t.bounds();
+                let l = (0..3).map(|a| hi[a] - lo[a]).fold(0.0, f64::max);
+                if l.is_finite() {
+                    l.max(1.0)
+                } else {
+                    1.0
+                }
+            } else {
+                0.5 * dot(t.n, t.n).sqrt() / std::f64::consts::SQRT_2
+            }
         })
         .sum();
-    let voxels = area / std::f64::consts::SQRT_2;
     let per_voxel = if has_colors { 12.0 } else { 8.0 };
     (voxels, voxels * per_voxel)
 }
 
-/// Available memory from `/proc/meminfo` (`MemAvailable`), if readable.
-fn mem_available() -> Option<u64> {
+/// Available memory from `/proc/meminfo` (`MemAvailable`), if readable (the one place the
+/// memory guards of [`voxelize`] and [`super::load_vox`] read it).
+pub(crate) fn mem_available() -> Option<u64> {
     let s = std::fs::read_to_string("/proc/meminfo").ok()?;
     let line = s.lines().find(|l| l.starts_with("MemAvailable:"))?;
     let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb * 1024)
+    Some(kb.saturating_mul(1024))
 }
 
 /// Per-thread scratch space for one brick.
@@ -361,9 +373,110 @@ struct Ctx<'a> {
     colors: bool,
 }
 
+/// Margin (in voxels) that every candidate range carries beyond the exact geometry, far above
+/// the f64 rounding error of the predicate and the ranges (below 1e-9 voxels at N = 65536).
+const MARGIN: f64 = 1e-3;
+
+/// True for a triangle whose normal is zero (a segment or a point) or not finite. Such a
+/// triangle has no plane to enumerate candidates from; [`for_candidates`] walks its edges.
+#[inline]
+fn is_degenerate(t: &GridTriangle) -> bool {
+    t.n.iter().all(|&c| c == 0.0) || t.n.iter().any(|c| !c.is_finite())
+}
+
+/// Parameter sub-range of `[t0, t1]` where `p + t d` lies in `[lo, hi]`; `None` if empty.
+#[inline]
+fn clip_axis(p: f64, d: f64, lo: f64, hi: f64, t0: f64, t1: f64) -> Option<(f64, f64)> {
+    if d == 0.0 {
+        return (!(p < lo || p > hi)).then_some((t0, t1));
+    }
+    let ta = (lo - p) / d;
+    let tb = (hi - p) / d;
+    let (ta, tb) = if ta <= tb { (ta, tb) } else { (tb, ta) };
+    let (s0, s1) = (ta.max(t0), tb.min(t1));
+    (s0 <= s1).then_some((s0, s1))
+}
+
+/// Calls `f` for every cell `c` in `[lo, hi]` (cell indices; cells of side `2^cell_log`
+/// voxels) whose closed box, grown by `margin` voxels on every side, meets the closed segment
+/// `a`-`b` (grid coordinates; `a == b` is a point). Cost: O(1) when no cell qualifies, else
+/// O(cells visited): the segment is clipped to the grown box of `[lo, hi]`, then walked one
+/// cell slab at a time along its dominant axis; in each slab the other two axes span at most
+/// `1 + 2 margin` cells' worth of length, so at most 3 x 3 cells per slab. Loops are bounded by
+/// `[lo, hi]` even for non-finite input.
+fn for_segment_cells(
+    a: [f64; 3],
+    b: [f64; 3],
+    cell_log: u32,
+    margin: f64,
+    lo: [u32; 3],
+    hi: [u32; 3],
+    f: &mut impl FnMut([u32; 3]),
+) {
+    // Scaling by a power of two is exact.
+    let inv = 1.0 / (1u64 << cell_log) as f64;
+    let a = a.map(|x| x * inv);
+    let b = b.map(|x| x * inv);
+    let m = margin * inv;
+    let d = sub(b, a);
+    let (mut t0, mut t1) = (0.0, 1.0);
+    for ax in 0..3 {
+        match clip_axis(
+            a[ax],
+            d[ax],
+            lo[ax] as f64 - m,
+            hi[ax] as f64 + 1.0 + m,
+            t0,
+            t1,
+        ) {
+            Some(r) => (t0, t1) = r,
+            None => return,
+        }
+    }
+    let ad = d.map(f64::abs);
+    let w = if ad[0] >= ad[1] && ad[0] >= ad[2] {
+        0
+    } else if ad[1] >= ad[2] {
+        1
+    } else {
+        2
+    };
+    let (u, v) = ((w + 1) % 3, (w + 2) % 3);
+    // Closed cells [i, i + 1] grown by m that meet the coordinate range [p, q] of `ax`.
+    let cells = |ax: usize, p: f64, q: f64| -> Option<(u32, u32)> {
+        let c_lo = (p.min(q) - m - 1.0).ceil().max(lo[ax] as f64);
+        let c_hi = (p.max(q) + m).floor().min(hi[ax] as f64);
+        (c_lo <= c_hi).then_some((c_lo as u32, c_hi as u32))
+    };
+    let Some((k_lo, k_hi)) = cells(w, a[w] + t0 * d[w], a[w] + t1 * d[w]) else {
+        return;
+    };
+    for k in k_lo..=k_hi {
+        let Some((s0, s1)) = clip_axis(a[w], d[w], k as f64 - m, k as f64 + 1.0 + m, t0, t1) else {
+            continue;
+        };
+        let Some((u_lo, u_hi)) = cells(u, a[u] + s0 * d[u], a[u] + s1 * d[u]) else {
+            continue;
+        };
+        let Some((v_lo, v_hi)) = cells(v, a[v] + s0 * d[v], a[v] + s1 * d[v]) else {
+            continue;
+        };
+        for cu in u_lo..=u_hi {
+            for cv in v_lo..=v_hi {
+                let mut c = [0u32; 3];
+                c[w] = k;
+                c[u] = cu;
+                c[v] = cv;
+                f(c);
+            }
+        }
+    }
+}
+
 /// Calls `f` for every voxel in `[lo, hi]` that may intersect `t` (a superset of the voxels
 /// passing [`tri_box_overlap`]): every column of the dominant normal axis, limited to the
-/// plane's range within the column plus a margin.
+/// plane's range within the column plus a margin; for a degenerate triangle, the voxels near
+/// its edges ([`for_segment_cells`]).
 #[inline]
 fn for_candidates(t: &GridTriangle, lo: [u32; 3], hi: [u32; 3], mut f: impl FnMut([u32; 3])) {
     let n = t.n;
@@ -376,14 +489,12 @@ fn for_candidates(t: &GridTriangle, lo: [u32; 3], hi: [u32; 3], mut f: impl FnMu
         2
     };
     let (u, v) = ((w + 1) % 3, (w + 2) % 3);
-    if n[w] == 0.0 || !n[w].is_finite() {
-        // Degenerate triangle: every voxel of the range.
-        for x in lo[0]..=hi[0] {
-            for y in lo[1]..=hi[1] {
-                for z in lo[2]..=hi[2] {
-                    f([x, y, z]);
-                }
-            }
+    if is_degenerate(t) {
+        // Zero normal: the triangle is a segment or a point (or, after rounding, a sliver far
+        // thinner than MARGIN), i.e. within MARGIN of the union of its edges. Some voxels
+        // may be visited twice (shared neighbourhoods); the caller is idempotent.
+        for k in 0..3 {
+            for_segment_cells(t.v[k], t.v[(k + 1) % 3], 0, MARGIN, lo, hi, &mut f);
         }
         return;
     }
@@ -392,7 +503,6 @@ fn for_candidates(t: &GridTriangle, lo: [u32; 3], hi: [u32; 3], mut f: impl FnMu
     let p = [dot(n, t.v[0]), dot(n, t.v[1]), dot(n, t.v[2])];
     let pmin = p[0].min(p[1]).min(p[2]) - t.n_rad;
     let pmax = p[0].max(p[1]).max(p[2]) + t.n_rad;
-    const MARGIN: f64 = 1e-3;
     for cu in lo[u]..=hi[u] {
         let su = n[u] * (cu as f64 + 0.5);
         // Columns of this row that the triangle's projection can touch: the v-extent of the
@@ -564,23 +674,39 @@ pub fn voxelize(
     }
     let res_log = resolution.trailing_zeros();
     let brick_log = BRICK_LOG.min(res_log);
-    // Bin triangles into bricks: key = brick Morton code << 32 | triangle index.
+    // Bin triangles into bricks: key = brick Morton code << 32 | triangle index. A triangle
+    // goes to every brick of its voxel range; a degenerate one (segment) only to the bricks
+    // near its edges (a superset of the bricks holding its voxel candidates, which are the
+    // voxels near its edges): a long diagonal segment would otherwise fill (N / 128)^3 bins.
     let mut pairs: Vec<u64> = tris
         .par_iter()
         .enumerate()
         .flat_map_iter(|(i, t)| {
             let range = voxel_range(t, resolution);
-            let (lo, hi) = range.unwrap_or(([1; 3], [0; 3]));
-            let (blo, bhi) = if range.is_some() {
-                (lo.map(|c| c >> brick_log), hi.map(|c| c >> brick_log))
-            } else {
-                ([1; 3], [0; 3])
+            let (mut blo, mut bhi) = match range {
+                Some((lo, hi)) => (lo.map(|c| c >> brick_log), hi.map(|c| c >> brick_log)),
+                None => ([1; 3], [0; 3]),
             };
-            (blo[2]..=bhi[2]).flat_map(move |z| {
-                (blo[1]..=bhi[1]).flat_map(move |y| {
-                    (blo[0]..=bhi[0]).map(move |x| (morton::encode(x, y, z) << 32) | i as u64)
-                })
-            })
+            let mut near_edges: Vec<u64> = Vec::new();
+            if range.is_some() && is_degenerate(t) {
+                let mut push = |b: [u32; 3]| near_edges.push(morton::encode(b[0], b[1], b[2]));
+                for k in 0..3 {
+                    let (a, b) = (t.v[k], t.v[(k + 1) % 3]);
+                    for_segment_cells(a, b, brick_log, MARGIN, blo, bhi, &mut push);
+                }
+                near_edges.sort_unstable();
+                near_edges.dedup();
+                (blo, bhi) = ([1; 3], [0; 3]);
+            }
+            let key = move |code: u64| (code << 32) | i as u64;
+            near_edges
+                .into_iter()
+                .map(key)
+                .chain((blo[2]..=bhi[2]).flat_map(move |z| {
+                    (blo[1]..=bhi[1]).flat_map(move |y| {
+                        (blo[0]..=bhi[0]).map(move |x| key(morton::encode(x, y, z)))
+                    })
+                }))
         })
         .collect();
     pairs.par_sort_unstable();
@@ -682,5 +808,92 @@ pub fn voxelize_brute_force(mesh: &Mesh, resolution: u32) -> Voxels {
         } else {
             Vec::new()
         },
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn degenerate_triangles_count_their_length_in_the_estimate() {
+        let seg = GridTriangle::new([[1.0, 2.0, 3.0], [101.0, 42.0, 3.0], [51.0, 22.0, 3.0]]);
+        let point = GridTriangle::new([[5.5; 3]; 3]);
+        assert!(is_degenerate(&seg) && is_degenerate(&point));
+        let (voxels, bytes) = estimate_bytes(&[seg], false);
+        assert_eq!(voxels, 100.0);
+        assert_eq!(bytes, 800.0);
+        assert_eq!(estimate_bytes(&[point], true), (1.0, 12.0));
+        // A proper triangle still counts area / sqrt(2).
+        let tri = GridTriangle::new([[0.0; 3], [4.0, 0.0, 0.0], [0.0, 4.0, 0.0]]);
+        assert!(!is_degenerate(&tri));
+        assert_eq!(
+            estimate_bytes(&[tri], false).0,
+            8.0 / std::f64::consts::SQRT_2
+        );
+    }
+
+    #[test]
+    fn segment_cells_cover_the_closed_neighbourhood() {
+        // Sampled brute force on a small grid: every cell whose box grown by the margin meets
+        // the segment is reported (the superset the exact predicate needs), each once, and
+        // every reported cell is within one cell of the segment (the per-slab box).
+        let cases = [
+            ([0.5, 0.5, 0.5], [6.5, 2.5, 0.5]),
+            ([2.0, 2.0, 2.0], [2.0, 2.0, 2.0]),
+            ([0.0, 7.0, 3.0], [7.0, 0.0, 3.0]),
+            ([1.25, 6.0, 2.75], [5.5, 1.0, 7.0]),
+            ([7.9, 0.1, 4.0], [0.2, 7.7, 4.5]),
+        ];
+        let near = |a: [f64; 3], b: [f64; 3], c: [u32; 3], grow: f64| {
+            (0..=4096).any(|i| {
+                let s = i as f64 / 4096.0;
+                (0..3).all(|k| {
+                    let p = a[k] + s * (b[k] - a[k]);
+                    p >= c[k] as f64 - grow && p <= c[k] as f64 + 1.0 + grow
+                })
+            })
+        };
+        for (a, b) in cases {
+            let mut got = Vec::new();
+            for_segment_cells(a, b, 0, MARGIN, [0; 3], [7; 3], &mut |c| got.push(c));
+            got.sort_unstable();
+            let len = got.len();
+            got.dedup();
+            assert_eq!(len, got.len(), "{a:?}-{b:?}: a cell reported twice");
+            for x in 0..8u32 {
+                for y in 0..8u32 {
+                    for z in 0..8u32 {
+                        let c = [x, y, z];
+                        if near(a, b, c, MARGIN) {
+                            assert!(got.binary_search(&c).is_ok(), "{a:?}-{b:?}: {c:?} missing");
+                        }
+                    }
+                }
+            }
+            for &c in &got {
+                assert!(
+                    near(a, b, c, 1.0),
+                    "{a:?}-{b:?}: {c:?} is far from the segment"
+                );
+            }
+        }
+        // Cells of side 4 (as for bricks), clipped to x <= 2: the diagonal (0.25 .. 3.75 cells)
+        // passes the cell corners (1, 1), (2, 2), (3, 3), so the closed cells around them count.
+        let mut got = Vec::new();
+        let (a, b) = ([1.0, 1.0, 1.0], [15.0, 15.0, 1.0]);
+        for_segment_cells(a, b, 2, MARGIN, [0; 3], [2, 3, 3], &mut |c| got.push(c));
+        got.sort_unstable();
+        let want = [
+            [0, 0],
+            [0, 1],
+            [1, 0],
+            [1, 1],
+            [1, 2],
+            [2, 1],
+            [2, 2],
+            [2, 3],
+        ];
+        assert_eq!(got, want.map(|[x, y]| [x, y, 0]).to_vec());
     }
 }
