@@ -574,7 +574,7 @@ fn symmetrise(n: u32, seed: &[[u32; 3]], gens: &[usize]) -> Voxels {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(40))]
+    #![proptest_config(ProptestConfig::with_cases(128))]
 
     /// Random sparse sets (many small, often symmetric leaves) and random sets symmetrised by a
     /// random subgroup (nodes with non-trivial stabilisers): all counts equal brute force.
@@ -596,7 +596,7 @@ fn shared_meshes_match_brute_force() {
     let Some(data) = common::shared_data() else {
         return;
     };
-    for (mesh, res) in [("bunny.obj", 64), ("teapot.obj", 32)] {
+    for (mesh, res) in [("bunny.obj", 128), ("dragon.obj", 64), ("teapot.obj", 64)] {
         let options = voxdag::scene::ImportOptions {
             resolution: Some(res),
             ..Default::default()
@@ -650,4 +650,54 @@ fn three_bit_invariance_misses_combined_mirrors() {
     assert_eq!(reference_ssvdag(&v, false)[0], 2);
     assert_eq!(reference_ssvdag(&v, true)[0], 1);
     check_scene(&v);
+}
+
+/// `voxdag stats --json` reports the transform counts per level; the table shows them too.
+#[test]
+fn cli_stats_reports_symmetry_counts() {
+    let v = symmetrise(
+        32,
+        &[[1, 2, 3], [5, 0, 9], [15, 15, 2], [30, 7, 19]],
+        &[3, 16],
+    );
+    let dag = Svdag::from_voxels(&v).expect("build");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("scene.vdag");
+    dag.save(&path).expect("save");
+    let run = |args: &[&str]| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_voxdag"))
+            .args(args)
+            .output()
+            .expect("run voxdag");
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8(out.stdout).expect("utf-8")
+    };
+    let path_str = path.to_str().expect("utf-8 path");
+    let json: serde_json::Value =
+        serde_json::from_str(&run(&["stats", path_str, "--json"])).expect("json");
+    let levels = json["levels"].as_array().expect("levels");
+    let counts = symmetry_counts(&dag);
+    assert_eq!(levels.len(), counts.len());
+    for (level, c) in levels.iter().zip(&counts) {
+        for (key, want) in [
+            ("svdag", c.svdag),
+            ("ssvdag", c.ssvdag),
+            ("s", c.s),
+            ("a", c.a),
+            ("sa", c.sa),
+        ] {
+            assert_eq!(level[key], want, "level {} {key}", c.level);
+        }
+    }
+    let table = run(&["stats", path_str]);
+    assert!(table.contains("ssvdag") && table.contains(" sa"), "{table}");
+    let row0 = format!(
+        "{} {:>10} {:>10} {:>10} {:>10}",
+        counts[0].svdag, counts[0].ssvdag, counts[0].s, counts[0].a, counts[0].sa
+    );
+    assert!(table.contains(&row0), "{table}\n{row0}");
 }
