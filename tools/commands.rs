@@ -160,7 +160,7 @@ pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
 /// `voxdag stats`.
 pub fn stats(args: &StatsArgs) -> Result<()> {
     let dag = Svdag::load(&args.file)?;
-    let stats = dag.stats();
+    let stats = dag.stats_with_symmetry();
     if args.json {
         println!("{}", serde_json::to_string(&stats)?);
     } else {
@@ -169,25 +169,41 @@ pub fn stats(args: &StatsArgs) -> Result<()> {
     Ok(())
 }
 
-/// A human-readable table of DAG statistics.
+/// A human-readable table of DAG statistics (with the transform columns when computed).
 pub fn stats_table(file: &Path, stats: &DagStats) -> String {
+    let symmetry = stats.levels.iter().any(|l| l.sa.is_some());
     let mut out = format!(
-        "{}\n  resolution  {}^3\n  voxels      {}\n  bytes       svo {}  svdag32 {}\n  level  node size        svo      svdag\n",
+        "{}\n  resolution  {}^3\n  voxels      {}\n  bytes       svo {}  svdag32 {}\n  level  node size        svo      svdag",
         file.display(),
         stats.resolution,
         stats.voxels,
         stats.bytes.svo,
         stats.bytes.svdag32
     );
+    if symmetry {
+        out += "     ssvdag          s          a         sa";
+    }
+    out += "\n";
+    let cell = |v: Option<u64>| v.map_or_else(|| "-".to_string(), |v| v.to_string());
     for level in &stats.levels {
         let size = 4u64 << level.level;
         out += &format!(
-            "  {:>5}  {:>9} {:>10} {:>10}\n",
+            "  {:>5}  {:>9} {:>10} {:>10}",
             level.level,
             format!("{size}^3"),
             level.svo,
             level.svdag
         );
+        if symmetry {
+            out += &format!(
+                " {:>10} {:>10} {:>10} {:>10}",
+                cell(level.ssvdag),
+                cell(level.s),
+                cell(level.a),
+                cell(level.sa)
+            );
+        }
+        out += "\n";
     }
     out
 }

@@ -17,20 +17,26 @@
 //! Colours (optional) are one RGBA8 word per occupied voxel in depth-first Morton order.
 
 mod build;
+pub mod canonical;
 mod export;
 mod file;
 mod index;
 mod query;
 pub mod raycast;
+pub mod ssvdag;
 mod stats;
+pub mod transform;
 mod validate;
 
 use std::path::PathBuf;
 
+pub use canonical::{symmetry_counts, CanonicalDag, SymmetryLevelCounts, TransformPointer};
 pub use export::{export_vox, export_xyz_u32, export_xyz_u32_file};
 pub use file::{ColorFormat, Encoding, FORMAT_VERSION, MAGIC};
 pub use index::VoxelIndex;
+pub use ssvdag::{Invariance, Ssvdag};
 pub use stats::{ByteStats, DagStats, LevelStats};
+pub use transform::{Transform, TransformSet};
 
 /// Largest supported grid side: Morton codes hold 21 bits per axis.
 pub const MAX_RESOLUTION: u32 = 1 << 21;

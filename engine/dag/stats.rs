@@ -16,6 +16,18 @@ pub struct LevelStats {
     pub svo: u64,
     /// Unique nodes stored in the DAG on this level.
     pub svdag: u64,
+    /// SSVDAG stored nodes (3-bit invariance, as published); only from `stats_with_symmetry`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ssvdag: Option<u64>,
+    /// Unique nodes up to mirrors (S); only from `stats_with_symmetry`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub s: Option<u64>,
+    /// Unique nodes up to axis permutations (A); only from `stats_with_symmetry`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub a: Option<u64>,
+    /// Unique nodes up to all 48 transforms (S+A); only from `stats_with_symmetry`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sa: Option<u64>,
 }
 
 /// Sizes in bytes of the scene in several encodings.
@@ -142,8 +154,25 @@ impl Svdag {
                     level: l as u32,
                     svo,
                     svdag,
+                    ssvdag: None,
+                    s: None,
+                    a: None,
+                    sa: None,
                 })
                 .collect(),
         }
+    }
+
+    /// [`Svdag::stats`] plus the per-level unique counts under transforms (`ssvdag`, `s`, `a`,
+    /// `sa`; see `docs/transforms.md`). Much slower than `stats`.
+    pub fn stats_with_symmetry(&self) -> DagStats {
+        let mut stats = self.stats();
+        for (level, counts) in stats.levels.iter_mut().zip(super::symmetry_counts(self)) {
+            level.ssvdag = Some(counts.ssvdag);
+            level.s = Some(counts.s);
+            level.a = Some(counts.a);
+            level.sa = Some(counts.sa);
+        }
+        stats
     }
 }
