@@ -3,18 +3,10 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+mod common;
+
 use indicatif::ProgressBar;
 use voxdag::scene::{import, load_mesh, load_vox, morton, ImportOptions, SceneError, Voxels};
-
-fn shared() -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
-    if p.is_dir() {
-        Some(p)
-    } else {
-        println!("skipped: ../shared/data not found");
-        None
-    }
-}
 
 fn bundled(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -59,7 +51,9 @@ fn files_with_ext(dir: &Path, exts: &[&str], out: &mut Vec<PathBuf>) {
 
 #[test]
 fn shared_meshes_import() {
-    let Some(data) = shared() else { return };
+    let Some(data) = common::shared_data() else {
+        return;
+    };
     let mut files = Vec::new();
     files_with_ext(&data.join("meshes"), &["obj"], &mut files);
     assert!(files.len() >= 7, "{files:?}");
@@ -76,7 +70,9 @@ fn shared_meshes_import() {
 
 #[test]
 fn shared_textured_models_import_with_colours() {
-    let Some(data) = shared() else { return };
+    let Some(data) = common::shared_data() else {
+        return;
+    };
     let mut files = Vec::new();
     files_with_ext(&data.join("textured"), &["gltf", "glb"], &mut files);
     assert!(files.len() >= 5, "{files:?}");
@@ -117,7 +113,9 @@ fn shared_textured_models_import_with_colours() {
 
 #[test]
 fn gltf_node_transforms_are_applied() {
-    let Some(data) = shared() else { return };
+    let Some(data) = common::shared_data() else {
+        return;
+    };
     // Fox is skinned and its mesh node sits under a scaled/rotated hierarchy; the rest pose
     // must still be a sane, non-degenerate shape (longest side along the body).
     let m = load_mesh(
@@ -131,7 +129,9 @@ fn gltf_node_transforms_are_applied() {
 
 #[test]
 fn shared_vox_files_import() {
-    let Some(data) = shared() else { return };
+    let Some(data) = common::shared_data() else {
+        return;
+    };
     let mut files = Vec::new();
     files_with_ext(&data.join("vox"), &["vox"], &mut files);
     assert!(files.len() >= 40, "{} files", files.len());

@@ -2,6 +2,7 @@
 //! image comparison with actual/difference PNGs on failure.
 #![allow(dead_code)] // each test binary uses a different subset
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -15,13 +16,19 @@ pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// `../shared/data`, or `None` after printing the one skip line the test policy asks for.
+/// `../shared/data`, or `None` after printing the one `skipped:` line the test policy asks for.
 pub fn shared_data() -> Option<PathBuf> {
     let dir = repo().join("../shared/data");
     if dir.is_dir() {
         Some(dir)
     } else {
-        println!("skipped: ../shared/data not found");
+        // Straight to the stderr handle: the test harness captures print!/eprint! output, and this
+        // line must be visible in CI logs.
+        let test = std::thread::current().name().unwrap_or("test").to_string();
+        let _ = writeln!(
+            std::io::stderr(),
+            "skipped: {test}: ../shared/data not found"
+        );
         None
     }
 }
