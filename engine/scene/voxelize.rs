@@ -719,6 +719,7 @@ pub fn voxelize(
             start = i;
         }
     }
+    progress.set_message("voxelizing");
     progress.set_length(bricks.len() as u64);
     progress.set_position(0);
     let ctx = Ctx {
