@@ -18,6 +18,7 @@
 
 mod build;
 pub mod canonical;
+pub mod encode;
 mod export;
 mod file;
 mod index;
