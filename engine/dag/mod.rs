@@ -33,7 +33,7 @@ use std::path::PathBuf;
 
 pub use canonical::{symmetry_counts, CanonicalDag, SymmetryLevelCounts, TransformPointer};
 pub use export::{export_vox, export_xyz_u32, export_xyz_u32_file};
-pub use file::{ColorFormat, Encoding, FORMAT_VERSION, MAGIC};
+pub use file::{ColorFormat, Encoding, VdagFile, FORMAT_VERSION, MAGIC};
 pub use index::VoxelIndex;
 pub use ssvdag::{Invariance, Ssvdag};
 pub use stats::{ByteStats, DagStats, LevelStats};
