@@ -2,7 +2,7 @@
 //! so a decoder can read a pointer word from its low bits.
 
 /// Longest code the encoder emits and the decoder accepts.
-pub const MAX_CODE_LEN: u8 = 16;
+pub const MAX_CODE_LEN: u8 = 15;
 
 /// Optimal code lengths under a length limit (package-merge, Larmore & Hirschberg 1990).
 ///
@@ -183,7 +183,7 @@ mod tests {
             let n = w[w.len() - 1] + w[w.len() - 2];
             w.push(n);
         }
-        for limit in [5u8, 8, 16] {
+        for limit in [5u8, 8, 15] {
             let lengths = length_limited_code_lengths(&w, limit).unwrap();
             assert!(lengths.iter().all(|&l| l >= 1 && l <= limit));
             let h = Huffman::from_lengths(lengths, None).unwrap();

@@ -543,15 +543,10 @@ impl TsvdagEncoding {
             .codes
             .iter()
             .take(top as usize)
-            .map(|c| {
-                2 + c.as_ref().map_or(0, |h| {
-                    3 * h
-                        .lengths
-                        .iter()
-                        .filter(|&&l| l > 0)
-                        .count()
-                        .max(h.single().is_some() as usize) as u64
-                })
+            .map(|c| match c {
+                None => 2,
+                Some(h) if h.single().is_some() => 4,
+                Some(_) => 2 + SYMBOLS as u64 / 2,
             })
             .sum();
         24 + 8 * top * 2
@@ -585,21 +580,18 @@ impl TsvdagEncoding {
             for c in &self.codes[..top] {
                 match c {
                     None => w.u16(0),
-                    Some(h) => {
-                        if let Some(s) = h.single() {
+                    Some(h) => match h.single() {
+                        Some(s) => {
                             w.u16(1);
                             w.u16(s);
-                            w.u8(0);
-                        } else {
-                            let used: Vec<usize> =
-                                (0..h.lengths.len()).filter(|&s| h.lengths[s] > 0).collect();
-                            w.u16(used.len() as u16);
-                            for s in used {
-                                w.u16(s as u16);
-                                w.u8(h.lengths[s]);
+                        }
+                        None => {
+                            w.u16(2);
+                            for pair in h.lengths.chunks(2) {
+                                w.u8(pair[0] | pair.get(1).copied().unwrap_or(0) << 4);
                             }
                         }
-                    }
+                    },
                 }
             }
         }
@@ -663,33 +655,28 @@ impl TsvdagEncoding {
         if options.huffman {
             for code in codes.iter_mut().take(top) {
                 let at = r.at as u64;
-                let n = r.u16("symbol count")?;
-                if n as usize > SYMBOLS {
-                    return Err(corrupt(at, format!("{n} Huffman symbols")));
-                }
-                if n == 0 {
-                    continue;
-                }
-                let mut lengths = vec![0u8; SYMBOLS];
-                let mut single = None;
-                for _ in 0..n {
-                    let s = r.u16("symbol")? as usize;
-                    let len = r.u8("code length")?;
-                    if s >= SYMBOLS || lengths[s] != 0 {
-                        return Err(corrupt(at, format!("bad Huffman symbol {s}")));
-                    }
-                    if len == 0 {
-                        if n != 1 {
-                            return Err(corrupt(at, "zero-length code among several"));
+                match r.u16("code kind")? {
+                    0 => {}
+                    1 => {
+                        let s = r.u16("symbol")?;
+                        if s as usize >= SYMBOLS {
+                            return Err(corrupt(at, format!("bad Huffman symbol {s}")));
                         }
-                        single = Some(s as u16);
+                        *code = Huffman::from_lengths(vec![0; SYMBOLS], Some(s));
                     }
-                    lengths[s] = len;
+                    2 => {
+                        let mut lengths = Vec::with_capacity(SYMBOLS);
+                        for _ in 0..SYMBOLS / 2 {
+                            let b = r.u8("code lengths")?;
+                            lengths.push(b & 15);
+                            lengths.push(b >> 4);
+                        }
+                        *code = Some(Huffman::from_lengths(lengths, None).ok_or_else(|| {
+                            corrupt(at, "code lengths do not form a prefix code")
+                        })?);
+                    }
+                    k => return Err(corrupt(at, format!("unknown code kind {k}"))),
                 }
-                *code = Some(
-                    Huffman::from_lengths(lengths, single)
-                        .ok_or_else(|| corrupt(at, "code lengths do not form a prefix code"))?,
-                );
             }
         }
         let leaves = r.u64s(leaf_count, "leaves")?;
