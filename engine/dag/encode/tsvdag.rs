@@ -329,8 +329,8 @@ impl TsvdagEncoding {
             sorted.sort_unstable_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
             if options.huffman {
                 let mut hist = vec![0u64; SYMBOLS];
-                for ((_, t, tr), _) in &sorted {
-                    hist[*t as usize * 8 + nonzero_mask(tr)] += 1;
+                for ((_, t, tr), count) in &sorted {
+                    hist[*t as usize * 8 + nonzero_mask(tr)] += *count;
                 }
                 out.codes[l - 1] = Huffman::from_weights(&hist);
             }
