@@ -3,6 +3,8 @@
 //! followed by the pointers in ascending octant order; a pointer is `target << 3 | mirror`,
 //! `target` being a leaf index (children of level 1) or a node offset in 16-bit units.
 
+#![allow(clippy::needless_range_loop)] // levels index several parallel arrays
+
 use super::bytes::{Reader, Writer};
 use super::traverse::{root_level, TreeView};
 use super::{corrupt, EncodeError};
@@ -53,6 +55,9 @@ pub(crate) fn sort_by_refcount(
     order
 }
 
+/// The pointers of one node by stored octant: `(value, size code)`.
+pub(crate) type NodePointers = [Option<(u64, u8)>; 8];
+
 /// Parses the node at `off` of a 2-bit-header stream: `(header, per stored octant the pointer
 /// value, end offset)`. `max_code` is the largest size code allowed (2: 16/32-bit, 3: also 48).
 pub(crate) fn read_node(
@@ -60,7 +65,7 @@ pub(crate) fn read_node(
     off: usize,
     max_code: u16,
     byte_base: u64,
-) -> Result<([Option<(u64, u8)>; 8], usize), EncodeError> {
+) -> Result<(NodePointers, usize), EncodeError> {
     let at = |i: usize| byte_base + 2 * i as u64;
     let header = *stream
         .get(off)

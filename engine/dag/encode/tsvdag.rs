@@ -20,6 +20,8 @@
 //! index into the child level's table of 64-bit `E`s; 32/48-bit pointers hold `v` with
 //! `v & 1` = 1: table index `v >> 1`, 0: `E = v >> 1`. Without tables every pointer is `E`.
 
+#![allow(clippy::needless_range_loop)] // levels index several parallel arrays
+
 use std::sync::Arc;
 
 use super::bytes::{Reader, Writer};
@@ -37,6 +39,9 @@ pub const MAX_TRANSLATION_LEVEL: u32 = 2;
 
 /// Number of Huffman symbols: 48 transforms x 8 nonzero-translation masks.
 const SYMBOLS: usize = 48 * 8;
+
+/// (new target id, transform id, translation): a distinct pointer of a level.
+type PointerKey = (u64, u8, [i32; 3]);
 
 /// A child pointer of a [`TransformGraph`] node.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
@@ -297,7 +302,7 @@ impl TsvdagEncoding {
             let cl = (l - 1) as u32;
             let side = 4i32 << cl;
             // Distinct pointers and their reference counts.
-            let mut refs: FxHashMap<(u64, u8, [i32; 3]), u64> = FxHashMap::default();
+            let mut refs: FxHashMap<PointerKey, u64> = FxHashMap::default();
             for &old in &order[l] {
                 for c in g.levels[l].node_children(old) {
                     if !g.set.contains(c.transform) {
@@ -325,7 +330,7 @@ impl TsvdagEncoding {
                     *refs.entry(key).or_insert(0) += 1;
                 }
             }
-            let mut sorted: Vec<((u64, u8, [i32; 3]), u64)> = refs.into_iter().collect();
+            let mut sorted: Vec<(PointerKey, u64)> = refs.into_iter().collect();
             sorted.sort_unstable_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
             if options.huffman {
                 let mut hist = vec![0u64; SYMBOLS];
@@ -334,7 +339,7 @@ impl TsvdagEncoding {
                 }
                 out.codes[l - 1] = Huffman::from_weights(&hist);
             }
-            let mut value: FxHashMap<(u64, u8, [i32; 3]), (u64, u16)> = FxHashMap::default();
+            let mut value: FxHashMap<PointerKey, (u64, u16)> = FxHashMap::default();
             let mut table: Vec<u64> = Vec::new();
             for ((idx, t, tr), count) in sorted {
                 let ptr = GraphPointer {
@@ -516,8 +521,9 @@ impl TsvdagEncoding {
                     }
                 }
             }
-        } else if self.set != TransformSet::None || self.translates(level) {
-            if take(&mut e, 1) == 1 {
+        } else if (self.set != TransformSet::None || self.translates(level)) && take(&mut e, 1) == 1
+        {
+            {
                 let f = take(&mut e, transform_bits(self.set));
                 transform = field_transform(self.set, f).ok_or_else(|| bad("transform field"))?;
                 if self.translates(level) {
@@ -716,7 +722,7 @@ impl TsvdagEncoding {
             }
             return Ok(());
         }
-        if self.leaves.iter().any(|&m| m == 0) {
+        if self.leaves.contains(&0) {
             return Err(corrupt(0, "empty leaf"));
         }
         let mut below: Option<Vec<u32>> = None;
