@@ -45,6 +45,10 @@ fn encodings(dag: &Svdag) -> Vec<(String, EncodedDag)> {
             out.push((format!("tsvdag {set:?} {o:?}"), EncodedDag::Tsvdag(e)));
         }
     }
+    for o in all_options() {
+        let e = TsvdagEncoding::build_with_translations(dag, TransformSet::All, true, o).unwrap();
+        out.push((format!("tsvdag S+A+T {o:?}"), EncodedDag::Tsvdag(e)));
+    }
     out
 }
 

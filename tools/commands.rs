@@ -256,12 +256,12 @@ pub fn stats(args: &StatsArgs) -> Result<()> {
     Ok(())
 }
 
-/// Bytes of the DAG in each encoding: `ssvdag`, `tsvdag` (S+A, tables, Huffman) and the
+/// Bytes of the DAG in each encoding: `ssvdag`, `tsvdag` (S+A+T, tables, Huffman) and the
 /// ablations `tsvdag_base` (neither) and `tsvdag_lut` (tables only).
 pub fn encoded_bytes(dag: &Svdag) -> Result<Vec<(String, u64)>> {
-    let canonical = voxdag::dag::CanonicalDag::build(dag, TransformSet::All);
-    let graph = voxdag::dag::encode::TransformGraph::from_canonical(&canonical);
-    drop(canonical);
+    let tdag = voxdag::dag::build_transform_dag(dag, TransformSet::All, true);
+    let graph = voxdag::dag::encode::TransformGraph::from_transform_dag(&tdag);
+    drop(tdag);
     let mut out = vec![(
         "ssvdag".to_string(),
         SsvdagEncoding::build(dag)?.byte_size(),

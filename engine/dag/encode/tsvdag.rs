@@ -35,7 +35,7 @@ use crate::scene::morton;
 use rustc_hash::FxHashMap;
 
 /// Highest level whose nodes may be translated (16^3 subtrees, dissertation §3.3.2).
-pub const MAX_TRANSLATION_LEVEL: u32 = 2;
+pub use crate::dag::translate::MAX_TRANSLATION_LEVEL;
 
 /// Number of Huffman symbols: 48 transforms x 8 nonzero-translation masks.
 const SYMBOLS: usize = 48 * 8;
@@ -128,6 +128,33 @@ impl TransformGraph {
                 })
                 .collect(),
             root: dag.root().map(|p| conv(&p)),
+        }
+    }
+}
+
+impl TransformGraph {
+    /// The graph of a transform DAG (S+A+T when it was built with translations).
+    pub fn from_transform_dag(dag: &crate::dag::TransformDag) -> TransformGraph {
+        let conv = |p: &crate::dag::TPointer| GraphPointer {
+            node: p.node,
+            transform: p.transform,
+            translation: p.translation.map(|t| t as i32),
+        };
+        TransformGraph {
+            resolution: dag.resolution,
+            set: dag.set,
+            translations: dag.translations,
+            levels: dag
+                .levels
+                .iter()
+                .map(|l| GraphLevel {
+                    leaves: l.leaves.clone(),
+                    child_masks: l.child_masks.clone(),
+                    child_starts: l.child_starts.clone(),
+                    children: l.children.iter().map(conv).collect(),
+                })
+                .collect(),
+            root: dag.root.as_ref().map(conv),
         }
     }
 }
@@ -247,6 +274,18 @@ impl TsvdagEncoding {
     ) -> Result<TsvdagEncoding, EncodeError> {
         let canonical = CanonicalDag::build(dag, set);
         Self::encode(&TransformGraph::from_canonical(&canonical), options)
+    }
+
+    /// Builds the transform DAG of an SVDAG (`set`, plus translations when asked: S+A+T with
+    /// `TransformSet::All`) and encodes it.
+    pub fn build_with_translations(
+        dag: &crate::dag::Svdag,
+        set: TransformSet,
+        translations: bool,
+        options: TsvdagOptions,
+    ) -> Result<TsvdagEncoding, EncodeError> {
+        let tdag = crate::dag::build_transform_dag(dag, set, translations);
+        Self::encode(&TransformGraph::from_transform_dag(&tdag), options)
     }
 
     /// Encodes a graph.
