@@ -8,13 +8,19 @@ use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
 use voxdag::atomic_file::write_atomic;
-use voxdag::dag::{export_vox, export_xyz_u32_file, DagStats, Svdag, VoxelIndex};
+use voxdag::dag::encode::{EncodedDag, SsvdagEncoding, TsvdagEncoding, TsvdagOptions, VoxelDigest};
+use voxdag::dag::{
+    export_vox, export_xyz_u32_file, DagStats, Svdag, TransformSet, VdagFile, VoxelIndex,
+};
 use voxdag::gpu::{GpuContext, GpuOptions, Profiler};
 use voxdag::render::gpu::GpuRenderer;
 use voxdag::render::{render_cpu, Camera, RenderSettings};
 use voxdag::scene::{self, ImportOptions};
 
-use crate::{BuildArgs, DemoArgs, ExportArgs, ExportFormat, RenderArgs, StatsArgs};
+use crate::{
+    BuildArgs, DemoArgs, EncodingArg, ExportArgs, ExportFormat, RenderArgs, StatsArgs,
+    TransformsArg, VerifyArgs,
+};
 
 /// What `voxdag build --report` writes: the inputs, the outcome and the cost of one build.
 #[derive(Serialize, Deserialize)]
@@ -100,8 +106,12 @@ pub fn parse_vec3(text: &str) -> Result<[f32; 3], String> {
     Ok(v)
 }
 
-/// Imports, voxelizes and builds the SVDAG of a scene; returns the DAG and the build report.
-pub fn build_scene(args: &BuildArgs, quiet: bool) -> Result<(Svdag, BuildReport)> {
+/// Imports, voxelizes and builds the SVDAG of a scene; returns the DAG, the build report and
+/// the digest of the source voxels (computed before the SVDAG is built).
+pub fn build_scene_digest(
+    args: &BuildArgs,
+    quiet: bool,
+) -> Result<(Svdag, BuildReport, VoxelDigest)> {
     let options = ImportOptions {
         resolution: args.resolution,
         vox_scale: args.vox_scale,
@@ -115,6 +125,7 @@ pub fn build_scene(args: &BuildArgs, quiet: bool) -> Result<(Svdag, BuildReport)
         voxels.colors = Vec::new();
     }
     let voxelize_time = start.elapsed();
+    let digest = VoxelDigest::of_codes(&voxels.codes);
     let start = Instant::now();
     let dag = Svdag::from_voxels(&voxels)?;
     let build_time = start.elapsed();
@@ -129,7 +140,58 @@ pub fn build_scene(args: &BuildArgs, quiet: bool) -> Result<(Svdag, BuildReport)
         peak_rss_bytes: peak_rss_bytes(),
         stats,
     };
-    Ok((dag, report))
+    Ok((dag, report, digest))
+}
+
+/// The transform set of a `--transforms` value (translations are reported separately).
+fn transform_set(t: TransformsArg) -> TransformSet {
+    match t {
+        TransformsArg::None => TransformSet::None,
+        TransformsArg::S => TransformSet::Mirrors,
+        TransformsArg::A => TransformSet::AxisPermutations,
+        TransformsArg::Sa | TransformsArg::Sat => TransformSet::All,
+    }
+}
+
+/// Encodes a DAG as `voxdag build` asks.
+pub fn encode_dag(
+    dag: &Svdag,
+    encoding: EncodingArg,
+    transforms: TransformsArg,
+    options: TsvdagOptions,
+) -> Result<EncodedDag> {
+    Ok(match encoding {
+        EncodingArg::Svdag32 => EncodedDag::Svdag32(dag.clone()),
+        EncodingArg::Ssvdag => EncodedDag::Ssvdag(SsvdagEncoding::build(dag)?),
+        EncodingArg::Tsvdag => {
+            if transforms == TransformsArg::Sat {
+                bail!(
+                    "--transforms sat needs the translation search (engine/dag/translate.rs), \
+                     not merged into this build yet; use --transforms sa"
+                );
+            }
+            EncodedDag::Tsvdag(TsvdagEncoding::build(
+                dag,
+                transform_set(transforms),
+                options,
+            )?)
+        }
+    })
+}
+
+/// Loads a `.vdag` file of any encoding as an SVDAG, decoding compact encodings on the CPU.
+pub fn load_svdag(path: &Path) -> Result<Svdag> {
+    let file = VdagFile::load(path)?;
+    let kind = file.encoded.kind();
+    if kind != voxdag::dag::encode::EncodingKind::Svdag32 {
+        log::info!(
+            "{}: decoding the {} encoding to svdag32 on the CPU (GPU traversal of compact \
+             encodings comes with the path tracer)",
+            path.display(),
+            kind.name()
+        );
+    }
+    Ok(file.into_svdag(path)?)
 }
 
 /// `voxdag build`.
@@ -138,17 +200,33 @@ pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
     if let Some(report) = &args.report {
         check_output_dir(report)?;
     }
-    let (dag, report) = build_scene(args, quiet)?;
-    dag.save(&args.output)?;
+    let (dag, report, digest) = build_scene_digest(args, quiet)?;
+    let options = TsvdagOptions {
+        lut: !args.no_lut,
+        huffman: !args.no_huffman,
+    };
+    let start = Instant::now();
+    let encoded = encode_dag(&dag, args.encoding, args.transforms, options)?;
+    let encode_time = start.elapsed();
+    let bytes = encoded.byte_size();
+    let colors = dag.colors.clone();
+    let file = VdagFile {
+        encoded,
+        colors,
+        digest: Some(digest),
+    };
+    file.save(&args.output)?;
     println!(
-        "{}: {}^3, {} voxels, {} SVDAG nodes, {} bytes (voxelize {:.2} s, build {:.2} s, peak {:.0} MiB)",
+        "{}: {}^3, {} voxels, {} SVDAG nodes, {} {} bytes (voxelize {:.2} s, build {:.2} s, encode {}, peak {:.0} MiB)",
         args.output.display(),
         report.resolution,
         report.voxels,
         report.stats.levels.iter().map(|l| l.svdag).sum::<u64>(),
-        report.stats.bytes.svdag32,
+        bytes,
+        file.encoded.kind().name(),
         report.voxelize_s,
         report.build_s,
+        seconds(encode_time),
         report.peak_rss_bytes as f64 / (1024.0 * 1024.0)
     );
     if let Some(path) = &args.report {
@@ -159,13 +237,116 @@ pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
 
 /// `voxdag stats`.
 pub fn stats(args: &StatsArgs) -> Result<()> {
-    let dag = Svdag::load(&args.file)?;
+    let dag = load_svdag(&args.file)?;
     let stats = dag.stats_with_symmetry();
+    let bytes = encoded_bytes(&dag)?;
     if args.json {
-        println!("{}", serde_json::to_string(&stats)?);
+        let mut value = serde_json::to_value(&stats)?;
+        if let Some(b) = value.get_mut("bytes").and_then(|b| b.as_object_mut()) {
+            for (name, v) in &bytes {
+                b.insert(name.clone(), serde_json::Value::from(*v));
+            }
+        }
+        println!("{}", serde_json::to_string(&value)?);
     } else {
         print!("{}", stats_table(&args.file, &stats));
+        let line: Vec<String> = bytes.iter().map(|(n, v)| format!("{n} {v}")).collect();
+        println!("  encoded     {}", line.join("  "));
     }
+    Ok(())
+}
+
+/// Bytes of the DAG in each encoding: `ssvdag`, `tsvdag` (S+A+T, tables, Huffman) and the
+/// ablations `tsvdag_base` (neither) and `tsvdag_lut` (tables only).
+pub fn encoded_bytes(dag: &Svdag) -> Result<Vec<(String, u64)>> {
+    let tdag = voxdag::dag::build_transform_dag(dag, TransformSet::All, true);
+    let graph = voxdag::dag::encode::TransformGraph::from_transform_dag(&tdag);
+    drop(tdag);
+    let mut out = vec![(
+        "ssvdag".to_string(),
+        SsvdagEncoding::build(dag)?.byte_size(),
+    )];
+    for (name, lut, huffman) in [
+        ("tsvdag", true, true),
+        ("tsvdag_base", false, false),
+        ("tsvdag_lut", true, false),
+    ] {
+        let e = TsvdagEncoding::encode(&graph, TsvdagOptions { lut, huffman })?;
+        out.push((name.to_string(), e.byte_size()));
+    }
+    Ok(out)
+}
+
+/// `voxdag verify`: traverses the stored encoding and compares it with the build-time digest
+/// (and, with `--against`, voxel by voxel with another file).
+pub fn verify(args: &VerifyArgs) -> Result<()> {
+    let file = VdagFile::load(&args.file)?;
+    let kind = file.encoded.kind().name();
+    if let EncodedDag::Svdag32(dag) = &file.encoded {
+        dag.validate()?;
+    }
+    let digest = file
+        .encoded
+        .digest()
+        .with_context(|| format!("{}: traversing the {kind} encoding", args.file.display()))?;
+    if !file.colors.is_empty() && file.colors.len() as u64 != digest.voxels {
+        bail!(
+            "{}: {} colours for {} decoded voxels",
+            args.file.display(),
+            file.colors.len(),
+            digest.voxels
+        );
+    }
+    match file.digest {
+        Some(stored) if stored != digest => bail!(
+            "{}: decoded {} voxels with checksum {:#010x}, built from {} voxels with checksum {:#010x}",
+            args.file.display(),
+            digest.voxels,
+            digest.crc32,
+            stored.voxels,
+            stored.crc32
+        ),
+        Some(_) => {}
+        None if args.against.is_none() => println!(
+            "{}: no build-time digest stored (v1 file): structure and decoding checked only",
+            args.file.display()
+        ),
+        None => {}
+    }
+    if let Some(other) = &args.against {
+        let reference = VdagFile::load(other)?;
+        let mut a = file.encoded.voxels();
+        let mut b = reference.encoded.voxels();
+        loop {
+            match (a.next().transpose()?, b.next().transpose()?) {
+                (None, None) => break,
+                (x, y) if x == y => continue,
+                (x, y) => {
+                    let code = match (x, y) {
+                        (Some(x), Some(y)) => x.min(y),
+                        (Some(x), None) => x,
+                        (None, Some(y)) => y,
+                        (None, None) => unreachable!(),
+                    };
+                    let [vx, vy, vz] = voxdag::scene::morton::decode(code);
+                    let here = file.encoded.contains(vx, vy, vz)?;
+                    bail!(
+                        "first differing voxel ({vx}, {vy}, {vz}): {} in {}, {} in {}",
+                        if here { "set" } else { "empty" },
+                        args.file.display(),
+                        if here { "empty" } else { "set" },
+                        other.display()
+                    );
+                }
+            }
+        }
+    }
+    println!(
+        "ok: {} ({kind}, {} voxels, checksum {:#010x})",
+        args.file.display(),
+        digest.voxels,
+        digest.crc32
+    );
     Ok(())
 }
 
@@ -210,7 +391,7 @@ pub fn stats_table(file: &Path, stats: &DagStats) -> String {
 
 /// `voxdag export-voxels`.
 pub fn export_voxels(args: &ExportArgs) -> Result<()> {
-    let dag = Svdag::load(&args.file)?;
+    let dag = load_svdag(&args.file)?;
     check_output_dir(&args.output)?;
     match args.format {
         ExportFormat::XyzU32 => export_xyz_u32_file(&dag, &args.output)?,
@@ -252,7 +433,7 @@ pub fn render(args: &RenderArgs) -> Result<()> {
     if let Some(trace) = &args.trace {
         check_output_dir(trace)?;
     }
-    let dag = Svdag::load(&args.file)?;
+    let dag = load_svdag(&args.file)?;
     let settings = render_settings(args, &dag);
     let start = Instant::now();
     let image = if args.cpu {
@@ -320,6 +501,10 @@ pub fn demo(args: &DemoArgs, quiet: bool) -> Result<()> {
         no_colors: false,
         output: vdag.clone(),
         report: Some(args.out_dir.join("avocado-build.json")),
+        encoding: EncodingArg::Svdag32,
+        transforms: TransformsArg::Sa,
+        no_lut: false,
+        no_huffman: false,
     };
     build(&build_args, quiet)?;
     let render_args = RenderArgs {

@@ -24,6 +24,8 @@ enum Command {
     Build(BuildArgs),
     /// Print resolution, voxel count, bytes per encoding and per-level node counts of a .vdag file.
     Stats(StatsArgs),
+    /// Traverse the stored encoding of a .vdag file and check it holds exactly the original voxels.
+    Verify(VerifyArgs),
     /// Export the occupied voxels of a .vdag file for other tools.
     ExportVoxels(ExportArgs),
     /// Render a .vdag file to a PNG on the GPU (or the CPU reference renderer).
@@ -58,6 +60,54 @@ pub struct BuildArgs {
     /// Also write a JSON report of the build (times, peak memory, counts) to this file.
     #[arg(long)]
     report: Option<PathBuf>,
+    /// Node encoding stored in the file.
+    #[arg(long, value_enum, default_value = "svdag32")]
+    encoding: EncodingArg,
+    /// Transforms the tsvdag encoding may use (sat: S+A plus translations).
+    #[arg(long, value_enum, default_value = "sa")]
+    transforms: TransformsArg,
+    /// tsvdag: no pointer look-up tables.
+    #[arg(long)]
+    no_lut: bool,
+    /// tsvdag: no Huffman coding of transform ids.
+    #[arg(long)]
+    no_huffman: bool,
+}
+
+/// Node encodings of `voxdag build --encoding`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum EncodingArg {
+    /// 32-bit SVDAG words.
+    Svdag32,
+    /// SSVDAG (Villanueva et al. 2016), 16/32-bit pointers.
+    Ssvdag,
+    /// Transform-aware SVDAG (dissertation §3.4).
+    Tsvdag,
+}
+
+/// Transform sets of `voxdag build --transforms`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum TransformsArg {
+    /// No transforms (plain SVDAG in the compact encoding).
+    None,
+    /// The 8 mirrors.
+    S,
+    /// The 6 axis permutations.
+    A,
+    /// All 48.
+    Sa,
+    /// All 48 plus translations.
+    Sat,
+}
+
+/// Arguments of `voxdag verify`.
+#[derive(Args)]
+pub struct VerifyArgs {
+    /// The .vdag file.
+    file: PathBuf,
+    /// Also compare voxel by voxel with another .vdag file (reports the first differing voxel).
+    #[arg(long)]
+    against: Option<PathBuf>,
 }
 
 /// Arguments of `voxdag stats`.
@@ -145,6 +195,7 @@ fn main() {
     let result = match cli.command {
         Command::Build(args) => commands::build(&args, cli.quiet),
         Command::Stats(args) => commands::stats(&args),
+        Command::Verify(args) => commands::verify(&args),
         Command::ExportVoxels(args) => commands::export_voxels(&args),
         Command::Render(args) => commands::render(&args),
         Command::Bench(cmd) => bench::run(cmd, cli.quiet),

@@ -371,15 +371,29 @@ pub struct SymmetryLevelCounts {
     pub a: u64,
     /// Unique nodes up to all 48 transforms.
     pub sa: u64,
+    /// Stored nodes of the S+A+T transform DAG (all 48 transforms plus destructive translations
+    /// of 4^3, 8^3 and 16^3 subtrees; see `docs/translations.md`); `sat <= sa`.
+    pub sat: u64,
 }
 
-/// Per-level unique counts for SVDAG, SSVDAG (3-bit), S, A and S+A, level 0 first.
+/// Per-level unique counts for SVDAG, SSVDAG (3-bit), S, A, S+A and S+A+T, level 0 first.
 pub fn symmetry_counts(dag: &Svdag) -> Vec<SymmetryLevelCounts> {
+    symmetry_counts_with_progress(dag, &indicatif::ProgressBar::hidden())
+}
+
+/// [`symmetry_counts`] reporting the translation search on `progress`.
+pub fn symmetry_counts_with_progress(
+    dag: &Svdag,
+    progress: &indicatif::ProgressBar,
+) -> Vec<SymmetryLevelCounts> {
     let svdag: Vec<u64> = dag.level_stats().iter().map(|l| l.svdag).collect();
     let ssvdag = super::Ssvdag::build(dag, super::Invariance::Axes3).level_counts();
     let s = CanonicalDag::build(dag, TransformSet::Mirrors).level_counts();
     let a = CanonicalDag::build(dag, TransformSet::AxisPermutations).level_counts();
-    let sa = CanonicalDag::build(dag, TransformSet::All).level_counts();
+    let sa_dag = CanonicalDag::build(dag, TransformSet::All);
+    let sa = sa_dag.level_counts();
+    let sat = super::TransformDag::from_canonical(&sa_dag, true, progress).level_counts();
+    drop(sa_dag);
     (0..svdag.len())
         .map(|l| SymmetryLevelCounts {
             level: l as u32,
@@ -388,6 +402,7 @@ pub fn symmetry_counts(dag: &Svdag) -> Vec<SymmetryLevelCounts> {
             s: s[l],
             a: a[l],
             sa: sa[l],
+            sat: sat[l],
         })
         .collect()
 }

@@ -9,6 +9,9 @@ use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::path::Path;
 
+use super::encode::{
+    EncodeError, EncodedDag, EncodingKind, SsvdagEncoding, TsvdagEncoding, VoxelDigest,
+};
 use super::validate::Place;
 use super::{DagError, Svdag, MAX_RESOLUTION};
 
@@ -28,6 +31,10 @@ const SECTION_LEVELS: u32 = 1;
 const SECTION_WORDS: u32 = 2;
 /// Section id: `color_count` attribute values in the colour format.
 const SECTION_COLORS: u32 = 3;
+/// Section id: voxel digest (u64 voxel count, u32 CRC-32 of the Morton codes, u32 zero).
+const SECTION_DIGEST: u32 = 4;
+/// Section id: the encoded node payload of an ssvdag/tsvdag file.
+const SECTION_PAYLOAD: u32 = 5;
 
 /// Node encoding of the words section.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -35,6 +42,37 @@ const SECTION_COLORS: u32 = 3;
 pub enum Encoding {
     /// `Svdag::words` unchanged (32-bit masks and pointers).
     Svdag32 = 0,
+    /// SSVDAG with 16/32-bit pointers (payload layout in `docs/encodings.md`).
+    Ssvdag = 1,
+    /// TSVDAG (payload layout in `docs/encodings.md`).
+    Tsvdag = 2,
+}
+
+impl Encoding {
+    /// The CLI name.
+    pub fn name(self) -> &'static str {
+        EncodingKind::from(self).name()
+    }
+}
+
+impl From<EncodingKind> for Encoding {
+    fn from(k: EncodingKind) -> Encoding {
+        match k {
+            EncodingKind::Svdag32 => Encoding::Svdag32,
+            EncodingKind::Ssvdag => Encoding::Ssvdag,
+            EncodingKind::Tsvdag => Encoding::Tsvdag,
+        }
+    }
+}
+
+impl From<Encoding> for EncodingKind {
+    fn from(e: Encoding) -> EncodingKind {
+        match e {
+            Encoding::Svdag32 => EncodingKind::Svdag32,
+            Encoding::Ssvdag => EncodingKind::Ssvdag,
+            Encoding::Tsvdag => EncodingKind::Tsvdag,
+        }
+    }
 }
 
 /// Encoding of the per-voxel colour section.
@@ -86,27 +124,98 @@ fn align8(x: u64) -> u64 {
     x.div_ceil(8) * 8
 }
 
-/// Byte offsets and lengths of the three v1 sections plus the file size.
-struct Layout {
-    levels: (u64, u64),
-    words: (u64, u64),
-    colors: (u64, u64),
-    file_size: u64,
+/// The contents of one section, borrowed for writing.
+enum Data<'a> {
+    U32(&'a [u32]),
+    U64(&'a [u64]),
+    Bytes(&'a [u8]),
 }
 
-impl Layout {
-    fn of(dag: &Svdag) -> Layout {
-        let table_end = HEADER_LEN + 3 * ENTRY_LEN;
-        let levels = (align8(table_end), dag.level_starts.len() as u64 * 8);
-        let words = (align8(levels.0 + levels.1), dag.words.len() as u64 * 4);
-        let colors = (align8(words.0 + words.1), dag.colors.len() as u64 * 4);
-        Layout {
-            levels,
-            words,
-            colors,
-            file_size: colors.0 + colors.1 + 4,
+impl Data<'_> {
+    fn len(&self) -> u64 {
+        match self {
+            Data::U32(v) => v.len() as u64 * 4,
+            Data::U64(v) => v.len() as u64 * 8,
+            Data::Bytes(v) => v.len() as u64,
         }
     }
+}
+
+/// Header fields that vary between files.
+struct HeaderFields {
+    encoding: u32,
+    resolution: u32,
+    color_format: ColorFormat,
+    /// Words (svdag32) or payload bytes (other encodings).
+    count: u64,
+    color_count: u64,
+}
+
+/// Byte offset of each section (in table order) and the file size.
+fn layout(sections: &[(u32, Data)]) -> (Vec<u64>, u64) {
+    let mut at = align8(HEADER_LEN + sections.len() as u64 * ENTRY_LEN);
+    let mut offsets = Vec::with_capacity(sections.len());
+    for (i, (_, data)) in sections.iter().enumerate() {
+        if i > 0 {
+            at = align8(at);
+        }
+        offsets.push(at);
+        at += data.len();
+    }
+    (offsets, at + 4)
+}
+
+/// Writes header, table, sections (each at the next multiple of 8) and the CRC.
+fn write_file(w: &mut impl Write, h: &HeaderFields, sections: &[(u32, Data)]) -> io::Result<()> {
+    let (offsets, file_size) = layout(sections);
+    let mut out = CrcWriter {
+        inner: w,
+        crc: crc32fast::Hasher::new(),
+        written: 0,
+    };
+    let level_count = h.resolution.trailing_zeros() - 1;
+    let mut header = Vec::with_capacity((HEADER_LEN + sections.len() as u64 * ENTRY_LEN) as usize);
+    header.extend_from_slice(&MAGIC);
+    header.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+    header.extend_from_slice(&h.encoding.to_le_bytes());
+    header.extend_from_slice(&h.resolution.to_le_bytes());
+    header.extend_from_slice(&level_count.to_le_bytes());
+    header.extend_from_slice(&(h.color_format as u32).to_le_bytes());
+    header.extend_from_slice(&(sections.len() as u32).to_le_bytes());
+    header.extend_from_slice(&file_size.to_le_bytes());
+    header.extend_from_slice(&h.count.to_le_bytes());
+    header.extend_from_slice(&h.color_count.to_le_bytes());
+    header.extend_from_slice(&0u64.to_le_bytes());
+    for ((id, data), offset) in sections.iter().zip(&offsets) {
+        header.extend_from_slice(&id.to_le_bytes());
+        header.extend_from_slice(&0u32.to_le_bytes());
+        header.extend_from_slice(&offset.to_le_bytes());
+        header.extend_from_slice(&data.len().to_le_bytes());
+    }
+    out.put(&header)?;
+    for ((_, data), &offset) in sections.iter().zip(&offsets) {
+        out.pad_to(offset)?;
+        match data {
+            Data::U32(v) => out.put_u32s(v)?,
+            Data::U64(v) => {
+                for chunk in v.chunks(4096) {
+                    let bytes: Vec<u8> = chunk.iter().flat_map(|x| x.to_le_bytes()).collect();
+                    out.put(&bytes)?;
+                }
+            }
+            Data::Bytes(v) => out.put(v)?,
+        }
+    }
+    let crc = out.crc.clone().finalize();
+    out.inner.write_all(&crc.to_le_bytes())?;
+    Ok(())
+}
+
+fn digest_bytes(d: &VoxelDigest) -> [u8; 16] {
+    let mut b = [0u8; 16];
+    b[..8].copy_from_slice(&d.voxels.to_le_bytes());
+    b[8..12].copy_from_slice(&d.crc32.to_le_bytes());
+    b
 }
 
 /// [`crate::atomic_file::write_atomic`] with the error mapped to [`DagError::Io`].
@@ -132,62 +241,232 @@ fn u64_at(b: &[u8], at: u64) -> u64 {
     u64::from_le_bytes(b[at..at + 8].try_into().expect("8 bytes"))
 }
 
-impl Svdag {
-    /// Serialises the DAG in `.vdag` v1 format to a writer.
-    pub fn write_to(&self, w: &mut impl Write) -> io::Result<()> {
-        let layout = Layout::of(self);
-        let mut out = CrcWriter {
-            inner: w,
-            crc: crc32fast::Hasher::new(),
-            written: 0,
+/// A checked header and section table.
+struct Parsed {
+    encoding: Encoding,
+    resolution: u32,
+    level_count: u32,
+    color_format: ColorFormat,
+    color_count: u64,
+    /// `(offset, length)` of sections 1..=5.
+    sections: [Option<(u64, u64)>; 5],
+}
+
+/// Checks everything up to and including the section table (reading rules 1-3 of
+/// `docs/vdag-format.md`).
+fn parse_header(bytes: &[u8], name: &Path) -> Result<Parsed, DagError> {
+    let err = |offset: u64, reason: String| DagError::Format {
+        path: name.to_path_buf(),
+        offset,
+        reason,
+    };
+    let len = bytes.len() as u64;
+    let min = HEADER_LEN + 3 * ENTRY_LEN + 4;
+    if len < min {
+        return Err(err(
+            len,
+            format!("file is {len} bytes, shorter than the {min}-byte minimum"),
+        ));
+    }
+    if bytes[..8] != MAGIC {
+        return Err(err(0, "not a .vdag file (bad magic)".into()));
+    }
+    let version = u32_at(bytes, 8);
+    if version != FORMAT_VERSION {
+        return Err(err(8, format!("unsupported format version {version}")));
+    }
+    let file_size = u64_at(bytes, 32);
+    if file_size != len {
+        return Err(err(
+            32,
+            format!("header says {file_size} bytes, file has {len} (truncated?)"),
+        ));
+    }
+    let stored_crc = u32_at(bytes, len - 4);
+    let crc = crc32fast::hash(&bytes[..(len - 4) as usize]);
+    if crc != stored_crc {
+        return Err(err(
+            len - 4,
+            format!("checksum mismatch: stored {stored_crc:#010x}, computed {crc:#010x}"),
+        ));
+    }
+    let encoding = match u32_at(bytes, 12) {
+        0 => Encoding::Svdag32,
+        1 => Encoding::Ssvdag,
+        2 => Encoding::Tsvdag,
+        other => return Err(err(12, format!("unknown encoding id {other}"))),
+    };
+    let resolution = u32_at(bytes, 16);
+    if !resolution.is_power_of_two() || !(8..=MAX_RESOLUTION).contains(&resolution) {
+        return Err(err(
+            16,
+            format!("resolution {resolution} is not a power of two in 8..=2^21"),
+        ));
+    }
+    let level_count = u32_at(bytes, 20);
+    if level_count != resolution.trailing_zeros() - 1 {
+        return Err(err(
+            20,
+            format!("{level_count} levels for resolution {resolution}"),
+        ));
+    }
+    let color_format = match u32_at(bytes, 24) {
+        0 => ColorFormat::None,
+        1 => ColorFormat::Rgba8,
+        other => return Err(err(24, format!("unknown colour format id {other}"))),
+    };
+    let section_count = u32_at(bytes, 28);
+    if !(3..=MAX_SECTIONS).contains(&section_count) {
+        return Err(err(
+            28,
+            format!("section count {section_count} not in 3..={MAX_SECTIONS}"),
+        ));
+    }
+    let table_end = HEADER_LEN + section_count as u64 * ENTRY_LEN;
+    if table_end > len - 4 {
+        return Err(err(
+            28,
+            format!("section table of {section_count} entries runs past the end of the file"),
+        ));
+    }
+    let count = u64_at(bytes, 40);
+    if encoding == Encoding::Svdag32 {
+        if count == 0 || count > u32::MAX as u64 {
+            return Err(err(40, format!("word count {count} not in 1..=2^32-1")));
+        }
+    } else if count == 0 || count > len {
+        return Err(err(
+            40,
+            format!("payload size {count} not in 1..={len} (the file length)"),
+        ));
+    }
+    let color_count = u64_at(bytes, 48);
+    if color_format == ColorFormat::None && color_count != 0 {
+        return Err(err(
+            48,
+            format!("{color_count} colours with colour format 'none'"),
+        ));
+    }
+    if u64_at(bytes, 56) != 0 {
+        return Err(err(56, "reserved header field is not zero".into()));
+    }
+
+    // Section table: known ids at most once, inside the file, expected lengths, no overlap.
+    let mut sections: [Option<(u64, u64)>; 5] = [None; 5];
+    let mut ranges: Vec<(u64, u64, u64)> = Vec::new(); // (start, end, table entry offset)
+    for i in 0..section_count as u64 {
+        let at = HEADER_LEN + i * ENTRY_LEN;
+        let (id, reserved) = (u32_at(bytes, at), u32_at(bytes, at + 4));
+        let (offset, length) = (u64_at(bytes, at + 8), u64_at(bytes, at + 16));
+        if reserved != 0 {
+            return Err(err(at + 4, "reserved section field is not zero".into()));
+        }
+        let end = offset.checked_add(length).filter(|&e| e <= len - 4);
+        let Some(end) = end.filter(|_| offset >= table_end && offset % 8 == 0) else {
+            return Err(err(
+                at + 8,
+                format!("section {id} at {offset} (+{length} bytes) is outside the data area"),
+            ));
         };
+        let svdag32 = encoding == Encoding::Svdag32;
+        let expected = match id {
+            SECTION_LEVELS if svdag32 => Some(level_count as u64 * 8),
+            SECTION_WORDS if svdag32 => Some(count * 4),
+            SECTION_COLORS => color_count.checked_mul(4),
+            SECTION_DIGEST => Some(16),
+            SECTION_PAYLOAD if !svdag32 => Some(count),
+            SECTION_LEVELS | SECTION_WORDS | SECTION_PAYLOAD => {
+                return Err(err(
+                    at,
+                    format!("section {id} does not belong in a {} file", encoding.name()),
+                ))
+            }
+            _ => Some(length), // unknown sections are skipped
+        };
+        if expected != Some(length) {
+            return Err(err(
+                at + 16,
+                format!("section {id} is {length} bytes, expected {expected:?}"),
+            ));
+        }
+        if (1..=5).contains(&id) {
+            let slot = &mut sections[id as usize - 1];
+            if slot.is_some() {
+                return Err(err(at, format!("section {id} listed twice")));
+            }
+            *slot = Some((offset, length));
+        }
+        ranges.push((offset, end, at));
+    }
+    ranges.sort_unstable();
+    for pair in ranges.windows(2) {
+        if pair[1].0 < pair[0].1 {
+            return Err(err(pair[1].2 + 8, "sections overlap".into()));
+        }
+    }
+    let required: &[u32] = if encoding == Encoding::Svdag32 {
+        &[SECTION_LEVELS, SECTION_WORDS, SECTION_COLORS]
+    } else {
+        &[SECTION_COLORS, SECTION_DIGEST, SECTION_PAYLOAD]
+    };
+    for &id in required {
+        if sections[id as usize - 1].is_none() {
+            return Err(err(28, format!("section {id} missing")));
+        }
+    }
+    Ok(Parsed {
+        encoding,
+        resolution,
+        level_count,
+        color_format,
+        color_count,
+        sections,
+    })
+}
+
+/// Decodes a u32 array of a checked section.
+fn u32s(bytes: &[u8], (at, n): (u64, u64)) -> Vec<u32> {
+    bytes[at as usize..(at + n) as usize]
+        .chunks_exact(4)
+        .map(|c| u32::from_le_bytes(c.try_into().expect("4 bytes")))
+        .collect()
+}
+
+impl Svdag {
+    /// Serialises the DAG in `.vdag` v1 format (encoding `svdag32`) to a writer.
+    pub fn write_to(&self, w: &mut impl Write) -> io::Result<()> {
+        self.write_with(w, None)
+    }
+
+    /// `write_to`, with an optional digest section.
+    fn write_with(&self, w: &mut impl Write, digest: Option<&VoxelDigest>) -> io::Result<()> {
         let color_format = if self.colors.is_empty() {
             ColorFormat::None
         } else {
             ColorFormat::Rgba8
         };
-        let mut header = Vec::with_capacity((HEADER_LEN + 3 * ENTRY_LEN) as usize);
-        header.extend_from_slice(&MAGIC);
-        header.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
-        header.extend_from_slice(&(Encoding::Svdag32 as u32).to_le_bytes());
-        header.extend_from_slice(&self.resolution.to_le_bytes());
-        header.extend_from_slice(&(self.level_starts.len() as u32).to_le_bytes());
-        header.extend_from_slice(&(color_format as u32).to_le_bytes());
-        header.extend_from_slice(&3u32.to_le_bytes());
-        header.extend_from_slice(&layout.file_size.to_le_bytes());
-        header.extend_from_slice(&(self.words.len() as u64).to_le_bytes());
-        header.extend_from_slice(&(self.colors.len() as u64).to_le_bytes());
-        header.extend_from_slice(&0u64.to_le_bytes());
-        for (id, (offset, len)) in [
-            (SECTION_LEVELS, layout.levels),
-            (SECTION_WORDS, layout.words),
-            (SECTION_COLORS, layout.colors),
-        ] {
-            header.extend_from_slice(&id.to_le_bytes());
-            header.extend_from_slice(&0u32.to_le_bytes());
-            header.extend_from_slice(&offset.to_le_bytes());
-            header.extend_from_slice(&len.to_le_bytes());
+        let h = HeaderFields {
+            encoding: Encoding::Svdag32 as u32,
+            resolution: self.resolution,
+            color_format,
+            count: self.words.len() as u64,
+            color_count: self.colors.len() as u64,
+        };
+        let digest = digest.map(digest_bytes);
+        let mut sections = vec![
+            (SECTION_LEVELS, Data::U64(&self.level_starts)),
+            (SECTION_WORDS, Data::U32(&self.words)),
+            (SECTION_COLORS, Data::U32(&self.colors)),
+        ];
+        if let Some(d) = &digest {
+            sections.push((SECTION_DIGEST, Data::Bytes(d)));
         }
-        out.put(&header)?;
-        out.pad_to(layout.levels.0)?;
-        let levels: Vec<u8> = self
-            .level_starts
-            .iter()
-            .flat_map(|s| s.to_le_bytes())
-            .collect();
-        out.put(&levels)?;
-        out.pad_to(layout.words.0)?;
-        out.put_u32s(&self.words)?;
-        out.pad_to(layout.colors.0)?;
-        out.put_u32s(&self.colors)?;
-        let crc = out.crc.clone().finalize();
-        out.inner.write_all(&crc.to_le_bytes())?;
-        Ok(())
+        write_file(w, &h, &sections)
     }
 
     /// The `.vdag` v1 bytes of this DAG.
     pub fn to_bytes(&self) -> Vec<u8> {
-        let mut bytes = Vec::with_capacity(Layout::of(self).file_size as usize);
+        let mut bytes = Vec::new();
         self.write_to(&mut bytes)
             .expect("writing to a Vec cannot fail");
         bytes
@@ -198,7 +477,8 @@ impl Svdag {
         write_atomic(path, |w| self.write_to(w))
     }
 
-    /// Loads and validates a `.vdag` file.
+    /// Loads and validates a `.vdag` file whose encoding is `svdag32` (see [`VdagFile::load`]
+    /// for the other encodings).
     pub fn load(path: &Path) -> Result<Svdag, DagError> {
         let bytes = std::fs::read(path).map_err(|source| DagError::Io {
             path: path.to_path_buf(),
@@ -207,169 +487,36 @@ impl Svdag {
         Self::from_bytes(&bytes, path)
     }
 
-    /// Parses and validates `.vdag` bytes; `name` is used in error messages.
+    /// Parses and validates `.vdag` bytes of encoding `svdag32`; `name` is used in error messages.
     pub fn from_bytes(bytes: &[u8], name: impl AsRef<Path>) -> Result<Svdag, DagError> {
-        let err = |offset: u64, reason: String| DagError::Format {
-            path: name.as_ref().to_path_buf(),
-            offset,
-            reason,
-        };
-        let len = bytes.len() as u64;
-        let min = HEADER_LEN + 3 * ENTRY_LEN + 4;
-        if len < min {
-            return Err(err(
-                len,
-                format!("file is {len} bytes, shorter than the {min}-byte minimum"),
-            ));
+        let parsed = parse_header(bytes, name.as_ref())?;
+        if parsed.encoding != Encoding::Svdag32 {
+            return Err(DagError::Format {
+                path: name.as_ref().to_path_buf(),
+                offset: 12,
+                reason: format!(
+                    "encoding {} is not svdag32: load it with VdagFile (and decode)",
+                    parsed.encoding.name()
+                ),
+            });
         }
-        if bytes[..8] != MAGIC {
-            return Err(err(0, "not a .vdag file (bad magic)".into()));
-        }
-        let version = u32_at(bytes, 8);
-        if version != FORMAT_VERSION {
-            return Err(err(8, format!("unsupported format version {version}")));
-        }
-        let file_size = u64_at(bytes, 32);
-        if file_size != len {
-            return Err(err(
-                32,
-                format!("header says {file_size} bytes, file has {len} (truncated?)"),
-            ));
-        }
-        let stored_crc = u32_at(bytes, len - 4);
-        let crc = crc32fast::hash(&bytes[..(len - 4) as usize]);
-        if crc != stored_crc {
-            return Err(err(
-                len - 4,
-                format!("checksum mismatch: stored {stored_crc:#010x}, computed {crc:#010x}"),
-            ));
-        }
-        let encoding = u32_at(bytes, 12);
-        if encoding != Encoding::Svdag32 as u32 {
-            return Err(err(12, format!("unknown encoding id {encoding}")));
-        }
-        let resolution = u32_at(bytes, 16);
-        if !resolution.is_power_of_two() || !(8..=MAX_RESOLUTION).contains(&resolution) {
-            return Err(err(
-                16,
-                format!("resolution {resolution} is not a power of two in 8..=2^21"),
-            ));
-        }
-        let level_count = u32_at(bytes, 20);
-        if level_count != resolution.trailing_zeros() - 1 {
-            return Err(err(
-                20,
-                format!("{level_count} levels for resolution {resolution}"),
-            ));
-        }
-        let color_format = u32_at(bytes, 24);
-        if color_format > ColorFormat::Rgba8 as u32 {
-            return Err(err(24, format!("unknown colour format id {color_format}")));
-        }
-        let section_count = u32_at(bytes, 28);
-        if !(3..=MAX_SECTIONS).contains(&section_count) {
-            return Err(err(
-                28,
-                format!("section count {section_count} not in 3..={MAX_SECTIONS}"),
-            ));
-        }
-        let table_end = HEADER_LEN + section_count as u64 * ENTRY_LEN;
-        if table_end > len - 4 {
-            return Err(err(
-                28,
-                format!("section table of {section_count} entries runs past the end of the file"),
-            ));
-        }
-        let word_count = u64_at(bytes, 40);
-        if word_count == 0 || word_count > u32::MAX as u64 {
-            return Err(err(
-                40,
-                format!("word count {word_count} not in 1..=2^32-1"),
-            ));
-        }
-        let color_count = u64_at(bytes, 48);
-        if color_format == ColorFormat::None as u32 && color_count != 0 {
-            return Err(err(
-                48,
-                format!("{color_count} colours with colour format 'none'"),
-            ));
-        }
-        if u64_at(bytes, 56) != 0 {
-            return Err(err(56, "reserved header field is not zero".into()));
-        }
+        Self::from_parsed(bytes, name.as_ref(), &parsed)
+    }
 
-        // Section table: known ids exactly once, inside the file, expected lengths, no overlap.
-        let mut sections: [Option<(u64, u64)>; 3] = [None; 3];
-        let mut ranges: Vec<(u64, u64, u64)> = Vec::new(); // (start, end, table entry offset)
-        for i in 0..section_count as u64 {
-            let at = HEADER_LEN + i * ENTRY_LEN;
-            let (id, reserved) = (u32_at(bytes, at), u32_at(bytes, at + 4));
-            let (offset, length) = (u64_at(bytes, at + 8), u64_at(bytes, at + 16));
-            if reserved != 0 {
-                return Err(err(at + 4, "reserved section field is not zero".into()));
-            }
-            let end = offset.checked_add(length).filter(|&e| e <= len - 4);
-            let Some(end) = end.filter(|_| offset >= table_end && offset % 8 == 0) else {
-                return Err(err(
-                    at + 8,
-                    format!("section {id} at {offset} (+{length} bytes) is outside the data area"),
-                ));
-            };
-            let expected = match id {
-                SECTION_LEVELS => Some(level_count as u64 * 8),
-                SECTION_WORDS => Some(word_count * 4),
-                SECTION_COLORS => color_count.checked_mul(4),
-                _ => Some(length), // unknown sections are skipped
-            };
-            if expected != Some(length) {
-                return Err(err(
-                    at + 16,
-                    format!("section {id} is {length} bytes, expected {expected:?}"),
-                ));
-            }
-            if (1..=3).contains(&id) {
-                let slot = &mut sections[id as usize - 1];
-                if slot.is_some() {
-                    return Err(err(at, format!("section {id} listed twice")));
-                }
-                *slot = Some((offset, length));
-            }
-            ranges.push((offset, end, at));
-        }
-        ranges.sort_unstable();
-        for pair in ranges.windows(2) {
-            if pair[1].0 < pair[0].1 {
-                return Err(err(pair[1].2 + 8, "sections overlap".into()));
-            }
-        }
-        let mut get = |id: u32| {
-            sections[id as usize - 1]
-                .take()
-                .ok_or_else(|| err(28, format!("section {id} missing")))
-        };
-        let (levels_at, levels_len) = get(SECTION_LEVELS)?;
-        let (words_at, words_len) = get(SECTION_WORDS)?;
-        let (colors_at, colors_len) = get(SECTION_COLORS)?;
-
+    fn from_parsed(bytes: &[u8], name: &Path, parsed: &Parsed) -> Result<Svdag, DagError> {
+        let get = |id: u32| parsed.sections[id as usize - 1].expect("required section checked");
+        let (levels_at, levels_len) = get(SECTION_LEVELS);
+        let (words_at, _) = get(SECTION_WORDS);
         // Every size is now bounded by the file length: allocate and decode.
-        let slice = |at: u64, n: u64| &bytes[at as usize..(at + n) as usize];
-        let level_starts: Vec<u64> = slice(levels_at, levels_len)
+        let level_starts: Vec<u64> = bytes[levels_at as usize..(levels_at + levels_len) as usize]
             .chunks_exact(8)
             .map(|c| u64::from_le_bytes(c.try_into().expect("8 bytes")))
             .collect();
-        let words: Vec<u32> = slice(words_at, words_len)
-            .chunks_exact(4)
-            .map(|c| u32::from_le_bytes(c.try_into().expect("4 bytes")))
-            .collect();
-        let colors: Vec<u32> = slice(colors_at, colors_len)
-            .chunks_exact(4)
-            .map(|c| u32::from_le_bytes(c.try_into().expect("4 bytes")))
-            .collect();
         let dag = Svdag {
-            resolution,
-            words,
+            resolution: parsed.resolution,
+            words: u32s(bytes, get(SECTION_WORDS)),
             level_starts,
-            colors,
+            colors: u32s(bytes, get(SECTION_COLORS)),
         };
         dag.check().map_err(|(place, reason)| {
             let offset = match place {
@@ -378,8 +525,163 @@ impl Svdag {
                 Place::Word(w) => words_at + 4 * w as u64,
                 Place::Colors => 48,
             };
-            err(offset, format!("invalid DAG: {reason}"))
+            DagError::Format {
+                path: name.to_path_buf(),
+                offset,
+                reason: format!("invalid DAG: {reason}"),
+            }
         })?;
         Ok(dag)
+    }
+}
+
+/// A `.vdag` file in any encoding: the nodes, the colours, and the digest of the voxel set
+/// computed when it was built (required for ssvdag/tsvdag, optional for svdag32).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct VdagFile {
+    /// The stored nodes.
+    pub encoded: EncodedDag,
+    /// Per-voxel RGBA8 colours in Morton order (empty: none).
+    pub colors: Vec<u32>,
+    /// Voxel count and checksum of the source voxels.
+    pub digest: Option<VoxelDigest>,
+}
+
+impl VdagFile {
+    /// Serialises the file to a writer.
+    pub fn write_to(&self, w: &mut impl Write) -> io::Result<()> {
+        let payload = match &self.encoded {
+            EncodedDag::Svdag32(dag) => {
+                if dag.colors == self.colors {
+                    return dag.write_with(w, self.digest.as_ref());
+                }
+                let mut dag = dag.clone();
+                dag.colors = self.colors.clone();
+                return dag.write_with(w, self.digest.as_ref());
+            }
+            other => other.payload(),
+        };
+        let digest = self
+            .digest
+            .ok_or_else(|| io::Error::other("ssvdag/tsvdag files need the voxel digest"))?;
+        let digest = digest_bytes(&digest);
+        let h = HeaderFields {
+            encoding: Encoding::from(self.encoded.kind()) as u32,
+            resolution: self.encoded.resolution(),
+            color_format: if self.colors.is_empty() {
+                ColorFormat::None
+            } else {
+                ColorFormat::Rgba8
+            },
+            count: payload.len() as u64,
+            color_count: self.colors.len() as u64,
+        };
+        write_file(
+            w,
+            &h,
+            &[
+                (SECTION_COLORS, Data::U32(&self.colors)),
+                (SECTION_DIGEST, Data::Bytes(&digest)),
+                (SECTION_PAYLOAD, Data::Bytes(&payload)),
+            ],
+        )
+    }
+
+    /// The file's bytes.
+    pub fn to_bytes(&self) -> Result<Vec<u8>, DagError> {
+        let mut bytes = Vec::new();
+        self.write_to(&mut bytes).map_err(|source| DagError::Io {
+            path: "<memory>".into(),
+            source,
+        })?;
+        Ok(bytes)
+    }
+
+    /// Saves atomically.
+    pub fn save(&self, path: &Path) -> Result<(), DagError> {
+        write_atomic(path, |w| self.write_to(w))
+    }
+
+    /// Loads and validates a file of any encoding (v1 svdag32 files included).
+    pub fn load(path: &Path) -> Result<VdagFile, DagError> {
+        let bytes = std::fs::read(path).map_err(|source| DagError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_bytes(&bytes, path)
+    }
+
+    /// Parses and validates bytes; `name` is used in error messages.
+    pub fn from_bytes(bytes: &[u8], name: impl AsRef<Path>) -> Result<VdagFile, DagError> {
+        let name = name.as_ref();
+        let parsed = parse_header(bytes, name)?;
+        let err = |offset: u64, reason: String| DagError::Format {
+            path: name.to_path_buf(),
+            offset,
+            reason,
+        };
+        let digest = parsed.sections[SECTION_DIGEST as usize - 1].map(|(at, _)| VoxelDigest {
+            voxels: u64_at(bytes, at),
+            crc32: u32_at(bytes, at + 8),
+        });
+        if let Some((at, _)) = parsed.sections[SECTION_DIGEST as usize - 1] {
+            if u32_at(bytes, at + 12) != 0 {
+                return Err(err(at + 12, "reserved digest field is not zero".into()));
+            }
+            let d = digest.expect("section present");
+            if parsed.color_format != ColorFormat::None && parsed.color_count != d.voxels {
+                return Err(err(
+                    48,
+                    format!("{} colours for {} voxels", parsed.color_count, d.voxels),
+                ));
+            }
+        }
+        if parsed.encoding == Encoding::Svdag32 {
+            let dag = Svdag::from_parsed(bytes, name, &parsed)?;
+            let colors = dag.colors.clone();
+            return Ok(VdagFile {
+                encoded: EncodedDag::Svdag32(dag),
+                colors,
+                digest,
+            });
+        }
+        let (at, n) = parsed.sections[SECTION_PAYLOAD as usize - 1].expect("required");
+        let payload = &bytes[at as usize..(at + n) as usize];
+        let map = |e: EncodeError| match e {
+            EncodeError::Corrupt { offset, reason } => err(at + offset, reason),
+            other => err(at, other.to_string()),
+        };
+        let encoded = match parsed.encoding {
+            Encoding::Ssvdag => EncodedDag::Ssvdag(
+                SsvdagEncoding::from_payload(payload, parsed.resolution).map_err(map)?,
+            ),
+            _ => EncodedDag::Tsvdag(
+                TsvdagEncoding::from_payload(payload, parsed.resolution).map_err(map)?,
+            ),
+        };
+        debug_assert_eq!(parsed.level_count, parsed.resolution.trailing_zeros() - 1);
+        Ok(VdagFile {
+            encoded,
+            colors: u32s(
+                bytes,
+                parsed.sections[SECTION_COLORS as usize - 1].expect("required"),
+            ),
+            digest,
+        })
+    }
+
+    /// Decodes the nodes to an SVDAG (traversing the encoded bytes) with the file's colours.
+    pub fn into_svdag(self, name: &Path) -> Result<Svdag, DagError> {
+        if let EncodedDag::Svdag32(mut dag) = self.encoded {
+            dag.colors = self.colors;
+            return Ok(dag);
+        }
+        self.encoded
+            .to_svdag(self.colors)
+            .map_err(|e| DagError::Format {
+                path: name.to_path_buf(),
+                offset: 0,
+                reason: format!("decoding {}: {e}", self.encoded.kind().name()),
+            })
     }
 }

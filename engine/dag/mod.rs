@@ -18,6 +18,7 @@
 
 mod build;
 pub mod canonical;
+pub mod encode;
 mod export;
 mod file;
 mod index;
@@ -26,17 +27,24 @@ pub mod raycast;
 pub mod ssvdag;
 mod stats;
 pub mod transform;
+pub mod translate;
 mod validate;
 
 use std::path::PathBuf;
 
-pub use canonical::{symmetry_counts, CanonicalDag, SymmetryLevelCounts, TransformPointer};
+pub use canonical::{
+    symmetry_counts, symmetry_counts_with_progress, CanonicalDag, SymmetryLevelCounts,
+    TransformPointer,
+};
 pub use export::{export_vox, export_xyz_u32, export_xyz_u32_file};
-pub use file::{ColorFormat, Encoding, FORMAT_VERSION, MAGIC};
+pub use file::{ColorFormat, Encoding, VdagFile, FORMAT_VERSION, MAGIC};
 pub use index::VoxelIndex;
 pub use ssvdag::{Invariance, Ssvdag};
 pub use stats::{ByteStats, DagStats, LevelStats};
 pub use transform::{Transform, TransformSet};
+pub use translate::{
+    build_transform_dag, build_transform_dag_with_progress, TLevel, TPointer, TransformDag,
+};
 
 /// Largest supported grid side: Morton codes hold 21 bits per axis.
 pub const MAX_RESOLUTION: u32 = 1 << 21;

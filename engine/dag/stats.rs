@@ -28,6 +28,9 @@ pub struct LevelStats {
     /// Unique nodes up to all 48 transforms (S+A); only from `stats_with_symmetry`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sa: Option<u64>,
+    /// Stored nodes with S+A and translations (S+A+T); only from `stats_with_symmetry`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sat: Option<u64>,
 }
 
 /// Sizes in bytes of the scene in several encodings.
@@ -158,13 +161,15 @@ impl Svdag {
                     s: None,
                     a: None,
                     sa: None,
+                    sat: None,
                 })
                 .collect(),
         }
     }
 
     /// [`Svdag::stats`] plus the per-level unique counts under transforms (`ssvdag`, `s`, `a`,
-    /// `sa`; see `docs/transforms.md`). Much slower than `stats`.
+    /// `sa`, `sat`; see `docs/transforms.md`, `docs/translations.md`). Much slower than `stats`
+    /// (the translation search dominates).
     pub fn stats_with_symmetry(&self) -> DagStats {
         let mut stats = self.stats();
         for (level, counts) in stats.levels.iter_mut().zip(super::symmetry_counts(self)) {
@@ -172,6 +177,7 @@ impl Svdag {
             level.s = Some(counts.s);
             level.a = Some(counts.a);
             level.sa = Some(counts.sa);
+            level.sat = Some(counts.sat);
         }
         stats
     }

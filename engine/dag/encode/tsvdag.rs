@@ -1,0 +1,1022 @@
+//! TSVDAG encoding (dissertation §3.4): transform-aware SVDAG with compact pointers.
+//!
+//! Input is a [`TransformGraph`]: per level stored nodes whose children are
+//! `(child, transform, translation)`. The subtree a pointer denotes is `Shift_t(T(C))`: the
+//! transform `T` applied to the stored node `C`, then every voxel moved by `t` inside the
+//! child's cube (voxels moved out are dropped: destructive translation). Built from a
+//! [`CanonicalDag`] every translation is zero.
+//!
+//! Encoded pointer value `E` (first field in the low bits), for a child at level `l`:
+//! - Huffman on: the code of the symbol `transform id * 8 + nonzero-translation axes mask`,
+//!   then `l + 3` bits of `t + side` for each nonzero axis (x, y, z order), then the target.
+//! - Huffman off: when the set is not `None` or level `l` may translate, 1 flag bit (any
+//!   transform or translation); if set, the transform field (S: mirror, 3 bits; A: permutation,
+//!   3 bits; S+A: id, 6 bits; none: 0 bits) and, where level `l` may translate, 3 x `l + 3`
+//!   translation bits; then the target.
+//!
+//! The target is a leaf index (level 0) or a node offset in 16-bit units. Inner nodes are a
+//! 16-bit header (2 bits per child in stored octant order: 00 empty, 01 16-bit, 10 32-bit,
+//! 11 48-bit pointer) followed by the pointers. With look-up tables a 16-bit pointer is an
+//! index into the child level's table of 64-bit `E`s; 32/48-bit pointers hold `v` with
+//! `v & 1` = 1: table index `v >> 1`, 0: `E = v >> 1`. Without tables every pointer is `E`.
+
+#![allow(clippy::needless_range_loop)] // levels index several parallel arrays
+
+use std::sync::Arc;
+
+use super::bytes::{Reader, Writer};
+use super::huffman::Huffman;
+use super::ssvdag::{read_node, sort_by_refcount};
+use super::traverse::{root_level, TreeView};
+use super::{corrupt, EncodeError};
+use crate::dag::canonical::CanonicalDag;
+use crate::dag::transform::{Transform, TransformSet, PERMUTATIONS};
+use crate::scene::morton;
+use rustc_hash::FxHashMap;
+
+/// Highest level whose nodes may be translated (16^3 subtrees, dissertation §3.3.2).
+pub use crate::dag::translate::MAX_TRANSLATION_LEVEL;
+
+/// Number of Huffman symbols: 48 transforms x 8 nonzero-translation masks.
+const SYMBOLS: usize = 48 * 8;
+
+/// (new target id, transform id, translation): a distinct pointer of a level.
+type PointerKey = (u64, u8, [i32; 3]);
+
+/// A child pointer of a [`TransformGraph`] node.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub struct GraphPointer {
+    /// Stored node (or leaf) index in the level below.
+    pub node: u32,
+    /// Transform applied to the stored node.
+    pub transform: Transform,
+    /// Translation applied after the transform, per axis in `(-side, side)`.
+    pub translation: [i32; 3],
+}
+
+/// Stored nodes of one level of a [`TransformGraph`].
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct GraphLevel {
+    /// Level 0 only: 4^3 leaf masks.
+    pub leaves: Vec<u64>,
+    /// Inner levels: child mask per node (bit = stored octant).
+    pub child_masks: Vec<u8>,
+    /// Inner levels: index of each node's first child in `children`.
+    pub child_starts: Vec<u32>,
+    /// Inner levels: children in ascending octant order.
+    pub children: Vec<GraphPointer>,
+}
+
+impl GraphLevel {
+    /// Number of stored nodes.
+    pub fn len(&self) -> usize {
+        if self.leaves.is_empty() {
+            self.child_masks.len()
+        } else {
+            self.leaves.len()
+        }
+    }
+
+    /// Whether the level has no node.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Children of inner node `i`.
+    pub fn node_children(&self, i: usize) -> &[GraphPointer] {
+        let s = self.child_starts[i] as usize;
+        &self.children[s..s + self.child_masks[i].count_ones() as usize]
+    }
+}
+
+/// The general input of the TSVDAG encoder: stored nodes with (child, transform, translation)
+/// pointers.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TransformGraph {
+    /// Grid side length.
+    pub resolution: u32,
+    /// Transforms pointers may use.
+    pub set: TransformSet,
+    /// Whether pointers to levels `0..=MAX_TRANSLATION_LEVEL` may carry translations.
+    pub translations: bool,
+    /// Levels bottom-up (0 = leaves).
+    pub levels: Vec<GraphLevel>,
+    /// The root pointer (`None` for an empty scene); its translation must be zero.
+    pub root: Option<GraphPointer>,
+}
+
+impl TransformGraph {
+    /// The graph of a canonical DAG (all translations zero).
+    pub fn from_canonical(dag: &CanonicalDag) -> TransformGraph {
+        let conv = |p: &crate::dag::TransformPointer| GraphPointer {
+            node: p.node,
+            transform: p.transform,
+            translation: [0; 3],
+        };
+        TransformGraph {
+            resolution: dag.resolution,
+            set: dag.set,
+            translations: false,
+            levels: dag
+                .levels
+                .iter()
+                .map(|l| GraphLevel {
+                    leaves: l.leaves.clone(),
+                    child_masks: l.child_masks.clone(),
+                    child_starts: l.child_starts.clone(),
+                    children: l.children.iter().map(conv).collect(),
+                })
+                .collect(),
+            root: dag.root().map(|p| conv(&p)),
+        }
+    }
+}
+
+impl TransformGraph {
+    /// The graph of a transform DAG (S+A+T when it was built with translations).
+    pub fn from_transform_dag(dag: &crate::dag::TransformDag) -> TransformGraph {
+        let conv = |p: &crate::dag::TPointer| GraphPointer {
+            node: p.node,
+            transform: p.transform,
+            translation: p.translation.map(|t| t as i32),
+        };
+        TransformGraph {
+            resolution: dag.resolution,
+            set: dag.set,
+            translations: dag.translations,
+            levels: dag
+                .levels
+                .iter()
+                .map(|l| GraphLevel {
+                    leaves: l.leaves.clone(),
+                    child_masks: l.child_masks.clone(),
+                    child_starts: l.child_starts.clone(),
+                    children: l.children.iter().map(conv).collect(),
+                })
+                .collect(),
+            root: dag.root.as_ref().map(conv),
+        }
+    }
+}
+
+/// Run-time switches of the TSVDAG encoder (the transform set comes with the graph).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TsvdagOptions {
+    /// Per-level pointer look-up tables.
+    pub lut: bool,
+    /// Huffman-coded transform ids.
+    pub huffman: bool,
+}
+
+impl Default for TsvdagOptions {
+    fn default() -> Self {
+        TsvdagOptions {
+            lut: true,
+            huffman: true,
+        }
+    }
+}
+
+/// A TSVDAG in its compact encoding (layout in `docs/encodings.md`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TsvdagEncoding {
+    /// Grid side length.
+    pub resolution: u32,
+    /// Transforms pointers may use.
+    pub set: TransformSet,
+    /// Whether levels `0..=MAX_TRANSLATION_LEVEL` carry translations.
+    pub translations: bool,
+    /// Encoder switches.
+    pub options: TsvdagOptions,
+    /// Transform of the root (`None`: empty scene).
+    pub root: Option<Transform>,
+    /// Stored leaves.
+    pub leaves: Vec<u64>,
+    /// Node streams in 16-bit units per level (entry 0 empty).
+    pub levels: Vec<Vec<u16>>,
+    /// Pointer tables per child level (the root level's is empty).
+    pub tables: Vec<Vec<u64>>,
+    /// Huffman code per child level (when enabled and the level is pointed to).
+    pub codes: Vec<Option<Huffman>>,
+}
+
+/// A node handle of the TSVDAG view.
+#[derive(Clone, Debug)]
+pub enum TNode {
+    /// A stored node seen through a transform then a translation.
+    Stored {
+        /// Leaf index or node offset.
+        index: u64,
+        /// Transform applied to the stored node.
+        transform: Transform,
+        /// Translation applied after it.
+        translation: [i32; 3],
+    },
+    /// A window of a materialised (translated) subtree: bits indexed by local Morton code.
+    Dense {
+        /// The subtree's occupancy.
+        grid: Arc<Vec<u64>>,
+        /// First Morton code of the window.
+        base: u64,
+    },
+}
+
+fn set_id(set: TransformSet) -> u32 {
+    match set {
+        TransformSet::None => 0,
+        TransformSet::Mirrors => 1,
+        TransformSet::AxisPermutations => 2,
+        TransformSet::All => 3,
+    }
+}
+
+fn transform_bits(set: TransformSet) -> u32 {
+    match set {
+        TransformSet::None => 0,
+        TransformSet::Mirrors | TransformSet::AxisPermutations => 3,
+        TransformSet::All => 6,
+    }
+}
+
+fn transform_field(set: TransformSet, t: Transform) -> u64 {
+    match set {
+        TransformSet::None => 0,
+        TransformSet::Mirrors => t.mirror() as u64,
+        TransformSet::AxisPermutations => t.permutation_index() as u64,
+        TransformSet::All => t.index() as u64,
+    }
+}
+
+fn field_transform(set: TransformSet, f: u64) -> Option<Transform> {
+    match set {
+        TransformSet::None => (f == 0).then_some(Transform::IDENTITY),
+        TransformSet::Mirrors => Transform::from_parts(0, f as u8),
+        TransformSet::AxisPermutations => Transform::from_parts(f as usize, 0),
+        TransformSet::All => Transform::from_index(f as usize),
+    }
+}
+
+/// Bits per translation axis of a child at `level` (`t + side` in `1..2 * side`).
+fn translation_bits(level: u32) -> u32 {
+    level + 3
+}
+
+impl TsvdagEncoding {
+    fn translates(&self, level: u32) -> bool {
+        self.translations && level <= MAX_TRANSLATION_LEVEL
+    }
+
+    /// Canonicalizes an SVDAG under `set` and encodes it (no translations).
+    pub fn build(
+        dag: &crate::dag::Svdag,
+        set: TransformSet,
+        options: TsvdagOptions,
+    ) -> Result<TsvdagEncoding, EncodeError> {
+        let canonical = CanonicalDag::build(dag, set);
+        Self::encode(&TransformGraph::from_canonical(&canonical), options)
+    }
+
+    /// Builds the transform DAG of an SVDAG (`set`, plus translations when asked: S+A+T with
+    /// `TransformSet::All`) and encodes it.
+    pub fn build_with_translations(
+        dag: &crate::dag::Svdag,
+        set: TransformSet,
+        translations: bool,
+        options: TsvdagOptions,
+    ) -> Result<TsvdagEncoding, EncodeError> {
+        let tdag = crate::dag::build_transform_dag(dag, set, translations);
+        Self::encode(&TransformGraph::from_transform_dag(&tdag), options)
+    }
+
+    /// Encodes a graph.
+    pub fn encode(
+        g: &TransformGraph,
+        options: TsvdagOptions,
+    ) -> Result<TsvdagEncoding, EncodeError> {
+        let top = root_level(g.resolution) as usize;
+        if g.levels.len() != top + 1 {
+            return Err(EncodeError::InvalidInput(format!(
+                "{} levels for resolution {}",
+                g.levels.len(),
+                g.resolution
+            )));
+        }
+        let mut out = TsvdagEncoding {
+            resolution: g.resolution,
+            set: g.set,
+            translations: g.translations,
+            options,
+            root: None,
+            leaves: Vec::new(),
+            levels: vec![Vec::new(); top + 1],
+            tables: vec![Vec::new(); top + 1],
+            codes: vec![None; top + 1],
+        };
+        let Some(root) = g.root else {
+            return Ok(out);
+        };
+        if root.translation != [0; 3] || !g.set.contains(root.transform) {
+            return Err(EncodeError::InvalidInput(
+                "root pointer out of the set or translated".into(),
+            ));
+        }
+        out.root = Some(root.transform);
+        let counts: Vec<usize> = g.levels.iter().map(|l| l.len()).collect();
+        if root.node as usize >= counts[top] {
+            return Err(EncodeError::InvalidInput("root node out of range".into()));
+        }
+        let order = sort_by_refcount(&counts, root.node as usize, |l, n| {
+            g.levels[l]
+                .node_children(n)
+                .iter()
+                .map(|c| c.node as usize)
+                .collect()
+        });
+        let mut new_id = vec![u64::MAX; counts[0]];
+        for (i, &old) in order[0].iter().enumerate() {
+            out.leaves.push(g.levels[0].leaves[old]);
+            new_id[old] = i as u64;
+        }
+        for l in 1..=top {
+            let cl = (l - 1) as u32;
+            let side = 4i32 << cl;
+            // Distinct pointers and their reference counts.
+            let mut refs: FxHashMap<PointerKey, u64> = FxHashMap::default();
+            for &old in &order[l] {
+                for c in g.levels[l].node_children(old) {
+                    if !g.set.contains(c.transform) {
+                        return Err(EncodeError::InvalidInput(format!(
+                            "transform {} outside the set at level {l}",
+                            c.transform.index()
+                        )));
+                    }
+                    if c.translation != [0; 3] && !out.translates(cl) {
+                        return Err(EncodeError::InvalidInput(format!(
+                            "translation at level {cl}, where none is allowed"
+                        )));
+                    }
+                    if c.translation.iter().any(|&t| t <= -side || t >= side) {
+                        return Err(EncodeError::InvalidInput(format!(
+                            "translation {:?} out of range at level {cl}",
+                            c.translation
+                        )));
+                    }
+                    let key = (
+                        new_id[c.node as usize],
+                        c.transform.index() as u8,
+                        c.translation,
+                    );
+                    *refs.entry(key).or_insert(0) += 1;
+                }
+            }
+            let mut sorted: Vec<(PointerKey, u64)> = refs.into_iter().collect();
+            sorted.sort_unstable_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
+            if options.huffman {
+                let mut hist = vec![0u64; SYMBOLS];
+                for ((_, t, tr), count) in &sorted {
+                    hist[*t as usize * 8 + nonzero_mask(tr)] += *count;
+                }
+                out.codes[l - 1] = Huffman::from_weights(&hist);
+            }
+            let mut value: FxHashMap<PointerKey, (u64, u16)> = FxHashMap::default();
+            let mut table: Vec<u64> = Vec::new();
+            for ((idx, t, tr), count) in sorted {
+                let ptr = GraphPointer {
+                    node: 0,
+                    transform: Transform::from_index(t as usize).expect("checked"),
+                    translation: tr,
+                };
+                let e = out.encode_pointer(cl, idx, &ptr)?;
+                let bits = |v: u64| 64 - v.leading_zeros();
+                let entry = if options.lut {
+                    let inline_bits = bits(e) + 1;
+                    let inline_size = inline_bits.div_ceil(16).max(2) as u64;
+                    let inline_cost = if inline_size > 3 {
+                        u64::MAX
+                    } else {
+                        count * inline_size
+                    };
+                    let i = table.len() as u64;
+                    let (tv, tsize) = if i <= 0xffff {
+                        (i, 1u64)
+                    } else {
+                        (i << 1 | 1, (bits(i) + 1).div_ceil(16).max(2) as u64)
+                    };
+                    let table_cost = count * tsize + 4;
+                    if table_cost < inline_cost {
+                        table.push(e);
+                        (tv, tsize as u16)
+                    } else {
+                        (e << 1, inline_size as u16)
+                    }
+                } else {
+                    let size = bits(e).div_ceil(16).max(1);
+                    if size > 3 {
+                        return Err(EncodeError::TooLarge(format!(
+                            "pointer of {} bits at level {l} without look-up tables",
+                            bits(e)
+                        )));
+                    }
+                    (e, size as u16)
+                };
+                value.insert((idx, t, tr), entry);
+            }
+            out.tables[l - 1] = table;
+            let mut stream: Vec<u16> = Vec::new();
+            let mut offsets = vec![u64::MAX; counts[l]];
+            for &old in &order[l] {
+                offsets[old] = stream.len() as u64;
+                let at = stream.len();
+                stream.push(0);
+                let mut header = 0u16;
+                let mask = g.levels[l].child_masks[old];
+                let mut k = 0;
+                for o in 0..8 {
+                    if (mask >> o) & 1 == 0 {
+                        continue;
+                    }
+                    let c = g.levels[l].node_children(old)[k];
+                    k += 1;
+                    let key = (
+                        new_id[c.node as usize],
+                        c.transform.index() as u8,
+                        c.translation,
+                    );
+                    let (v, size) = value[&key];
+                    for i in 0..size {
+                        stream.push((v >> (16 * i)) as u16);
+                    }
+                    header |= size << (2 * o);
+                }
+                stream[at] = header;
+            }
+            out.levels[l] = stream;
+            new_id = offsets;
+        }
+        Ok(out)
+    }
+
+    /// `E` of a pointer to `target` at child level `level`.
+    fn encode_pointer(
+        &self,
+        level: u32,
+        target: u64,
+        p: &GraphPointer,
+    ) -> Result<u64, EncodeError> {
+        let tb = translation_bits(level);
+        let side = 4i64 << level;
+        let mut fields: Vec<(u64, u32)> = Vec::new(); // (value, bits), low bits first
+        if self.options.huffman {
+            let sym = p.transform.index() * 8 + nonzero_mask(&p.translation);
+            let code = self.codes[level as usize].as_ref();
+            let (c, len) = code
+                .and_then(|h| h.encode(sym))
+                .ok_or_else(|| EncodeError::InvalidInput("symbol without a code".into()))?;
+            fields.push((c as u64, len as u32));
+            for &t in &p.translation {
+                if t != 0 {
+                    fields.push(((t as i64 + side) as u64, tb));
+                }
+            }
+        } else if self.set != TransformSet::None || self.translates(level) {
+            let any = p.transform != Transform::IDENTITY || p.translation != [0; 3];
+            fields.push((any as u64, 1));
+            if any {
+                fields.push((
+                    transform_field(self.set, p.transform),
+                    transform_bits(self.set),
+                ));
+                if self.translates(level) {
+                    for &t in &p.translation {
+                        fields.push(((t as i64 + side) as u64, tb));
+                    }
+                }
+            }
+        }
+        let used: u32 = fields.iter().map(|f| f.1).sum();
+        if used + (64 - target.leading_zeros()) > 63 {
+            return Err(EncodeError::TooLarge(format!(
+                "pointer to {target} needs over 63 bits"
+            )));
+        }
+        let mut e = target;
+        for &(v, b) in fields.iter().rev() {
+            e = e << b | v;
+        }
+        Ok(e)
+    }
+
+    /// Decodes the pointer value `v` (size code `code`) of a child at level `level`:
+    /// (target, transform, translation).
+    fn decode_pointer(
+        &self,
+        level: u32,
+        v: u64,
+        code: u8,
+    ) -> Result<(u64, Transform, [i32; 3]), EncodeError> {
+        let l = level as usize;
+        let mut e = v;
+        if self.options.lut {
+            let table_index = if code == 1 {
+                Some(v)
+            } else if v & 1 == 1 {
+                Some(v >> 1)
+            } else {
+                e = v >> 1;
+                None
+            };
+            if let Some(i) = table_index {
+                e = *self.tables[l].get(i as usize).ok_or_else(|| {
+                    corrupt(0, format!("table index {i} out of range at level {l}"))
+                })?;
+            }
+        }
+        let tb = translation_bits(level);
+        let side = 4i32 << level;
+        fn take(e: &mut u64, bits: u32) -> u64 {
+            let x = *e & ((1u64 << bits) - 1);
+            *e >>= bits;
+            x
+        }
+        let mut transform = Transform::IDENTITY;
+        let mut translation = [0i32; 3];
+        let bad = |what: &str| corrupt(0, format!("{what} in pointer {v:#x} at level {l}"));
+        if self.options.huffman {
+            let h = self.codes[l]
+                .as_ref()
+                .ok_or_else(|| bad("no Huffman code"))?;
+            let (sym, len) = h.decode(e).ok_or_else(|| bad("invalid Huffman code"))?;
+            take(&mut e, len as u32);
+            let (t, mask) = (sym as usize / 8, sym as usize % 8);
+            transform = Transform::from_index(t).ok_or_else(|| bad("transform id"))?;
+            if mask != 0 && !self.translates(level) {
+                return Err(bad("translation"));
+            }
+            for (a, tr) in translation.iter_mut().enumerate() {
+                if (mask >> a) & 1 == 1 {
+                    *tr = take(&mut e, tb) as i32 - side;
+                    if *tr == 0 || *tr <= -side || *tr >= side {
+                        return Err(bad("translation amount"));
+                    }
+                }
+            }
+        } else if (self.set != TransformSet::None || self.translates(level)) && take(&mut e, 1) == 1
+        {
+            {
+                let f = take(&mut e, transform_bits(self.set));
+                transform = field_transform(self.set, f).ok_or_else(|| bad("transform field"))?;
+                if self.translates(level) {
+                    for tr in translation.iter_mut() {
+                        *tr = take(&mut e, tb) as i32 - side;
+                        if *tr <= -side || *tr >= side {
+                            return Err(bad("translation amount"));
+                        }
+                    }
+                }
+            }
+        }
+        if !self.set.contains(transform) {
+            return Err(bad("transform outside the set"));
+        }
+        Ok((e, transform, translation))
+    }
+
+    /// Bytes of the payload (`to_payload().len()`).
+    pub fn byte_size(&self) -> u64 {
+        let top = self.levels.len() as u64 - 1;
+        let huff: u64 = self
+            .codes
+            .iter()
+            .take(top as usize)
+            .map(|c| match c {
+                None => 2,
+                Some(h) if h.single().is_some() => 4,
+                Some(_) => 2 + SYMBOLS as u64 / 2,
+            })
+            .sum();
+        24 + 8 * top * 2
+            + if self.options.huffman { huff } else { 0 }
+            + 8 * self.leaves.len() as u64
+            + 8 * self.tables.iter().map(|t| t.len() as u64).sum::<u64>()
+            + 2 * self.levels.iter().map(|l| l.len() as u64).sum::<u64>()
+    }
+
+    /// Serialises the payload (layout in `docs/encodings.md`).
+    pub fn to_payload(&self) -> Vec<u8> {
+        let top = self.levels.len() - 1;
+        let mut w = Writer::default();
+        w.u32(self.levels.len() as u32);
+        let flags = self.root.is_none() as u32
+            | (self.options.lut as u32) << 1
+            | (self.options.huffman as u32) << 2
+            | (self.translations as u32) << 3
+            | set_id(self.set) << 8;
+        w.u32(flags);
+        w.u32(self.root.map_or(0, |t| t.index() as u32));
+        w.u32(0);
+        w.u64(self.leaves.len() as u64);
+        for l in &self.levels[1..] {
+            w.u64(l.len() as u64);
+        }
+        for t in &self.tables[..top] {
+            w.u64(t.len() as u64);
+        }
+        if self.options.huffman {
+            for c in &self.codes[..top] {
+                match c {
+                    None => w.u16(0),
+                    Some(h) => match h.single() {
+                        Some(s) => {
+                            w.u16(1);
+                            w.u16(s);
+                        }
+                        None => {
+                            w.u16(2);
+                            for pair in h.lengths.chunks(2) {
+                                w.u8(pair[0] | pair.get(1).copied().unwrap_or(0) << 4);
+                            }
+                        }
+                    },
+                }
+            }
+        }
+        w.u64s(&self.leaves);
+        for t in &self.tables[..top] {
+            w.u64s(t);
+        }
+        for l in &self.levels[1..] {
+            w.u16s(l);
+        }
+        w.bytes
+    }
+
+    /// Parses and validates a payload for a grid of side `resolution` (already validated).
+    pub fn from_payload(bytes: &[u8], resolution: u32) -> Result<TsvdagEncoding, EncodeError> {
+        let top = root_level(resolution) as usize;
+        let mut r = Reader::new(bytes);
+        let level_count = r.u32("level count")?;
+        if level_count as usize != top + 1 {
+            return Err(corrupt(
+                0,
+                format!("{level_count} levels, expected {}", top + 1),
+            ));
+        }
+        let flags = r.u32("flags")?;
+        if flags & !0x30f != 0 {
+            return Err(corrupt(4, format!("unknown flags {flags:#x}")));
+        }
+        let set = match (flags >> 8) & 3 {
+            0 => TransformSet::None,
+            1 => TransformSet::Mirrors,
+            2 => TransformSet::AxisPermutations,
+            _ => TransformSet::All,
+        };
+        let root_t = r.u32("root transform")?;
+        let root = if flags & 1 == 1 {
+            None
+        } else {
+            let t = Transform::from_index(root_t as usize)
+                .filter(|t| set.contains(*t))
+                .ok_or_else(|| corrupt(8, format!("root transform {root_t}")))?;
+            Some(t)
+        };
+        if r.u32("reserved")? != 0 {
+            return Err(corrupt(12, "reserved field is not zero"));
+        }
+        let options = TsvdagOptions {
+            lut: flags & 2 != 0,
+            huffman: flags & 4 != 0,
+        };
+        let leaf_count = r.u64("leaf count")?;
+        let mut stream_lens = Vec::new();
+        for _ in 0..top {
+            stream_lens.push(r.u64("level length")?);
+        }
+        let mut table_lens = Vec::new();
+        for _ in 0..top {
+            table_lens.push(r.u64("table length")?);
+        }
+        let mut codes = vec![None; top + 1];
+        if options.huffman {
+            for code in codes.iter_mut().take(top) {
+                let at = r.at as u64;
+                match r.u16("code kind")? {
+                    0 => {}
+                    1 => {
+                        let s = r.u16("symbol")?;
+                        if s as usize >= SYMBOLS {
+                            return Err(corrupt(at, format!("bad Huffman symbol {s}")));
+                        }
+                        *code = Huffman::from_lengths(vec![0; SYMBOLS], Some(s));
+                    }
+                    2 => {
+                        let mut lengths = Vec::with_capacity(SYMBOLS);
+                        for _ in 0..SYMBOLS / 2 {
+                            let b = r.u8("code lengths")?;
+                            lengths.push(b & 15);
+                            lengths.push(b >> 4);
+                        }
+                        *code = Some(Huffman::from_lengths(lengths, None).ok_or_else(|| {
+                            corrupt(at, "code lengths do not form a prefix code")
+                        })?);
+                    }
+                    k => return Err(corrupt(at, format!("unknown code kind {k}"))),
+                }
+            }
+        }
+        let leaves = r.u64s(leaf_count, "leaves")?;
+        let mut tables = Vec::new();
+        for &n in &table_lens {
+            tables.push(r.u64s(n, "pointer table")?);
+        }
+        tables.push(Vec::new());
+        let mut levels = vec![Vec::new()];
+        let mut bases = vec![0u64];
+        for &n in &stream_lens {
+            bases.push(r.at as u64);
+            levels.push(r.u16s(n, "level stream")?);
+        }
+        r.finish()?;
+        let enc = TsvdagEncoding {
+            resolution,
+            set,
+            translations: flags & 8 != 0,
+            options,
+            root,
+            leaves,
+            levels,
+            tables,
+            codes,
+        };
+        enc.validate(&bases)?;
+        Ok(enc)
+    }
+
+    /// Structural checks: whole nodes, decodable pointers to node starts one level down.
+    fn validate(&self, bases: &[u64]) -> Result<(), EncodeError> {
+        let top = self.levels.len() - 1;
+        if self.root.is_none() {
+            if !self.leaves.is_empty() || self.levels.iter().any(|l| !l.is_empty()) {
+                return Err(corrupt(4, "empty scene with stored nodes"));
+            }
+            return Ok(());
+        }
+        if self.leaves.contains(&0) {
+            return Err(corrupt(0, "empty leaf"));
+        }
+        let mut below: Option<Vec<u32>> = None;
+        for l in 1..=top {
+            let stream = &self.levels[l];
+            let mut starts = Vec::new();
+            let mut off = 0;
+            while off < stream.len() {
+                starts.push(off as u32);
+                let at = bases[l] + 2 * off as u64;
+                let (ptrs, end) = read_node(stream, off, 3, bases[l])?;
+                for (v, code) in ptrs.into_iter().flatten() {
+                    let (target, _, _) =
+                        self.decode_pointer(l as u32 - 1, v, code)
+                            .map_err(|e| match e {
+                                EncodeError::Corrupt { reason, .. } => corrupt(at, reason),
+                                other => other,
+                            })?;
+                    let ok = match &below {
+                        None => target < self.leaves.len() as u64,
+                        Some(st) => {
+                            target <= u32::MAX as u64 && st.binary_search(&(target as u32)).is_ok()
+                        }
+                    };
+                    if !ok {
+                        return Err(corrupt(
+                            at,
+                            format!("pointer to {target} is not a node of level {}", l - 1),
+                        ));
+                    }
+                }
+                off = end;
+            }
+            if l == top && starts.len() != 1 {
+                return Err(corrupt(bases[l], format!("{} root nodes", starts.len())));
+            }
+            below = Some(starts);
+        }
+        Ok(())
+    }
+
+    /// Whether voxel (x, y, z) is set: walks the encoded bytes mapping the query point into each
+    /// stored node's frame (inverse translation, then inverse transform), the point form of the
+    /// translation stack.
+    pub fn contains(&self, x: u32, y: u32, z: u32) -> Result<bool, EncodeError> {
+        let n = self.resolution;
+        let Some(root_t) = self.root else {
+            return Ok(false);
+        };
+        if x >= n || y >= n || z >= n {
+            return Ok(false);
+        }
+        let mut p = root_t.inverse().apply_point([x, y, z], n);
+        let mut index = 0u64;
+        let mut size = n;
+        for level in (1..self.levels.len()).rev() {
+            let half = size / 2;
+            let o = ((p[0] / half) | (p[1] / half) << 1 | (p[2] / half) << 2) as usize;
+            let (ptrs, _) = read_node(&self.levels[level], index as usize, 3, 0)?;
+            let Some((v, code)) = ptrs[o] else {
+                return Ok(false);
+            };
+            let (target, t, tr) = self.decode_pointer(level as u32 - 1, v, code)?;
+            let mut q = [0u32; 3];
+            for a in 0..3 {
+                let c = (p[a] % half) as i64 - tr[a] as i64;
+                if c < 0 || c >= half as i64 {
+                    return Ok(false);
+                }
+                q[a] = c as u32;
+            }
+            p = t.inverse().apply_point(q, half);
+            index = target;
+            size = half;
+        }
+        let mask = *self
+            .leaves
+            .get(index as usize)
+            .ok_or_else(|| corrupt(0, "leaf index out of range"))?;
+        Ok(mask >> morton::encode(p[0], p[1], p[2]) & 1 == 1)
+    }
+
+    /// Calls `f` with the local coordinates of every voxel of stored node `index` at `level`.
+    fn for_each_stored_voxel(
+        &self,
+        index: u64,
+        level: u32,
+        origin: [u32; 3],
+        f: &mut impl FnMut([u32; 3]),
+    ) -> Result<(), EncodeError> {
+        let node = TNode::Stored {
+            index,
+            transform: Transform::IDENTITY,
+            translation: [0; 3],
+        };
+        self.for_each_voxel_of(&node, level, origin, f)
+    }
+
+    fn for_each_voxel_of(
+        &self,
+        node: &TNode,
+        level: u32,
+        origin: [u32; 3],
+        f: &mut impl FnMut([u32; 3]),
+    ) -> Result<(), EncodeError> {
+        if level == 0 {
+            let mut m = self.leaf(node)?;
+            while m != 0 {
+                let [x, y, z] = morton::decode(m.trailing_zeros() as u64);
+                f([origin[0] + x, origin[1] + y, origin[2] + z]);
+                m &= m - 1;
+            }
+            return Ok(());
+        }
+        let half = 2u32 << level;
+        for (o, c) in self.children(node, level)?.iter().enumerate() {
+            if let Some(c) = c {
+                let o = o as u32;
+                let child_origin = [
+                    origin[0] + (o & 1) * half,
+                    origin[1] + ((o >> 1) & 1) * half,
+                    origin[2] + (o >> 2) * half,
+                ];
+                self.for_each_voxel_of(c, level - 1, child_origin, f)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Materialises `Shift_t(T(C))` for stored node `index` at `level` as a Morton-indexed grid.
+    fn materialise(
+        &self,
+        index: u64,
+        level: u32,
+        t: Transform,
+        tr: [i32; 3],
+    ) -> Result<Arc<Vec<u64>>, EncodeError> {
+        if level > MAX_TRANSLATION_LEVEL {
+            return Err(corrupt(0, format!("translated node at level {level}")));
+        }
+        let side = 4u32 << level;
+        let mut grid = vec![0u64; (side as usize).pow(3) / 64];
+        self.for_each_stored_voxel(index, level, [0; 3], &mut |v| {
+            let w = t.apply_point(v, side);
+            let mut q = [0u32; 3];
+            for a in 0..3 {
+                let c = w[a] as i64 + tr[a] as i64;
+                if c < 0 || c >= side as i64 {
+                    return;
+                }
+                q[a] = c as u32;
+            }
+            let code = morton::encode(q[0], q[1], q[2]);
+            grid[(code / 64) as usize] |= 1 << (code % 64);
+        })?;
+        Ok(Arc::new(grid))
+    }
+}
+
+fn nonzero_mask(t: &[i32; 3]) -> usize {
+    (t[0] != 0) as usize | ((t[1] != 0) as usize) << 1 | ((t[2] != 0) as usize) << 2
+}
+
+/// `T(Shift_t(X)) = Shift_t'(T(X))`: the translation seen through `T`.
+fn transform_translation(t: Transform, tr: [i32; 3]) -> [i32; 3] {
+    let perm = PERMUTATIONS[t.permutation_index()];
+    std::array::from_fn(|i| {
+        let v = tr[perm[i] as usize];
+        if (t.mirror() >> i) & 1 == 1 {
+            -v
+        } else {
+            v
+        }
+    })
+}
+
+impl TreeView for TsvdagEncoding {
+    type Node = TNode;
+
+    fn resolution(&self) -> u32 {
+        self.resolution
+    }
+
+    fn root(&self) -> Result<Option<TNode>, EncodeError> {
+        Ok(self.root.map(|t| TNode::Stored {
+            index: 0,
+            transform: t,
+            translation: [0; 3],
+        }))
+    }
+
+    fn children(&self, node: &TNode, level: u32) -> Result<[Option<TNode>; 8], EncodeError> {
+        match node {
+            TNode::Dense { grid, base } => {
+                let span = 64u64 << (3 * (level - 1));
+                Ok(std::array::from_fn(|o| {
+                    let start = base + o as u64 * span;
+                    let words = grid.get((start / 64) as usize..((start + span) / 64) as usize)?;
+                    words.iter().any(|&w| w != 0).then(|| TNode::Dense {
+                        grid: grid.clone(),
+                        base: start,
+                    })
+                }))
+            }
+            TNode::Stored {
+                index,
+                transform,
+                translation,
+            } => {
+                if *translation != [0; 3] {
+                    let grid = self.materialise(*index, level, *transform, *translation)?;
+                    let dense = TNode::Dense { grid, base: 0 };
+                    return self.children(&dense, level);
+                }
+                let stream = self
+                    .levels
+                    .get(level as usize)
+                    .ok_or_else(|| corrupt(0, format!("no level {level}")))?;
+                let (ptrs, _) = read_node(stream, *index as usize, 3, 0)?;
+                let mut out: [Option<TNode>; 8] = Default::default();
+                for (o, p) in ptrs.iter().enumerate() {
+                    if let Some((v, code)) = p {
+                        let (target, t, tr) = self.decode_pointer(level - 1, *v, *code)?;
+                        out[transform.apply_octant(o)] = Some(TNode::Stored {
+                            index: target,
+                            transform: transform.compose(t),
+                            translation: transform_translation(*transform, tr),
+                        });
+                    }
+                }
+                Ok(out)
+            }
+        }
+    }
+
+    fn leaf(&self, node: &TNode) -> Result<u64, EncodeError> {
+        match node {
+            TNode::Dense { grid, base } => grid
+                .get((base / 64) as usize)
+                .copied()
+                .ok_or_else(|| corrupt(0, "dense window out of range")),
+            TNode::Stored {
+                index,
+                transform,
+                translation,
+            } => {
+                if *translation != [0; 3] {
+                    return Ok(self.materialise(*index, 0, *transform, *translation)?[0]);
+                }
+                let mask = *self
+                    .leaves
+                    .get(*index as usize)
+                    .ok_or_else(|| corrupt(0, format!("leaf index {index} out of range")))?;
+                Ok(transform.apply_leaf(mask))
+            }
+        }
+    }
+}

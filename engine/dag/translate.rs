@@ -1,0 +1,964 @@
+//! Destructive translations of small subtrees combined with the symmetry group (dissertation
+//! §3.3.2): the S+A+T transform DAG.
+//!
+//! # What a pointer means
+//! A [`TPointer`] `(node, transform T, translation t)` into a level whose cubes have side `s`
+//! denotes the subtree `Tr_t(T(C))`, `C` the stored node: first the transform (see
+//! `transform.rs`), then a *destructive* translation. Voxel `v` (in `0..s` per axis) of the
+//! subtree is set iff `w = v - t` lies inside the cube and `C` has the voxel `T⁻¹(w)`. Voxels of
+//! `T(C)` that the translation moves out of the cube are dropped; the vacated region is empty.
+//! A decoder therefore does, per level: `p ← p - t` (outside the cube → empty), `p ← T⁻¹(p)`,
+//! then descends into `C` (see [`TransformDag::contains`]). Translations are signed (`[i8; 3]`,
+//! `|t_i| < s`); they are non-zero only in pointers into the levels `0..=MAX_TRANSLATION_LEVEL`
+//! (4^3 leaves, 8^3 and 16^3 nodes).
+//!
+//! A transform applied to a translated subtree is again a translated subtree:
+//! `T'(Tr_t(X)) = Tr_{L(t)}(T'(X))` with `L(t)_i = m_i ? -t[π_i] : t[π_i]` ([`apply_to_vector`]),
+//! which is how a parent's child transform composes with a child's translation.
+//!
+//! # Construction
+//! 1. Hierarchical canonicalization under the transform set ([`CanonicalDag`]): one node per
+//!    orbit and level. Levels above `MAX_TRANSLATION_LEVEL` are kept as they are.
+//! 2. Top-down over the translation levels (16^3, then 8^3, then 4^3): the *items* are the
+//!    canonical nodes referenced by the stored nodes of the level above (nodes that lose all
+//!    parents disappear). For every item `B` the search finds the best *parent* `A` with
+//!    `B = Tr_t(T(A))`, `T` in the set: items are ranked by occupancy (voxel count ascending,
+//!    ties by descending canonical id) and the parent is the matching item of the highest rank
+//!    (the most voxels); `B` itself (identity, `t = 0`) is always a candidate. Among the pointers
+//!    into that parent the smallest `|t|_1`, then the smallest transform id, wins.
+//! 3. Single-parent dependency graph: every item that is some item's parent (itself included)
+//!    is stored; the others become `(parent, T, t)`. A stored node is never itself translated, so
+//!    a decoder follows at most one translation per level. Where a chain `B → A → A'` exists,
+//!    `A` is stored as a duplicate of what `A'` could produce (destructive translations do not
+//!    compose, so the chain cannot be shortened).
+//!
+//! # The search (O(N·V))
+//! Per direction group `d` (one sign per axis), the hash of the region of a grid from voxel `q`
+//! toward `d` is `H_d(q) = Σ a^{u_x} b^{u_y} c^{u_z}` over the region's voxels, `u` = distance
+//! from `q` along `d` (wrapping `u64`, random odd bases). It is computed separably, one Horner
+//! pass per axis (`H(x) = v(x) + a·H(x ∓ 1)`), and so are the region voxel counts. Because
+//! empty space far from `q` adds nothing, the hash of a region equals the hash of the same voxels
+//! after a translation that keeps them inside; and because `u` is measured along `d`, the hash
+//! of a mirrored grid in the mirrored direction is the same, so 8 directions cover the 8 mirrors.
+//! - Table: every item `B` is entered 8 times, once per direction, with the hash of all of `B`
+//!   from its bounding-box corner opposite to `d` (its "occupied extreme").
+//! - Lookups: every item `A`, under each axis permutation `P` of the set, computes the hashes of
+//!   `P(A)` for the 8 directions and looks up the *tight* voxels only (those where the region's
+//!   bounding box starts at `q`: every distinct region once). A hit `(B, d_B)` gives the mirror
+//!   `m = d ⊕ d_B` and the translation (corner of `B` minus mirrored `q`); the region count at
+//!   the translated origin must equal `|B|` and the match is then confirmed voxel by voxel, so
+//!   hash collisions never produce a wrong pointer.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use indicatif::ProgressBar;
+use rayon::prelude::*;
+
+use super::canonical::CanonicalDag;
+use super::transform::{Transform, TransformSet};
+use super::Svdag;
+use crate::scene::{morton, Voxels};
+
+/// Highest level (0 = 4^3 leaves) whose nodes may be translated: 2, i.e. 16^3 nodes.
+pub const MAX_TRANSLATION_LEVEL: u32 = 2;
+
+/// A child pointer of a [`TransformDag`]: `Tr_translation(transform(node))` (module docs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub struct TPointer {
+    /// Stored node index within the level below (or the root level for the root pointer).
+    pub node: u32,
+    /// Transform applied first (one of the transform set).
+    pub transform: Transform,
+    /// Destructive translation applied after the transform, per axis, `|t| < side`.
+    pub translation: [i8; 3],
+}
+
+impl TPointer {
+    /// Whether the translation is non-zero.
+    pub fn has_translation(&self) -> bool {
+        self.translation != [0; 3]
+    }
+}
+
+/// The stored nodes of one level of a [`TransformDag`].
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct TLevel {
+    /// Level 0 only: the stored 4^3 leaf masks (bit `morton(x, y, z)`).
+    pub leaves: Vec<u64>,
+    /// Inner levels: child mask of each stored node (bit `o` = octant `x | y<<1 | z<<2`).
+    pub child_masks: Vec<u8>,
+    /// Inner levels: index of each node's first child in `children`.
+    pub child_starts: Vec<u32>,
+    /// Inner levels: children of all nodes, ascending octant order, into the level below.
+    pub children: Vec<TPointer>,
+    /// Canonical node (index into `CanonicalDag::levels[l]`) that each stored node is.
+    pub canonical: Vec<u32>,
+}
+
+impl TLevel {
+    /// Number of stored nodes.
+    pub fn len(&self) -> usize {
+        self.canonical.len()
+    }
+
+    /// Whether the level stores no node.
+    pub fn is_empty(&self) -> bool {
+        self.canonical.is_empty()
+    }
+
+    /// Children of inner node `i`, ascending octant order.
+    pub fn node_children(&self, i: usize) -> &[TPointer] {
+        let start = self.child_starts[i] as usize;
+        let n = self.child_masks[i].count_ones() as usize;
+        &self.children[start..start + n]
+    }
+}
+
+/// An SVDAG rewritten with transform + translation pointers (S+A+T when built with
+/// `TransformSet::All` and translations).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TransformDag {
+    /// Grid side length.
+    pub resolution: u32,
+    /// Transforms allowed in pointers.
+    pub set: TransformSet,
+    /// Whether translations were searched (levels `0..=MAX_TRANSLATION_LEVEL`).
+    pub translations: bool,
+    /// Levels bottom-up (0 = 4^3 leaves); the last is the root level.
+    pub levels: Vec<TLevel>,
+    /// The root pointer into the last level (`None` for an empty scene).
+    pub root: Option<TPointer>,
+}
+
+/// Builds the transform DAG of a (valid) SVDAG: canonicalization under `set`, then, when
+/// `translations`, the translation search on the 4^3, 8^3 and 16^3 levels.
+pub fn build_transform_dag(dag: &Svdag, set: TransformSet, translations: bool) -> TransformDag {
+    build_transform_dag_with_progress(dag, set, translations, &ProgressBar::hidden())
+}
+
+/// [`build_transform_dag`] reporting the translation search on `progress` (items searched).
+pub fn build_transform_dag_with_progress(
+    dag: &Svdag,
+    set: TransformSet,
+    translations: bool,
+    progress: &ProgressBar,
+) -> TransformDag {
+    let canonical = CanonicalDag::build(dag, set);
+    TransformDag::from_canonical(&canonical, translations, progress)
+}
+
+/// `L(v)`: how transform `t` acts on a translation vector (`t(x + v) = t(x) + L(v)`).
+pub fn apply_to_vector(t: Transform, v: [i8; 3]) -> [i8; 3] {
+    let perm = t.permutation();
+    std::array::from_fn(|i| {
+        let c = v[perm[i] as usize];
+        if (t.mirror() >> i) & 1 == 1 {
+            -c
+        } else {
+            c
+        }
+    })
+}
+
+/// `outer` applied to the subtree `p` points to: `outer(Tr_t(T(C))) = Tr_{L(t)}((outer∘T)(C))`.
+pub fn compose_pointer(outer: Transform, p: TPointer) -> TPointer {
+    TPointer {
+        node: p.node,
+        transform: outer.compose(p.transform),
+        translation: apply_to_vector(outer, p.translation),
+    }
+}
+
+impl TransformDag {
+    /// Builds the transform DAG from a canonical DAG (its transform set is kept); searches
+    /// translations when `translations`.
+    pub fn from_canonical(
+        c: &CanonicalDag,
+        translations: bool,
+        progress: &ProgressBar,
+    ) -> TransformDag {
+        let nlev = c.levels.len();
+        let Some(root) = c.root() else {
+            return TransformDag {
+                resolution: c.resolution,
+                set: c.set,
+                translations,
+                levels: vec![TLevel::default(); nlev],
+                root: None,
+            };
+        };
+        let top = nlev - 1;
+        // For every level: the stored canonical ids, and for every canonical id the pointer
+        // (into stored indices) that reproduces it.
+        let mut stored: Vec<Vec<u32>> = vec![Vec::new(); nlev];
+        let mut maps: Vec<Vec<TPointer>> = vec![Vec::new(); nlev];
+        for l in (0..nlev).rev() {
+            let count = c.levels[l].len();
+            if translations && l <= MAX_TRANSLATION_LEVEL as usize {
+                let items: Vec<u32> = if l == top {
+                    vec![root.node]
+                } else {
+                    let above = &c.levels[l + 1];
+                    let mut seen = vec![false; count];
+                    for &s in &stored[l + 1] {
+                        for ch in above.node_children(s as usize) {
+                            seen[ch.node as usize] = true;
+                        }
+                    }
+                    (0..count as u32).filter(|&i| seen[i as usize]).collect()
+                };
+                let parents = search_level(c, l, &items, progress);
+                let mut is_parent = vec![false; items.len()];
+                for p in &parents {
+                    is_parent[p.0 as usize] = true;
+                }
+                let mut stored_index = vec![u32::MAX; items.len()];
+                for (i, &item) in items.iter().enumerate() {
+                    if is_parent[i] {
+                        stored_index[i] = stored[l].len() as u32;
+                        stored[l].push(item);
+                    }
+                }
+                let mut map = vec![TPointer::default(); count];
+                for (i, &item) in items.iter().enumerate() {
+                    let (parent, transform, translation) = parents[i];
+                    map[item as usize] = if is_parent[i] {
+                        TPointer {
+                            node: stored_index[i],
+                            ..TPointer::default()
+                        }
+                    } else {
+                        TPointer {
+                            node: stored_index[parent as usize],
+                            transform,
+                            translation,
+                        }
+                    };
+                }
+                maps[l] = map;
+            } else {
+                stored[l] = (0..count as u32).collect();
+                maps[l] = (0..count as u32)
+                    .map(|node| TPointer {
+                        node,
+                        ..TPointer::default()
+                    })
+                    .collect();
+            }
+        }
+        let mut levels = Vec::with_capacity(nlev);
+        for l in 0..nlev {
+            let src = &c.levels[l];
+            let mut level = TLevel {
+                canonical: stored[l].clone(),
+                ..TLevel::default()
+            };
+            if l == 0 {
+                level.leaves = stored[l].iter().map(|&i| src.leaves[i as usize]).collect();
+            } else {
+                for &i in &stored[l] {
+                    level.child_starts.push(level.children.len() as u32);
+                    level.child_masks.push(src.child_masks[i as usize]);
+                    for ch in src.node_children(i as usize) {
+                        let below = maps[l - 1][ch.node as usize];
+                        level.children.push(compose_pointer(ch.transform, below));
+                    }
+                }
+            }
+            levels.push(level);
+        }
+        let root = compose_pointer(root.transform, maps[top][root.node as usize]);
+        TransformDag {
+            resolution: c.resolution,
+            set: c.set,
+            translations,
+            levels,
+            root: Some(root),
+        }
+    }
+
+    /// Stored node count per level, level 0 first.
+    pub fn level_counts(&self) -> Vec<u64> {
+        self.levels.iter().map(|l| l.len() as u64).collect()
+    }
+
+    /// Number of child pointers (and the root pointer) with a non-zero translation.
+    pub fn translated_pointers(&self) -> u64 {
+        let inner: usize = self
+            .levels
+            .iter()
+            .map(|l| l.children.iter().filter(|p| p.has_translation()).count())
+            .sum();
+        inner as u64 + self.root.is_some_and(|r| r.has_translation()) as u64
+    }
+
+    /// Whether voxel (x, y, z) is set: the reference decoder (per level `p ← T⁻¹(p - t)`).
+    pub fn contains(&self, x: u32, y: u32, z: u32) -> bool {
+        let Some(mut ptr) = self.root else {
+            return false;
+        };
+        let n = self.resolution as i64;
+        let mut p = [x as i64, y as i64, z as i64];
+        if p.iter().any(|&v| v >= n) {
+            return false;
+        }
+        let mut size = n;
+        for l in (0..self.levels.len()).rev() {
+            for (v, t) in p.iter_mut().zip(ptr.translation) {
+                *v -= t as i64;
+            }
+            if p.iter().any(|&v| v < 0 || v >= size) {
+                return false;
+            }
+            let q = ptr
+                .transform
+                .inverse()
+                .apply_point(p.map(|v| v as u32), size as u32);
+            let level = &self.levels[l];
+            if l == 0 {
+                let bit = morton::encode(q[0], q[1], q[2]);
+                return (level.leaves[ptr.node as usize] >> bit) & 1 == 1;
+            }
+            let half = (size / 2) as u32;
+            let o = ((q[0] / half) | (q[1] / half) << 1 | (q[2] / half) << 2) as usize;
+            let mask = level.child_masks[ptr.node as usize];
+            if (mask >> o) & 1 == 0 {
+                return false;
+            }
+            let rank = (mask & ((1u16 << o) - 1) as u8).count_ones() as usize;
+            ptr = level.node_children(ptr.node as usize)[rank];
+            p = q.map(|v| (v % half) as i64);
+            size = half as i64;
+        }
+        false
+    }
+
+    /// Decodes every voxel (Morton codes ascending, no colours).
+    pub fn to_voxels(&self) -> Voxels {
+        let mut codes = Vec::new();
+        if let Some(root) = self.root {
+            let n = self.resolution as i64;
+            let frame = Frame {
+                off: [0; 3],
+                sgn: [1; 3],
+                perm: [0, 1, 2],
+            };
+            let clip = ([0i64; 3], [n - 1; 3]);
+            self.decode(self.levels.len() - 1, root, frame, clip, &mut codes);
+        }
+        codes.sort_unstable();
+        codes.dedup();
+        Voxels {
+            resolution: self.resolution,
+            codes,
+            colors: Vec::new(),
+        }
+    }
+
+    /// Emits the voxels of the subtree `ptr` (level `l`) whose cube is placed by `frame`,
+    /// clipped to `clip` (inclusive world box: the intersection of all enclosing cubes).
+    fn decode(
+        &self,
+        l: usize,
+        ptr: TPointer,
+        frame: Frame,
+        clip: ([i64; 3], [i64; 3]),
+        out: &mut Vec<u64>,
+    ) {
+        let size = 4i64 << l;
+        let cube = frame.bounds(size);
+        let clip = (
+            std::array::from_fn(|i| clip.0[i].max(cube.0[i])),
+            std::array::from_fn(|i| clip.1[i].min(cube.1[i])),
+        );
+        if (0..3).any(|i| clip.0[i] > clip.1[i]) {
+            return;
+        }
+        let inner = frame.then_pointer(ptr.transform, ptr.translation, size);
+        let level = &self.levels[l];
+        if l == 0 {
+            let mut mask = level.leaves[ptr.node as usize];
+            while mask != 0 {
+                let [x, y, z] = morton::decode(mask.trailing_zeros() as u64);
+                mask &= mask - 1;
+                let w = inner.apply([x as i64, y as i64, z as i64]);
+                if (0..3).all(|i| w[i] >= clip.0[i] && w[i] <= clip.1[i]) {
+                    out.push(morton::encode(w[0] as u32, w[1] as u32, w[2] as u32));
+                }
+            }
+            return;
+        }
+        let half = size / 2;
+        let mask = level.child_masks[ptr.node as usize];
+        let mut k = 0;
+        for o in 0..8 {
+            if (mask >> o) & 1 == 1 {
+                let child = level.node_children(ptr.node as usize)[k];
+                k += 1;
+                let offset = [o & 1, (o >> 1) & 1, o >> 2].map(|b| b as i64 * half);
+                self.decode(l - 1, child, inner.then_offset(offset), clip, out);
+            }
+        }
+    }
+}
+
+/// An axis-aligned affine map `world_i = off_i + sgn_i · v[perm_i]` (local cube → world).
+#[derive(Clone, Copy, Debug)]
+struct Frame {
+    off: [i64; 3],
+    sgn: [i64; 3],
+    perm: [usize; 3],
+}
+
+impl Frame {
+    fn apply(&self, v: [i64; 3]) -> [i64; 3] {
+        std::array::from_fn(|i| self.off[i] + self.sgn[i] * v[self.perm[i]])
+    }
+
+    /// Inclusive world bounds of the local cube `[0, size)^3`.
+    fn bounds(&self, size: i64) -> ([i64; 3], [i64; 3]) {
+        let a = self.apply([0; 3]);
+        let b = self.apply([size - 1; 3]);
+        (
+            std::array::from_fn(|i| a[i].min(b[i])),
+            std::array::from_fn(|i| a[i].max(b[i])),
+        )
+    }
+
+    /// The map of the pointed-to node's local frame: `v = T(u) + t`, then `self`.
+    fn then_pointer(&self, t: Transform, tr: [i8; 3], size: i64) -> Frame {
+        let perm = t.permutation();
+        let mut out = *self;
+        for i in 0..3 {
+            let j = self.perm[i];
+            let mirrored = (t.mirror() >> j) & 1 == 1;
+            out.perm[i] = perm[j] as usize;
+            out.off[i] =
+                self.off[i] + self.sgn[i] * (tr[j] as i64 + if mirrored { size - 1 } else { 0 });
+            out.sgn[i] = if mirrored { -self.sgn[i] } else { self.sgn[i] };
+        }
+        out
+    }
+
+    /// The map of a child cube at local offset `o`: `v = w + o`, then `self`.
+    fn then_offset(&self, o: [i64; 3]) -> Frame {
+        let mut out = *self;
+        for i in 0..3 {
+            out.off[i] = self.off[i] + self.sgn[i] * o[self.perm[i]];
+        }
+        out
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The translation search.
+
+/// Morton-ordered bit grid of a node of side 4, 8 or 16 (the first `side^3 / 64` words used).
+type Grid = [u64; 64];
+
+/// Random odd bases of the polynomial region hash, one per axis.
+const BASES: [u64; 3] = [
+    0x9e37_79b9_7f4a_7c15,
+    0xc2b2_ae3d_27d4_eb4f,
+    0x1656_67b1_9e37_79f9,
+];
+
+/// Writes the voxels of canonical node `node` of level `level`, transformed by `t`, into `out`
+/// (Morton order; `out.len()` = words of the level).
+fn fill_grid(c: &CanonicalDag, level: usize, node: u32, t: Transform, out: &mut [u64]) {
+    let lv = &c.levels[level];
+    if level == 0 {
+        out[0] = t.apply_leaf(lv.leaves[node as usize]);
+        return;
+    }
+    let wpc = out.len() / 8;
+    let mask = lv.child_masks[node as usize];
+    let kids = lv.node_children(node as usize);
+    let mut k = 0;
+    for o in 0..8 {
+        if (mask >> o) & 1 == 1 {
+            let ch = kids[k];
+            k += 1;
+            let to = t.apply_octant(o);
+            fill_grid(
+                c,
+                level - 1,
+                ch.node,
+                t.compose(ch.transform),
+                &mut out[to * wpc..(to + 1) * wpc],
+            );
+        } else {
+            let to = t.apply_octant(o);
+            out[to * wpc..(to + 1) * wpc].fill(0);
+        }
+    }
+}
+
+/// `t` applied to a Morton grid of side `n`: bricks (4^3 leaves) move, each is transformed.
+fn transform_grid(src: &[u64], n: u32, t: Transform, dst: &mut [u64]) {
+    let bn = n / 4;
+    for (b, &w) in src.iter().enumerate() {
+        let [x, y, z] = morton::decode(b as u64);
+        let [x, y, z] = t.apply_point([x, y, z], bn);
+        dst[morton::encode(x, y, z) as usize] = t.apply_leaf(w);
+    }
+}
+
+/// Per-level constants of the search.
+struct Geometry {
+    /// Side of the level's cubes (4, 8 or 16).
+    n: usize,
+    /// Words of a grid.
+    words: usize,
+    /// Morton index → `[x, y, z]`.
+    coords: Vec<[u8; 3]>,
+    /// Morton index → linear index `x + n (y + n z)`.
+    linear: Vec<u16>,
+    /// `BASES[axis]^k` for `k < n`.
+    powers: [Vec<u64>; 3],
+}
+
+impl Geometry {
+    fn new(level: usize) -> Geometry {
+        let n = 4usize << level;
+        let cells = n * n * n;
+        let coords: Vec<[u8; 3]> = (0..cells as u64)
+            .map(|m| morton::decode(m).map(|v| v as u8))
+            .collect();
+        let linear = coords
+            .iter()
+            .map(|&[x, y, z]| (x as usize + n * (y as usize + n * z as usize)) as u16)
+            .collect();
+        let powers = BASES.map(|b| {
+            let mut v = Vec::with_capacity(n);
+            let mut p = 1u64;
+            for _ in 0..n {
+                v.push(p);
+                p = p.wrapping_mul(b);
+            }
+            v
+        });
+        Geometry {
+            n,
+            words: cells / 64,
+            coords,
+            linear,
+            powers,
+        }
+    }
+
+    fn index(&self, p: [usize; 3]) -> usize {
+        p[0] + self.n * (p[1] + self.n * p[2])
+    }
+}
+
+/// What the table needs of an item `B`.
+#[derive(Clone, Copy, Default)]
+struct ItemInfo {
+    voxels: u16,
+    lo: [u8; 3],
+    hi: [u8; 3],
+}
+
+/// Keys never 0 (the empty slot marker).
+#[inline]
+fn table_key(h: u64) -> u64 {
+    h.max(1)
+}
+
+/// Open-addressing map from region hash to a range of `(item << 3 | direction)` entries.
+struct Table {
+    shift: u32,
+    /// `(key, start, end)`; key 0 = empty.
+    slots: Vec<(u64, u32, u32)>,
+    entries: Vec<u32>,
+}
+
+impl Table {
+    fn build(mut pairs: Vec<(u64, u32)>) -> Table {
+        pairs.par_sort_unstable();
+        let distinct = pairs.chunk_by(|a, b| a.0 == b.0).count();
+        let cap = (distinct * 2).next_power_of_two().max(16);
+        let shift = 64 - cap.trailing_zeros();
+        let mut slots = vec![(0u64, 0u32, 0u32); cap];
+        let mut start = 0usize;
+        for run in pairs.chunk_by(|a, b| a.0 == b.0) {
+            let key = run[0].0;
+            let mut s = Self::slot(key, shift);
+            while slots[s].0 != 0 {
+                s = (s + 1) & (cap - 1);
+            }
+            slots[s] = (key, start as u32, (start + run.len()) as u32);
+            start += run.len();
+        }
+        let entries = pairs.into_iter().map(|p| p.1).collect();
+        Table {
+            shift,
+            slots,
+            entries,
+        }
+    }
+
+    #[inline]
+    fn slot(key: u64, shift: u32) -> usize {
+        (key.wrapping_mul(0x9e37_79b9_7f4a_7c15) >> shift) as usize
+    }
+
+    #[inline]
+    fn get(&self, key: u64) -> &[u32] {
+        let mask = self.slots.len() - 1;
+        let mut s = Self::slot(key, self.shift);
+        loop {
+            let (k, a, b) = self.slots[s];
+            if k == key {
+                return &self.entries[a as usize..b as usize];
+            }
+            if k == 0 {
+                return &[];
+            }
+            s = (s + 1) & mask;
+        }
+    }
+}
+
+/// Packs a parent candidate so that a larger value is preferred: parent rank, then smaller
+/// `|t|_1`, then smaller transform id; the low 15 bits hold the translation.
+fn pack(rank: u32, t: Transform, tr: [i8; 3]) -> u64 {
+    let l1: u64 = tr.iter().map(|v| v.unsigned_abs() as u64).sum();
+    let enc = tr.iter().enumerate().fold(0u64, |a, (i, &v)| {
+        a | (((v as i64 + 16) as u64 & 31) << (5 * i))
+    });
+    (rank as u64) << 32 | (63 - l1) << 26 | (63 - t.index() as u64) << 20 | enc
+}
+
+fn unpack(key: u64) -> (u32, Transform, [i8; 3]) {
+    let t = Transform::from_index(63 - ((key >> 20) & 63) as usize).unwrap_or_default();
+    let tr = std::array::from_fn(|i| (((key >> (5 * i)) & 31) as i64 - 16) as i8);
+    ((key >> 32) as u32, t, tr)
+}
+
+/// Scratch buffers of one worker.
+struct Scratch {
+    grid: Grid,
+    permuted: Grid,
+    /// Per depth of the direction tree (x, y, z pass): hashes and counts.
+    hash: [Vec<u64>; 4],
+    count: [Vec<u16>; 4],
+}
+
+impl Scratch {
+    fn new(cells: usize) -> Scratch {
+        Scratch {
+            grid: [0; 64],
+            permuted: [0; 64],
+            hash: std::array::from_fn(|_| vec![0; cells]),
+            count: std::array::from_fn(|_| vec![0; cells]),
+        }
+    }
+}
+
+/// One separable pass along `axis`: suffix (or prefix when `negative`) Horner sums of hashes
+/// and plain sums of counts, from `src` into `dst`.
+fn pass(
+    g: &Geometry,
+    (sh, sc): (&[u64], &[u16]),
+    (dh, dc): (&mut [u64], &mut [u16]),
+    axis: usize,
+    negative: bool,
+) {
+    let n = g.n;
+    let stride = [1, n, n * n][axis];
+    let (s1, s2) = match axis {
+        0 => (n, n * n),
+        1 => (1, n * n),
+        _ => (1, n),
+    };
+    let base = BASES[axis];
+    for a in 0..n {
+        for b in 0..n {
+            let start = a * s1 + b * s2;
+            let mut h = 0u64;
+            let mut c = 0u16;
+            for k in 0..n {
+                let i = if negative { k } else { n - 1 - k };
+                let idx = start + i * stride;
+                h = sh[idx].wrapping_add(base.wrapping_mul(h));
+                c += sc[idx];
+                dh[idx] = h;
+                dc[idx] = c;
+            }
+        }
+    }
+}
+
+/// Calls `f(direction, hashes, counts)` for the 8 direction groups of the dense grid held in
+/// `s.hash[0]` / `s.count[0]` (direction bit `i` set = toward negative axis `i`).
+fn for_each_direction(g: &Geometry, s: &mut Scratch, mut f: impl FnMut(usize, &[u64], &[u16])) {
+    let [h0, h1, h2, h3] = &mut s.hash;
+    let [c0, c1, c2, c3] = &mut s.count;
+    for dx in 0..2 {
+        pass(g, (h0, c0), (h1, c1), 0, dx == 1);
+        for dy in 0..2 {
+            pass(g, (h1, c1), (h2, c2), 1, dy == 1);
+            for dz in 0..2 {
+                pass(g, (h2, c2), (h3, c3), 2, dz == 1);
+                f(dx | dy << 1 | dz << 2, h3, c3);
+            }
+        }
+    }
+}
+
+/// Loads a Morton grid as dense hash/count seeds (1 per occupied voxel).
+fn load_dense(g: &Geometry, grid: &[u64], hash: &mut [u64], count: &mut [u16]) {
+    hash.fill(0);
+    count.fill(0);
+    for (w, &word) in grid.iter().enumerate() {
+        let mut m = word;
+        while m != 0 {
+            let bit = w * 64 + m.trailing_zeros() as usize;
+            m &= m - 1;
+            let i = g.linear[bit] as usize;
+            hash[i] = 1;
+            count[i] = 1;
+        }
+    }
+}
+
+/// Table entries of item `b`: its hash from each of its 8 bounding-box corners, and its info.
+fn item_entries(g: &Geometry, grid: &[u64]) -> (ItemInfo, [u64; 8]) {
+    let mut lo = [u8::MAX; 3];
+    let mut hi = [0u8; 3];
+    let mut voxels = 0u16;
+    for (w, &word) in grid.iter().enumerate() {
+        let mut m = word;
+        while m != 0 {
+            let p = g.coords[w * 64 + m.trailing_zeros() as usize];
+            m &= m - 1;
+            voxels += 1;
+            for i in 0..3 {
+                lo[i] = lo[i].min(p[i]);
+                hi[i] = hi[i].max(p[i]);
+            }
+        }
+    }
+    let mut keys = [0u64; 8];
+    for (d, key) in keys.iter_mut().enumerate() {
+        let mut h = 0u64;
+        for (w, &word) in grid.iter().enumerate() {
+            let mut m = word;
+            while m != 0 {
+                let p = g.coords[w * 64 + m.trailing_zeros() as usize];
+                m &= m - 1;
+                let mut term = 1u64;
+                for i in 0..3 {
+                    let u = if (d >> i) & 1 == 0 {
+                        p[i] - lo[i]
+                    } else {
+                        hi[i] - p[i]
+                    };
+                    term = term.wrapping_mul(g.powers[i][u as usize]);
+                }
+                h = h.wrapping_add(term);
+            }
+        }
+        *key = table_key(h);
+    }
+    (ItemInfo { voxels, lo, hi }, keys)
+}
+
+/// Whether `b = Tr_tr(t(a))` holds given that both have `|b|` voxels inside the translated
+/// window (checked by the caller): every voxel of `b` must come from a voxel of `a`.
+fn confirm(g: &Geometry, a: &[u64], b: &[u64], t: Transform, tr: [i8; 3]) -> bool {
+    let inv = t.inverse();
+    let n = g.n as i32;
+    for (w, &word) in b.iter().enumerate() {
+        let mut m = word;
+        while m != 0 {
+            let p = g.coords[w * 64 + m.trailing_zeros() as usize];
+            m &= m - 1;
+            let q: [i32; 3] = std::array::from_fn(|i| p[i] as i32 - tr[i] as i32);
+            if q.iter().any(|&v| v < 0 || v >= n) {
+                return false;
+            }
+            let [x, y, z] = inv.apply_point(q.map(|v| v as u32), g.n as u32);
+            let bit = morton::encode(x, y, z) as usize;
+            if (a[bit / 64] >> (bit % 64)) & 1 == 0 {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+/// Finds for every item (canonical ids of level `level`) its parent: `(item index of the parent,
+/// T, t)` with `item = Tr_t(T(parent))`; an item that is its own parent gets `(itself, id, 0)`.
+fn search_level(
+    c: &CanonicalDag,
+    level: usize,
+    items: &[u32],
+    progress: &ProgressBar,
+) -> Vec<(u32, Transform, [i8; 3])> {
+    let g = Geometry::new(level);
+    let set = c.set;
+    let words = g.words;
+    let grid_of = |i: usize, out: &mut [u64]| {
+        fill_grid(c, level, items[i], Transform::IDENTITY, &mut out[..words]);
+    };
+
+    // Table side: info and 8 corner hashes per item.
+    let entries: Vec<(ItemInfo, [u64; 8])> = (0..items.len())
+        .into_par_iter()
+        .map_init(
+            || [0u64; 64],
+            |grid, i| {
+                grid_of(i, grid);
+                item_entries(&g, &grid[..words])
+            },
+        )
+        .collect();
+    let info: Vec<ItemInfo> = entries.iter().map(|e| e.0).collect();
+    let mut pairs: Vec<(u64, u32)> = Vec::with_capacity(items.len() * 8);
+    for (i, (_, keys)) in entries.iter().enumerate() {
+        for (d, &k) in keys.iter().enumerate() {
+            pairs.push((k, (i as u32) << 3 | d as u32));
+        }
+    }
+    drop(entries);
+    let table = Table::build(pairs);
+
+    // Ranks: occupancy ascending, ties by descending canonical id; higher rank is preferred.
+    let mut by_rank: Vec<u32> = (0..items.len() as u32).collect();
+    by_rank.sort_unstable_by_key(|&i| {
+        (
+            info[i as usize].voxels,
+            std::cmp::Reverse(items[i as usize]),
+        )
+    });
+    let mut rank = vec![0u32; items.len()];
+    for (r, &i) in by_rank.iter().enumerate() {
+        rank[i as usize] = r as u32;
+    }
+    let best: Vec<AtomicU64> = (0..items.len())
+        .map(|i| AtomicU64::new(pack(rank[i], Transform::IDENTITY, [0; 3])))
+        .collect();
+
+    let perms: Vec<usize> = (0..6)
+        .filter(|&p| Transform::from_parts(p, 0).is_some_and(|t| set.contains(t)))
+        .collect();
+    let n = g.n;
+    let cells = n * n * n;
+    progress.inc_length(items.len() as u64);
+    by_rank.par_iter().rev().for_each_init(
+        || Scratch::new(cells),
+        |s, &a| {
+            let a = a as usize;
+            let ra = rank[a];
+            grid_of(a, &mut s.grid);
+            for &p in &perms {
+                let pt = Transform::from_parts(p, 0).unwrap_or_default();
+                transform_grid(&s.grid[..words], n as u32, pt, &mut s.permuted[..words]);
+                load_dense(&g, &s.permuted[..words], &mut s.hash[0], &mut s.count[0]);
+                let grid_a = s.grid;
+                let mut other = [0u64; 64];
+                for_each_direction(&g, s, |d, hash, count| {
+                    // Steps toward the inside of the region, per axis.
+                    for z in 0..n {
+                        for y in 0..n {
+                            for x in 0..n {
+                                let q = [x, y, z];
+                                let i = g.index(q);
+                                let cq = count[i];
+                                if cq == 0 {
+                                    continue;
+                                }
+                                // Tight: the region's slab at q is non-empty on every axis.
+                                let tight = (0..3).all(|ax| {
+                                    let neg = (d >> ax) & 1 == 1;
+                                    let next = if neg {
+                                        q[ax].checked_sub(1)
+                                    } else {
+                                        Some(q[ax] + 1).filter(|&v| v < n)
+                                    };
+                                    match next {
+                                        None => true,
+                                        Some(v) => {
+                                            let mut r = q;
+                                            r[ax] = v;
+                                            count[g.index(r)] < cq
+                                        }
+                                    }
+                                });
+                                if !tight {
+                                    continue;
+                                }
+                                for &e in table.get(table_key(hash[i])) {
+                                    let b = (e >> 3) as usize;
+                                    let db = (e & 7) as usize;
+                                    if b == a || info[b].voxels != cq {
+                                        continue;
+                                    }
+                                    let m = (d ^ db) as u8;
+                                    let Some(t) = Transform::from_parts(p, m) else {
+                                        continue;
+                                    };
+                                    if !set.contains(t) {
+                                        continue;
+                                    }
+                                    // In the frame of T(A): q'' = M_m(q); corner of B toward d_B.
+                                    let mut tr = [0i8; 3];
+                                    let mut origin = [0usize; 3];
+                                    let mut ok = true;
+                                    for ax in 0..3 {
+                                        let qm = if (m >> ax) & 1 == 1 {
+                                            n - 1 - q[ax]
+                                        } else {
+                                            q[ax]
+                                        } as i32;
+                                        let (t_ax, o) = if (db >> ax) & 1 == 0 {
+                                            let t_ax = info[b].lo[ax] as i32 - qm;
+                                            (t_ax, -t_ax)
+                                        } else {
+                                            let t_ax = info[b].hi[ax] as i32 - qm;
+                                            (t_ax, n as i32 - 1 - t_ax)
+                                        };
+                                        if ((db >> ax) & 1 == 0 && t_ax > 0)
+                                            || ((db >> ax) & 1 == 1 && t_ax < 0)
+                                        {
+                                            ok = false;
+                                            break;
+                                        }
+                                        tr[ax] = t_ax as i8;
+                                        // Window origin back in the frame of P(A).
+                                        origin[ax] = if (m >> ax) & 1 == 1 {
+                                            n - 1 - o as usize
+                                        } else {
+                                            o as usize
+                                        };
+                                    }
+                                    if !ok || count[g.index(origin)] != cq {
+                                        continue;
+                                    }
+                                    let key = pack(ra, t, tr);
+                                    if best[b].load(Ordering::Relaxed) >= key {
+                                        continue;
+                                    }
+                                    grid_of(b, &mut other);
+                                    if confirm(&g, &grid_a[..words], &other[..words], t, tr) {
+                                        best[b].fetch_max(key, Ordering::Relaxed);
+                                    }
+                                }
+                            }
+                        }
+                    }
+                });
+            }
+            progress.inc(1);
+        },
+    );
+    best.iter()
+        .map(|k| {
+            let (r, t, tr) = unpack(k.load(Ordering::Relaxed));
+            (by_rank[r as usize], t, tr)
+        })
+        .collect()
+}
