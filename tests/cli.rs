@@ -303,3 +303,43 @@ fn render_writes_png_profile_and_trace() {
         "{differing} pixels differ between GPU and CPU renders"
     );
 }
+
+#[test]
+fn bench_compress_writes_consistent_tables() {
+    let dir = tempfile::tempdir().unwrap();
+    let teapot = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/teapot.obj");
+    let (json, md, png) = (
+        dir.path().join("c.json"),
+        dir.path().join("c.md"),
+        dir.path().join("c.png"),
+    );
+    let out = voxdag(&[
+        "bench",
+        "compress",
+        "--scenes",
+        teapot,
+        "--resolutions",
+        "64",
+        "--json",
+        s(&json),
+        "--markdown",
+        s(&md),
+        "--chart",
+        s(&png),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rows: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let row = &rows[0];
+    let e = |k: &str| row["elements"][k].as_u64().unwrap();
+    assert!(e("svdag") <= e("svo") && e("s") <= e("svdag") && e("a") <= e("svdag"));
+    assert!(e("sa") <= e("s").min(e("a")) && e("sat") <= e("sa") && e("s") <= e("ssvdag"));
+    let b = |k: &str| row["bytes"][k].as_u64().unwrap();
+    assert!(b("ssvdag") < b("svdag32") && b("tsvdag") > 0 && b("tsvdag_base") > 0);
+    assert!(std::fs::read_to_string(&md).unwrap().contains("S+A+T"));
+    let chart = image::open(&png).unwrap();
+    assert_eq!((chart.width(), chart.height()), (18 + 5 * 14 + 18, 260), "one bar group");
+}

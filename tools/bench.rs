@@ -1,5 +1,7 @@
 //! `voxdag bench ...`: benchmarks writing JSON plus a Markdown table (never timed unit tests).
 
+mod compress;
+
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -24,6 +26,8 @@ pub enum BenchCommand {
     Build(BenchBuildArgs),
     /// Primary-ray throughput of the GPU renderer vs the CPU ray cast on the same scene, in one run.
     Render(BenchRenderArgs),
+    /// Tables 3.2-3.4: unique elements per transform set, encoded bytes, stage times, peak RSS.
+    Compress(compress::BenchCompressArgs),
 }
 
 /// Arguments of `voxdag bench build`.
@@ -78,6 +82,7 @@ pub fn run(command: BenchCommand, quiet: bool) -> Result<()> {
     match command {
         BenchCommand::Build(args) => bench_build(&args),
         BenchCommand::Render(args) => bench_render(&args, quiet),
+        BenchCommand::Compress(args) => compress::bench_compress(&args),
     }
 }
 

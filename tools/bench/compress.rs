@@ -1,0 +1,302 @@
+//! `voxdag bench compress`: the dissertation's Tables 3.2-3.4 for our scenes — unique element
+//! counts per transform set, encoded bytes per encoding feature, stage times and peak memory.
+
+use std::path::PathBuf;
+use std::process::Command;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use image::{Rgb, RgbImage};
+use serde::{Deserialize, Serialize};
+use voxdag::dag::encode::{SsvdagEncoding, TransformGraph, TsvdagEncoding, TsvdagOptions};
+use voxdag::dag::{build_transform_dag, CanonicalDag, Invariance, Ssvdag, Svdag, TransformSet};
+use voxdag::scene::{self, ImportOptions};
+
+use super::{scene_path, write_outputs};
+use crate::commands::{peak_rss_bytes, write_json};
+
+/// Arguments of `voxdag bench compress`.
+#[derive(Args)]
+pub struct BenchCompressArgs {
+    /// Scenes: shared data set names (bunny, dragon, buddha, sponza-crytek, ...) or paths.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "bunny,dragon,buddha,sponza-crytek"
+    )]
+    scenes: Vec<String>,
+    /// Grid resolutions.
+    #[arg(long, value_delimiter = ',', default_value = "2048,4096,8192")]
+    resolutions: Vec<u32>,
+    /// Folder of the shared data set.
+    #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/data"))]
+    data: PathBuf,
+    /// JSON output file.
+    #[arg(long, default_value = "out/bench-compress.json")]
+    json: PathBuf,
+    /// Markdown output file.
+    #[arg(long, default_value = "out/bench-compress.md")]
+    markdown: PathBuf,
+    /// Bar chart (PNG) of the element counts relative to the SVDAG.
+    #[arg(long, default_value = "out/bench-compress.png")]
+    chart: PathBuf,
+    /// Internal: measure one scene at one resolution in this process and write its row here.
+    #[arg(long, hide = true)]
+    row_out: Option<PathBuf>,
+}
+
+/// Seconds spent in each stage.
+#[derive(Serialize, Deserialize, Default)]
+struct StageTimes {
+    voxelize_and_build: f64,
+    ssvdag: f64,
+    s: f64,
+    a: f64,
+    sa: f64,
+    sat: f64,
+    encode_ssvdag: f64,
+    encode_tsvdag: f64,
+}
+
+/// Unique elements (nodes + leaves over all levels) per variant.
+#[derive(Serialize, Deserialize, Default)]
+struct Elements {
+    svo: u64,
+    svdag: u64,
+    ssvdag: u64,
+    s: u64,
+    a: u64,
+    sa: u64,
+    sat: u64,
+}
+
+/// Encoded bytes per encoding / feature set (TSVDAG on S+A+T).
+#[derive(Serialize, Deserialize, Default)]
+struct Bytes {
+    svdag32: u64,
+    ssvdag: u64,
+    tsvdag_base: u64,
+    tsvdag_lut: u64,
+    tsvdag: u64,
+}
+
+/// One (scene, resolution) measurement.
+#[derive(Serialize, Deserialize)]
+struct CompressRow {
+    scene: String,
+    resolution: u32,
+    voxels: u64,
+    elements: Elements,
+    bytes: Bytes,
+    seconds: StageTimes,
+    peak_rss_bytes: u64,
+}
+
+/// Runs `f` and returns its result with the seconds it took.
+fn timed<T>(f: impl FnOnce() -> T) -> (T, f64) {
+    let start = Instant::now();
+    let value = f();
+    (value, start.elapsed().as_secs_f64())
+}
+
+/// Measures one scene at one resolution in this process.
+fn measure(scene_name: &str, input: &std::path::Path, resolution: u32) -> Result<CompressRow> {
+    let (dag, build_s) = timed(|| -> Result<Svdag> {
+        let options = ImportOptions {
+            resolution: Some(resolution),
+            ..Default::default()
+        };
+        let voxels = scene::import(input, &options, &indicatif::ProgressBar::hidden())?;
+        Ok(Svdag::from_voxels(&voxels)?)
+    });
+    let dag = dag?;
+    let stats = dag.stats();
+    let total = |counts: Vec<u64>| counts.iter().sum::<u64>();
+    let (ssvdag, ssvdag_s) = timed(|| total(Ssvdag::build(&dag, Invariance::Axes3).level_counts()));
+    let (s, s_s) = timed(|| total(CanonicalDag::build(&dag, TransformSet::Mirrors).level_counts()));
+    let (a, a_s) =
+        timed(|| total(CanonicalDag::build(&dag, TransformSet::AxisPermutations).level_counts()));
+    let (sa, sa_s) = timed(|| total(CanonicalDag::build(&dag, TransformSet::All).level_counts()));
+    let (tdag, sat_s) = timed(|| build_transform_dag(&dag, TransformSet::All, true));
+    let (ssvdag_bytes, encode_ssvdag) =
+        timed(|| SsvdagEncoding::build(&dag).map(|e| e.byte_size()));
+    let graph = TransformGraph::from_transform_dag(&tdag);
+    let encode = |lut, huffman| {
+        TsvdagEncoding::encode(&graph, TsvdagOptions { lut, huffman }).map(|e| e.byte_size())
+    };
+    let ((base, lut, full), encode_tsvdag) = timed(|| {
+        (
+            encode(false, false),
+            encode(true, false),
+            encode(true, true),
+        )
+    });
+    Ok(CompressRow {
+        scene: scene_name.to_string(),
+        resolution,
+        voxels: stats.voxels,
+        elements: Elements {
+            svo: stats.levels.iter().map(|l| l.svo).sum(),
+            svdag: stats.levels.iter().map(|l| l.svdag).sum(),
+            ssvdag,
+            s,
+            a,
+            sa,
+            sat: total(tdag.level_counts()),
+        },
+        bytes: Bytes {
+            svdag32: dag.bytes_svdag32(),
+            ssvdag: ssvdag_bytes?,
+            tsvdag_base: base?,
+            tsvdag_lut: lut?,
+            tsvdag: full?,
+        },
+        seconds: StageTimes {
+            voxelize_and_build: build_s,
+            ssvdag: ssvdag_s,
+            s: s_s,
+            a: a_s,
+            sa: sa_s,
+            sat: sat_s,
+            encode_ssvdag,
+            encode_tsvdag,
+        },
+        peak_rss_bytes: peak_rss_bytes(),
+    })
+}
+
+/// `voxdag bench compress`: each (scene, resolution) runs in a child process so that its peak RSS
+/// is its own.
+pub fn bench_compress(args: &BenchCompressArgs) -> Result<()> {
+    if let Some(row_out) = &args.row_out {
+        let (name, resolution) = match (args.scenes.as_slice(), args.resolutions.as_slice()) {
+            ([name], [resolution]) => (name, *resolution),
+            _ => bail!("--row-out measures exactly one scene at one resolution"),
+        };
+        let row = measure(name, &scene_path(&args.data, name)?, resolution)?;
+        return write_json(row_out, &row);
+    }
+    let exe = std::env::current_exe().context("locating the voxdag executable")?;
+    let scratch = tempfile::Builder::new().prefix("voxdag-bench").tempdir()?;
+    let mut rows: Vec<CompressRow> = Vec::new();
+    for name in &args.scenes {
+        scene_path(&args.data, name)?; // fail before any work on an unknown scene
+        for &resolution in &args.resolutions {
+            eprintln!("bench compress: {name} at {resolution}^3");
+            let row_path = scratch.path().join("row.json");
+            let status = Command::new(&exe)
+                .args([
+                    "bench",
+                    "compress",
+                    "--scenes",
+                    name,
+                    "--resolutions",
+                    &resolution.to_string(),
+                ])
+                .arg("--data")
+                .arg(&args.data)
+                .arg("--row-out")
+                .arg(&row_path)
+                .status()
+                .context("starting voxdag bench compress")?;
+            if !status.success() {
+                bail!("bench compress of {name} at {resolution} failed ({status})");
+            }
+            rows.push(serde_json::from_slice(&std::fs::read(&row_path)?)?);
+        }
+    }
+    let md = markdown(&rows);
+    print!("{md}");
+    write_chart(&args.chart, &rows)?;
+    write_outputs(&args.json, &rows, &args.markdown, &md)
+}
+
+/// Tables 3.2 (elements), 3.3 (bytes) and 3.4 (times) as Markdown.
+fn markdown(rows: &[CompressRow]) -> String {
+    let pct = |x: u64, of: u64| {
+        if of == 0 {
+            0.0
+        } else {
+            100.0 * x as f64 / of as f64
+        }
+    };
+    let mut md = String::from("### Unique elements (nodes + leaves; % of SSVDAG)\n\n| scene | N | voxels | SVO | SVDAG | SSVDAG | S | A | S+A | S+A+T |\n|---|---|---|---|---|---|---|---|---|---|\n");
+    for r in rows {
+        let e = &r.elements;
+        md += &format!(
+            "| {} | {} | {} | {} | {} | {} | {} ({:.1}%) | {} ({:.1}%) | {} ({:.1}%) | {} ({:.1}%) |\n",
+            r.scene, r.resolution, r.voxels, e.svo, e.svdag, e.ssvdag,
+            e.s, pct(e.s, e.ssvdag), e.a, pct(e.a, e.ssvdag), e.sa, pct(e.sa, e.ssvdag), e.sat, pct(e.sat, e.ssvdag)
+        );
+    }
+    md += "\n### Encoded bytes (TSVDAG on S+A+T; % of SSVDAG)\n\n| scene | N | SVDAG32 | SSVDAG | Base | +LUT | +LUT+Huffman |\n|---|---|---|---|---|---|---|\n";
+    for r in rows {
+        let b = &r.bytes;
+        md += &format!(
+            "| {} | {} | {} | {} | {} ({:.1}%) | {} ({:.1}%) | {} ({:.1}%) |\n",
+            r.scene,
+            r.resolution,
+            b.svdag32,
+            b.ssvdag,
+            b.tsvdag_base,
+            pct(b.tsvdag_base, b.ssvdag),
+            b.tsvdag_lut,
+            pct(b.tsvdag_lut, b.ssvdag),
+            b.tsvdag,
+            pct(b.tsvdag, b.ssvdag)
+        );
+    }
+    md += "\n### Seconds per stage and peak memory\n\n| scene | N | voxelize+build | SSVDAG | S | A | S+A | S+A+T | encode SSVDAG | encode TSVDAG (3 variants) | peak RSS MiB |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
+    for r in rows {
+        let t = &r.seconds;
+        md +=
+            &format!(
+            "| {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.0} |\n",
+            r.scene, r.resolution, t.voxelize_and_build, t.ssvdag, t.s, t.a, t.sa, t.sat,
+            t.encode_ssvdag, t.encode_tsvdag, r.peak_rss_bytes as f64 / 1048576.0
+        );
+    }
+    md += "\nChart: per row one group of bars = element counts of SSVDAG, S, A, S+A, S+A+T as a share of the SVDAG's (full height = SVDAG).\n";
+    md
+}
+
+/// Bar colours of the chart, in the order SSVDAG, S, A, S+A, S+A+T.
+const BAR_COLOURS: [[u8; 3]; 5] = [
+    [120, 120, 120],
+    [66, 133, 244],
+    [52, 168, 83],
+    [251, 188, 5],
+    [234, 67, 53],
+];
+
+/// Draws one group of 5 bars per row (heights relative to the row's SVDAG count) as a PNG.
+fn write_chart(path: &std::path::Path, rows: &[CompressRow]) -> Result<()> {
+    let (bar, gap, height) = (14u32, 18u32, 240u32);
+    let width = gap + rows.len() as u32 * (5 * bar + gap);
+    let mut img = RgbImage::from_pixel(width, height + 20, Rgb([255, 255, 255]));
+    for (i, r) in rows.iter().enumerate() {
+        let e = &r.elements;
+        let values = [e.ssvdag, e.s, e.a, e.sa, e.sat];
+        for (j, &value) in values.iter().enumerate() {
+            let h = (height as f64 * value as f64 / e.svdag.max(1) as f64).round() as u32;
+            let x0 = gap + i as u32 * (5 * bar + gap) + j as u32 * bar;
+            for x in x0..x0 + bar - 2 {
+                for y in (10 + height - h.min(height))..(10 + height) {
+                    img.put_pixel(x, y, Rgb(BAR_COLOURS[j]));
+                }
+            }
+        }
+    }
+    for x in 0..width {
+        img.put_pixel(x, 10 + height, Rgb([0, 0, 0]));
+    }
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)?;
+    }
+    voxdag::atomic_file::write_atomic(path, |w| {
+        img.write_to(w, image::ImageFormat::Png)
+            .map_err(std::io::Error::other)
+    })
+    .with_context(|| format!("writing {}", path.display()))
+}
