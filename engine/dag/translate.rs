@@ -578,6 +578,12 @@ impl Table {
         self.slots[s] = Self::fingerprint(hash) << 32 | entry as u64;
     }
 
+    /// The first slot probed for `hash` (0: certainly absent).
+    #[inline]
+    fn first(&self, hash: u64) -> u64 {
+        self.slots[(hash >> self.shift) as usize]
+    }
+
     /// Calls `f` with every entry whose fingerprint equals that of `hash`.
     #[inline]
     fn for_each(&self, hash: u64, mut f: impl FnMut(u32)) {
@@ -616,6 +622,9 @@ fn unpack(key: u64) -> (u32, Transform, [i8; 3]) {
 /// Scratch buffers of one worker.
 struct Scratch {
     grid: Grid,
+    /// Tight cells of the current direction, and the first table slot of each.
+    tight: Vec<u32>,
+    first: Vec<u64>,
     /// Per depth of the direction tree (x, y, z pass): hashes and counts.
     hash: [Vec<u64>; 4],
     count: [Vec<u16>; 4],
@@ -625,6 +634,8 @@ impl Scratch {
     fn new(cells: usize) -> Scratch {
         Scratch {
             grid: [0; 64],
+            tight: Vec::with_capacity(cells),
+            first: Vec::with_capacity(cells),
             hash: std::array::from_fn(|_| vec![0; cells]),
             count: std::array::from_fn(|_| vec![0; cells]),
         }
@@ -666,10 +677,15 @@ fn pass(
 }
 
 /// Calls `f(direction, hashes, counts)` for the 8 direction groups of the dense grid held in
-/// `s.hash[0]` / `s.count[0]` (direction bit `i` set = toward negative axis `i`).
-fn for_each_direction(g: &Geometry, s: &mut Scratch, mut f: impl FnMut(usize, &[u64], &[u16])) {
-    let [h0, h1, h2, h3] = &mut s.hash;
-    let [c0, c1, c2, c3] = &mut s.count;
+/// `hash[0]` / `count[0]` (direction bit `i` set = toward negative axis `i`).
+fn for_each_direction(
+    g: &Geometry,
+    hash: &mut [Vec<u64>; 4],
+    count: &mut [Vec<u16>; 4],
+    mut f: impl FnMut(usize, &[u64], &[u16]),
+) {
+    let [h0, h1, h2, h3] = hash;
+    let [c0, c1, c2, c3] = count;
     for dx in 0..2 {
         pass(g, (h0, c0), (h1, c1), 0, dx == 1);
         for dy in 0..2 {
@@ -677,6 +693,45 @@ fn for_each_direction(g: &Geometry, s: &mut Scratch, mut f: impl FnMut(usize, &[
             for dz in 0..2 {
                 pass(g, (h2, c2), (h3, c3), 2, dz == 1);
                 f(dx | dy << 1 | dz << 2, h3, c3);
+            }
+        }
+    }
+}
+
+/// The tight cells of direction `d`: non-empty regions whose slab through the cell is non-empty
+/// on every axis (the region's bounding box starts there), i.e. every distinct region once.
+fn collect_tight(n: usize, d: usize, count: &[u16], out: &mut Vec<u32>) {
+    out.clear();
+    let neg = [d & 1 == 1, (d >> 1) & 1 == 1, (d >> 2) & 1 == 1];
+    // The neighbour toward the inside of the region along y / z, if any.
+    let next = |v: usize, negative: bool| -> Option<usize> {
+        if negative {
+            v.checked_sub(1)
+        } else {
+            Some(v + 1).filter(|&w| w < n)
+        }
+    };
+    for z in 0..n {
+        let nz = next(z, neg[2]);
+        for y in 0..n {
+            let r = n * (y + n * z);
+            let row = &count[r..r + n];
+            let ny = next(y, neg[1]).map(|w| &count[n * (w + n * z)..][..n]);
+            let nzr = nz.map(|w| &count[n * (y + n * w)..][..n]);
+            for x in 0..n {
+                let c = row[x];
+                if c == 0 {
+                    continue;
+                }
+                let nx = match next(x, neg[0]) {
+                    Some(w) => row[w],
+                    None => 0,
+                };
+                let yv = ny.map_or(0, |rr| rr[x]);
+                let zv = nzr.map_or(0, |rr| rr[x]);
+                if c > nx && c > yv && c > zv {
+                    out.push((r + x) as u32);
+                }
             }
         }
     }
@@ -733,8 +788,8 @@ fn item_keys(g: &Geometry, grid: &[u64], info: &ItemInfo, perms: &[usize], keys:
             let order = super::transform::PERMUTATIONS[perm];
             for d in 0..8 {
                 let mut term = 1u64;
-                for i in 0..3 {
-                    let j = order[i] as usize;
+                for (i, &j) in order.iter().enumerate() {
+                    let j = j as usize;
                     let u = if (d >> i) & 1 == 0 {
                         p[j] - info.lo[j]
                     } else {
@@ -864,100 +919,84 @@ fn search_level(
                 load_dense(&g, &s.grid[..words], &mut s.hash[0], &mut s.count[0]);
                 let grid_a = s.grid;
                 let mut other = [0u64; 64];
-                for_each_direction(&g, s, |d, hash, count| {
-                    let step: [isize; 3] = std::array::from_fn(|ax| {
-                        let st = [1, n, n * n][ax] as isize;
-                        if (d >> ax) & 1 == 1 {
-                            -st
-                        } else {
-                            st
+                let Scratch {
+                    hash: hashes,
+                    count: counts,
+                    tight,
+                    first,
+                    ..
+                } = s;
+                for_each_direction(&g, hashes, counts, |d, hash, count| {
+                    collect_tight(n, d, count, tight);
+                    // Independent loads first (they overlap in the memory system), then probes.
+                    first.clear();
+                    first.extend(tight.iter().map(|&i| table.first(hash[i as usize])));
+                    n_lookups += tight.len() as u64;
+                    for (&i, &f) in tight.iter().zip(first.iter()) {
+                        if f == 0 {
+                            continue;
                         }
-                    });
-                    for z in 0..n {
-                        for y in 0..n {
-                            for x in 0..n {
-                                let q = [x, y, z];
-                                let i = x + n * (y + n * z);
-                                let cq = count[i];
-                                if cq == 0 {
-                                    continue;
-                                }
-                                // Tight: the region's slab through q is non-empty on every axis.
-                                let inside = |ax: usize| {
-                                    if (d >> ax) & 1 == 1 {
-                                        q[ax] > 0
-                                    } else {
-                                        q[ax] + 1 < n
-                                    }
-                                };
-                                let tight = (0..3).all(|ax| {
-                                    !inside(ax) || count[(i as isize + step[ax]) as usize] < cq
-                                });
-                                if !tight {
-                                    continue;
-                                }
-                                n_lookups += 1;
-                                table.for_each(hash[i], |e| {
-                                    let b = (e >> 6) as usize;
-                                    let k = ((e >> 3) & 7) as usize;
-                                    let db = (e & 7) as usize;
-                                    let ib = &info[b];
-                                    if b == a || ib.voxels != cq {
-                                        return;
-                                    }
-                                    let m = (d ^ db) as u8;
-                                    let order = super::transform::PERMUTATIONS[perms[k]];
-                                    // P(b) = Tr_s(M_m(A)): corner of P(b) toward d_B minus M_m(q).
-                                    let mut shift = [0i8; 3];
-                                    let mut origin = [0usize; 3];
-                                    for ax in 0..3 {
-                                        let qm = if (m >> ax) & 1 == 1 {
-                                            n - 1 - q[ax]
-                                        } else {
-                                            q[ax]
-                                        } as i32;
-                                        let j = order[ax] as usize;
-                                        let o = if (db >> ax) & 1 == 0 {
-                                            let s_ax = ib.lo[j] as i32 - qm;
-                                            if s_ax > 0 {
-                                                return;
-                                            }
-                                            shift[ax] = s_ax as i8;
-                                            -s_ax
-                                        } else {
-                                            let s_ax = ib.hi[j] as i32 - qm;
-                                            if s_ax < 0 {
-                                                return;
-                                            }
-                                            shift[ax] = s_ax as i8;
-                                            n as i32 - 1 - s_ax
-                                        } as usize;
-                                        origin[ax] = if (m >> ax) & 1 == 1 { n - 1 - o } else { o };
-                                    }
-                                    // The window of A that stays inside must hold |b| voxels.
-                                    if count[origin[0] + n * (origin[1] + n * origin[2])] != cq {
-                                        return;
-                                    }
-                                    // b = P⁻¹(Tr_s(M_m(A))) = Tr_{L(s)}((P⁻¹ ∘ M_m)(A)).
-                                    let pinv = inverse_perms[k];
-                                    let t = pinv
-                                        .compose(Transform::from_parts(0, m).unwrap_or_default());
-                                    if !set.contains(t) {
-                                        return;
-                                    }
-                                    let tr = apply_to_vector(pinv, shift);
-                                    let key = pack(ra, t, tr);
-                                    if best[b].load(Ordering::Relaxed) >= key {
-                                        return;
-                                    }
-                                    n_confirmed += 1;
-                                    grid_of(b, &mut other);
-                                    if confirm(&g, &grid_a[..words], &other[..words], t, tr) {
-                                        best[b].fetch_max(key, Ordering::Relaxed);
-                                    }
-                                });
+                        let i = i as usize;
+                        let q = [i % n, (i / n) % n, i / (n * n)];
+                        let cq = count[i];
+                        table.for_each(hash[i], |e| {
+                            let b = (e >> 6) as usize;
+                            let k = ((e >> 3) & 7) as usize;
+                            let db = (e & 7) as usize;
+                            let ib = &info[b];
+                            if b == a || ib.voxels != cq {
+                                return;
                             }
-                        }
+                            let m = (d ^ db) as u8;
+                            let order = super::transform::PERMUTATIONS[perms[k]];
+                            // P(b) = Tr_s(M_m(A)): corner of P(b) toward d_B minus M_m(q).
+                            let mut shift = [0i8; 3];
+                            let mut origin = [0usize; 3];
+                            for ax in 0..3 {
+                                let qm = if (m >> ax) & 1 == 1 {
+                                    n - 1 - q[ax]
+                                } else {
+                                    q[ax]
+                                } as i32;
+                                let j = order[ax] as usize;
+                                let o = if (db >> ax) & 1 == 0 {
+                                    let s_ax = ib.lo[j] as i32 - qm;
+                                    if s_ax > 0 {
+                                        return;
+                                    }
+                                    shift[ax] = s_ax as i8;
+                                    -s_ax
+                                } else {
+                                    let s_ax = ib.hi[j] as i32 - qm;
+                                    if s_ax < 0 {
+                                        return;
+                                    }
+                                    shift[ax] = s_ax as i8;
+                                    n as i32 - 1 - s_ax
+                                } as usize;
+                                origin[ax] = if (m >> ax) & 1 == 1 { n - 1 - o } else { o };
+                            }
+                            // The window of A that stays inside must hold |b| voxels.
+                            if count[origin[0] + n * (origin[1] + n * origin[2])] != cq {
+                                return;
+                            }
+                            // b = P⁻¹(Tr_s(M_m(A))) = Tr_{L(s)}((P⁻¹ ∘ M_m)(A)).
+                            let pinv = inverse_perms[k];
+                            let t = pinv.compose(Transform::from_parts(0, m).unwrap_or_default());
+                            if !set.contains(t) {
+                                return;
+                            }
+                            let tr = apply_to_vector(pinv, shift);
+                            let key = pack(ra, t, tr);
+                            if best[b].load(Ordering::Relaxed) >= key {
+                                return;
+                            }
+                            n_confirmed += 1;
+                            grid_of(b, &mut other);
+                            if confirm(&g, &grid_a[..words], &other[..words], t, tr) {
+                                best[b].fetch_max(key, Ordering::Relaxed);
+                            }
+                        });
                     }
                 });
                 lookups.fetch_add(n_lookups, Ordering::Relaxed);
