@@ -40,14 +40,14 @@
 //! empty space far from `q` adds nothing, the hash of a region equals the hash of the same voxels
 //! after a translation that keeps them inside; and because `u` is measured along `d`, the hash
 //! of a mirrored grid in the mirrored direction is the same, so 8 directions cover the 8 mirrors.
-//! - Table: every item `B` is entered 8 times, once per direction, with the hash of all of `B`
-//!   from its bounding-box corner opposite to `d` (its "occupied extreme").
-//! - Lookups: every item `A`, under each axis permutation `P` of the set, computes the hashes of
-//!   `P(A)` for the 8 directions and looks up the *tight* voxels only (those where the region's
-//!   bounding box starts at `q`: every distinct region once). A hit `(B, d_B)` gives the mirror
-//!   `m = d ⊕ d_B` and the translation (corner of `B` minus mirrored `q`); the region count at
-//!   the translated origin must equal `|B|` and the match is then confirmed voxel by voxel, so
-//!   hash collisions never produce a wrong pointer.
+//! - Table: for every item `B` and every axis permutation `P` of the set, the hash of all of
+//!   `P(B)` from each of its 8 bounding-box corners (its "occupied extremes"): 48 keys for S+A.
+//! - Lookups: every item `A` computes its 8 direction grids once and looks up only the *tight*
+//!   voxels (where the region's bounding box starts at `q`: every distinct region once). A hit
+//!   `(B, P, d_B)` gives the mirror `m = d ⊕ d_B`, the shift (corner of `P(B)` minus mirrored
+//!   `q`), `T = P⁻¹ ∘ M_m` and `t = L_{P⁻¹}(shift)`; the region count at the window origin must
+//!   equal `|B|` and the match is then confirmed voxel by voxel, so hash collisions never
+//!   produce a wrong pointer.
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
