@@ -40,14 +40,14 @@
 //! empty space far from `q` adds nothing, the hash of a region equals the hash of the same voxels
 //! after a translation that keeps them inside; and because `u` is measured along `d`, the hash
 //! of a mirrored grid in the mirrored direction is the same, so 8 directions cover the 8 mirrors.
-//! - Table: every item `B` is entered 8 times, once per direction, with the hash of all of `B`
-//!   from its bounding-box corner opposite to `d` (its "occupied extreme").
-//! - Lookups: every item `A`, under each axis permutation `P` of the set, computes the hashes of
-//!   `P(A)` for the 8 directions and looks up the *tight* voxels only (those where the region's
-//!   bounding box starts at `q`: every distinct region once). A hit `(B, d_B)` gives the mirror
-//!   `m = d ⊕ d_B` and the translation (corner of `B` minus mirrored `q`); the region count at
-//!   the translated origin must equal `|B|` and the match is then confirmed voxel by voxel, so
-//!   hash collisions never produce a wrong pointer.
+//! - Table: for every item `B` and every axis permutation `P` of the set, the hash of all of
+//!   `P(B)` from each of its 8 bounding-box corners (its "occupied extremes"): 48 keys for S+A.
+//! - Lookups: every item `A` computes its 8 direction grids once and looks up only the *tight*
+//!   voxels (where the region's bounding box starts at `q`: every distinct region once). A hit
+//!   `(B, P, d_B)` gives the mirror `m = d ⊕ d_B`, the shift (corner of `P(B)` minus mirrored
+//!   `q`), `T = P⁻¹ ∘ M_m` and `t = L_{P⁻¹}(shift)`; the region count at the window origin must
+//!   equal `|B|` and the match is then confirmed voxel by voxel, so hash collisions never
+//!   produce a wrong pointer.
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -494,16 +494,6 @@ fn fill_grid(c: &CanonicalDag, level: usize, node: u32, t: Transform, out: &mut 
     }
 }
 
-/// `t` applied to a Morton grid of side `n`: bricks (4^3 leaves) move, each is transformed.
-fn transform_grid(src: &[u64], n: u32, t: Transform, dst: &mut [u64]) {
-    let bn = n / 4;
-    for (b, &w) in src.iter().enumerate() {
-        let [x, y, z] = morton::decode(b as u64);
-        let [x, y, z] = t.apply_point([x, y, z], bn);
-        dst[morton::encode(x, y, z) as usize] = t.apply_leaf(w);
-    }
-}
-
 /// Per-level constants of the search.
 struct Geometry {
     /// Side of the level's cubes (4, 8 or 16).
@@ -546,10 +536,6 @@ impl Geometry {
             powers,
         }
     }
-
-    fn index(&self, p: [usize; 3]) -> usize {
-        p[0] + self.n * (p[1] + self.n * p[2])
-    }
 }
 
 /// What the table needs of an item `B`.
@@ -560,61 +546,57 @@ struct ItemInfo {
     hi: [u8; 3],
 }
 
-/// Keys never 0 (the empty slot marker).
-#[inline]
-fn table_key(h: u64) -> u64 {
-    h.max(1)
-}
-
-/// Open-addressing map from region hash to a range of `(item << 3 | direction)` entries.
+/// Hash table from region hash to entries `item << 6 | permutation << 3 | direction`: open
+/// addressing with linear probing over one `u64` per entry (high half: low 32 bits of the hash,
+/// forced odd so that 0 marks an empty slot; low half: the entry); the slot is chosen by the
+/// high bits of the hash. Equal fingerprints of different hashes only cost a confirmation.
 struct Table {
     shift: u32,
-    /// `(key, start, end)`; key 0 = empty.
-    slots: Vec<(u64, u32, u32)>,
-    entries: Vec<u32>,
+    slots: Vec<u64>,
 }
 
 impl Table {
-    fn build(mut pairs: Vec<(u64, u32)>) -> Table {
-        pairs.par_sort_unstable();
-        let distinct = pairs.chunk_by(|a, b| a.0 == b.0).count();
-        let cap = (distinct * 2).next_power_of_two().max(16);
-        let shift = 64 - cap.trailing_zeros();
-        let mut slots = vec![(0u64, 0u32, 0u32); cap];
-        let mut start = 0usize;
-        for run in pairs.chunk_by(|a, b| a.0 == b.0) {
-            let key = run[0].0;
-            let mut s = Self::slot(key, shift);
-            while slots[s].0 != 0 {
-                s = (s + 1) & (cap - 1);
-            }
-            slots[s] = (key, start as u32, (start + run.len()) as u32);
-            start += run.len();
-        }
-        let entries = pairs.into_iter().map(|p| p.1).collect();
+    fn new(entries: usize) -> Table {
+        let cap = (entries * 2).next_power_of_two().max(64);
         Table {
-            shift,
-            slots,
-            entries,
+            shift: 64 - cap.trailing_zeros(),
+            slots: vec![0; cap],
         }
     }
 
     #[inline]
-    fn slot(key: u64, shift: u32) -> usize {
-        (key.wrapping_mul(0x9e37_79b9_7f4a_7c15) >> shift) as usize
+    fn fingerprint(hash: u64) -> u64 {
+        (hash as u32 | 1) as u64
     }
 
-    #[inline]
-    fn get(&self, key: u64) -> &[u32] {
+    fn insert(&mut self, hash: u64, entry: u32) {
         let mask = self.slots.len() - 1;
-        let mut s = Self::slot(key, self.shift);
+        let mut s = (hash >> self.shift) as usize;
+        while self.slots[s] != 0 {
+            s = (s + 1) & mask;
+        }
+        self.slots[s] = Self::fingerprint(hash) << 32 | entry as u64;
+    }
+
+    /// The first slot probed for `hash` (0: certainly absent).
+    #[inline]
+    fn first(&self, hash: u64) -> u64 {
+        self.slots[(hash >> self.shift) as usize]
+    }
+
+    /// Calls `f` with every entry whose fingerprint equals that of `hash`.
+    #[inline]
+    fn for_each(&self, hash: u64, mut f: impl FnMut(u32)) {
+        let mask = self.slots.len() - 1;
+        let fp = Self::fingerprint(hash);
+        let mut s = (hash >> self.shift) as usize;
         loop {
-            let (k, a, b) = self.slots[s];
-            if k == key {
-                return &self.entries[a as usize..b as usize];
+            let v = self.slots[s];
+            if v == 0 {
+                return;
             }
-            if k == 0 {
-                return &[];
+            if v >> 32 == fp {
+                f(v as u32);
             }
             s = (s + 1) & mask;
         }
@@ -640,7 +622,9 @@ fn unpack(key: u64) -> (u32, Transform, [i8; 3]) {
 /// Scratch buffers of one worker.
 struct Scratch {
     grid: Grid,
-    permuted: Grid,
+    /// Tight cells of the current direction, and the first table slot of each.
+    tight: Vec<u32>,
+    first: Vec<u64>,
     /// Per depth of the direction tree (x, y, z pass): hashes and counts.
     hash: [Vec<u64>; 4],
     count: [Vec<u16>; 4],
@@ -650,7 +634,8 @@ impl Scratch {
     fn new(cells: usize) -> Scratch {
         Scratch {
             grid: [0; 64],
-            permuted: [0; 64],
+            tight: Vec::with_capacity(cells),
+            first: Vec::with_capacity(cells),
             hash: std::array::from_fn(|_| vec![0; cells]),
             count: std::array::from_fn(|_| vec![0; cells]),
         }
@@ -692,10 +677,15 @@ fn pass(
 }
 
 /// Calls `f(direction, hashes, counts)` for the 8 direction groups of the dense grid held in
-/// `s.hash[0]` / `s.count[0]` (direction bit `i` set = toward negative axis `i`).
-fn for_each_direction(g: &Geometry, s: &mut Scratch, mut f: impl FnMut(usize, &[u64], &[u16])) {
-    let [h0, h1, h2, h3] = &mut s.hash;
-    let [c0, c1, c2, c3] = &mut s.count;
+/// `hash[0]` / `count[0]` (direction bit `i` set = toward negative axis `i`).
+fn for_each_direction(
+    g: &Geometry,
+    hash: &mut [Vec<u64>; 4],
+    count: &mut [Vec<u16>; 4],
+    mut f: impl FnMut(usize, &[u64], &[u16]),
+) {
+    let [h0, h1, h2, h3] = hash;
+    let [c0, c1, c2, c3] = count;
     for dx in 0..2 {
         pass(g, (h0, c0), (h1, c1), 0, dx == 1);
         for dy in 0..2 {
@@ -703,6 +693,45 @@ fn for_each_direction(g: &Geometry, s: &mut Scratch, mut f: impl FnMut(usize, &[
             for dz in 0..2 {
                 pass(g, (h2, c2), (h3, c3), 2, dz == 1);
                 f(dx | dy << 1 | dz << 2, h3, c3);
+            }
+        }
+    }
+}
+
+/// The tight cells of direction `d`: non-empty regions whose slab through the cell is non-empty
+/// on every axis (the region's bounding box starts there), i.e. every distinct region once.
+fn collect_tight(n: usize, d: usize, count: &[u16], out: &mut Vec<u32>) {
+    out.clear();
+    let neg = [d & 1 == 1, (d >> 1) & 1 == 1, (d >> 2) & 1 == 1];
+    // The neighbour toward the inside of the region along y / z, if any.
+    let next = |v: usize, negative: bool| -> Option<usize> {
+        if negative {
+            v.checked_sub(1)
+        } else {
+            Some(v + 1).filter(|&w| w < n)
+        }
+    };
+    for z in 0..n {
+        let nz = next(z, neg[2]);
+        for y in 0..n {
+            let r = n * (y + n * z);
+            let row = &count[r..r + n];
+            let ny = next(y, neg[1]).map(|w| &count[n * (w + n * z)..][..n]);
+            let nzr = nz.map(|w| &count[n * (y + n * w)..][..n]);
+            for x in 0..n {
+                let c = row[x];
+                if c == 0 {
+                    continue;
+                }
+                let nx = match next(x, neg[0]) {
+                    Some(w) => row[w],
+                    None => 0,
+                };
+                let yv = ny.map_or(0, |rr| rr[x]);
+                let zv = nzr.map_or(0, |rr| rr[x]);
+                if c > nx && c > yv && c > zv {
+                    out.push((r + x) as u32);
+                }
             }
         }
     }
@@ -724,46 +753,54 @@ fn load_dense(g: &Geometry, grid: &[u64], hash: &mut [u64], count: &mut [u16]) {
     }
 }
 
-/// Table entries of item `b`: its hash from each of its 8 bounding-box corners, and its info.
-fn item_entries(g: &Geometry, grid: &[u64]) -> (ItemInfo, [u64; 8]) {
+/// Occupancy and bounding box of a grid.
+fn item_info(g: &Geometry, grid: &[u64]) -> ItemInfo {
     let mut lo = [u8::MAX; 3];
     let mut hi = [0u8; 3];
     let mut voxels = 0u16;
+    for_each_voxel(g, grid, |p| {
+        voxels += 1;
+        for i in 0..3 {
+            lo[i] = lo[i].min(p[i]);
+            hi[i] = hi[i].max(p[i]);
+        }
+    });
+    ItemInfo { voxels, lo, hi }
+}
+
+fn for_each_voxel(g: &Geometry, grid: &[u64], mut f: impl FnMut([u8; 3])) {
     for (w, &word) in grid.iter().enumerate() {
         let mut m = word;
         while m != 0 {
-            let p = g.coords[w * 64 + m.trailing_zeros() as usize];
+            f(g.coords[w * 64 + m.trailing_zeros() as usize]);
             m &= m - 1;
-            voxels += 1;
-            for i in 0..3 {
-                lo[i] = lo[i].min(p[i]);
-                hi[i] = hi[i].max(p[i]);
-            }
         }
     }
-    let mut keys = [0u64; 8];
-    for (d, key) in keys.iter_mut().enumerate() {
-        let mut h = 0u64;
-        for (w, &word) in grid.iter().enumerate() {
-            let mut m = word;
-            while m != 0 {
-                let p = g.coords[w * 64 + m.trailing_zeros() as usize];
-                m &= m - 1;
+}
+
+/// Table keys of an item: for permutation `perm` of the set, the hash of `P(item)` from each of
+/// its 8 bounding-box corners (`keys[8 * k + d]`, `k` indexing `perms`).
+fn item_keys(g: &Geometry, grid: &[u64], info: &ItemInfo, perms: &[usize], keys: &mut Vec<u64>) {
+    keys.clear();
+    keys.resize(perms.len() * 8, 0);
+    for_each_voxel(g, grid, |p| {
+        for (k, &perm) in perms.iter().enumerate() {
+            let order = super::transform::PERMUTATIONS[perm];
+            for d in 0..8 {
                 let mut term = 1u64;
-                for i in 0..3 {
+                for (i, &j) in order.iter().enumerate() {
+                    let j = j as usize;
                     let u = if (d >> i) & 1 == 0 {
-                        p[i] - lo[i]
+                        p[j] - info.lo[j]
                     } else {
-                        hi[i] - p[i]
+                        info.hi[j] - p[j]
                     };
                     term = term.wrapping_mul(g.powers[i][u as usize]);
                 }
-                h = h.wrapping_add(term);
+                keys[8 * k + d] = keys[8 * k + d].wrapping_add(term);
             }
         }
-        *key = table_key(h);
-    }
-    (ItemInfo { voxels, lo, hi }, keys)
+    });
 }
 
 /// Whether `b = Tr_tr(t(a))` holds given that both have `|b|` voxels inside the translated
@@ -790,6 +827,9 @@ fn confirm(g: &Geometry, a: &[u64], b: &[u64], t: Transform, tr: [i8; 3]) -> boo
     true
 }
 
+/// Items per table batch: bounds the table (48 entries of 8 bytes per item, load <= 1/2).
+const TABLE_BATCH: usize = 1 << 20;
+
 /// Finds for every item (canonical ids of level `level`) its parent: `(item index of the parent,
 /// T, t)` with `item = Tr_t(T(parent))`; an item that is its own parent gets `(itself, id, 0)`.
 fn search_level(
@@ -798,33 +838,25 @@ fn search_level(
     items: &[u32],
     progress: &ProgressBar,
 ) -> Vec<(u32, Transform, [i8; 3])> {
+    let started = std::time::Instant::now();
     let g = Geometry::new(level);
     let set = c.set;
     let words = g.words;
+    let n = g.n;
+    let cells = n * n * n;
     let grid_of = |i: usize, out: &mut [u64]| {
         fill_grid(c, level, items[i], Transform::IDENTITY, &mut out[..words]);
     };
-
-    // Table side: info and 8 corner hashes per item.
-    let entries: Vec<(ItemInfo, [u64; 8])> = (0..items.len())
+    let info: Vec<ItemInfo> = (0..items.len())
         .into_par_iter()
         .map_init(
             || [0u64; 64],
             |grid, i| {
                 grid_of(i, grid);
-                item_entries(&g, &grid[..words])
+                item_info(&g, &grid[..words])
             },
         )
         .collect();
-    let info: Vec<ItemInfo> = entries.iter().map(|e| e.0).collect();
-    let mut pairs: Vec<(u64, u32)> = Vec::with_capacity(items.len() * 8);
-    for (i, (_, keys)) in entries.iter().enumerate() {
-        for (d, &k) in keys.iter().enumerate() {
-            pairs.push((k, (i as u32) << 3 | d as u32));
-        }
-    }
-    drop(entries);
-    let table = Table::build(pairs);
 
     // Ranks: occupancy ascending, ties by descending canonical id; higher rank is preferred.
     let mut by_rank: Vec<u32> = (0..items.len() as u32).collect();
@@ -845,115 +877,141 @@ fn search_level(
     let perms: Vec<usize> = (0..6)
         .filter(|&p| Transform::from_parts(p, 0).is_some_and(|t| set.contains(t)))
         .collect();
-    let n = g.n;
-    let cells = n * n * n;
-    progress.inc_length(items.len() as u64);
-    by_rank.par_iter().rev().for_each_init(
-        || Scratch::new(cells),
-        |s, &a| {
-            let a = a as usize;
-            let ra = rank[a];
-            grid_of(a, &mut s.grid);
-            for &p in &perms {
-                let pt = Transform::from_parts(p, 0).unwrap_or_default();
-                transform_grid(&s.grid[..words], n as u32, pt, &mut s.permuted[..words]);
-                load_dense(&g, &s.permuted[..words], &mut s.hash[0], &mut s.count[0]);
+    let inverse_perms: Vec<Transform> = perms
+        .iter()
+        .map(|&p| Transform::from_parts(p, 0).unwrap_or_default().inverse())
+        .collect();
+    let lookups = AtomicU64::new(0);
+    let confirmed = AtomicU64::new(0);
+    let batches = items.len().div_ceil(TABLE_BATCH).max(1);
+    progress.inc_length((items.len() * batches) as u64);
+    for batch in 0..batches {
+        let range = batch * TABLE_BATCH..((batch + 1) * TABLE_BATCH).min(items.len());
+        let keys: Vec<Vec<u64>> = range
+            .clone()
+            .into_par_iter()
+            .map_init(
+                || [0u64; 64],
+                |grid, b| {
+                    grid_of(b, grid);
+                    let mut keys = Vec::new();
+                    item_keys(&g, &grid[..words], &info[b], &perms, &mut keys);
+                    keys
+                },
+            )
+            .collect();
+        let mut table = Table::new(range.len() * perms.len() * 8);
+        for (b, keys) in range.clone().zip(&keys) {
+            for (e, &k) in keys.iter().enumerate() {
+                table.insert(k, (b as u32) << 6 | e as u32);
+            }
+        }
+        drop(keys);
+
+        by_rank.par_iter().rev().for_each_init(
+            || Scratch::new(cells),
+            |s, &a| {
+                let a = a as usize;
+                let ra = rank[a];
+                let mut n_lookups = 0u64;
+                let mut n_confirmed = 0u64;
+                grid_of(a, &mut s.grid);
+                load_dense(&g, &s.grid[..words], &mut s.hash[0], &mut s.count[0]);
                 let grid_a = s.grid;
                 let mut other = [0u64; 64];
-                for_each_direction(&g, s, |d, hash, count| {
-                    // Steps toward the inside of the region, per axis.
-                    for z in 0..n {
-                        for y in 0..n {
-                            for x in 0..n {
-                                let q = [x, y, z];
-                                let i = g.index(q);
-                                let cq = count[i];
-                                if cq == 0 {
-                                    continue;
-                                }
-                                // Tight: the region's slab at q is non-empty on every axis.
-                                let tight = (0..3).all(|ax| {
-                                    let neg = (d >> ax) & 1 == 1;
-                                    let next = if neg {
-                                        q[ax].checked_sub(1)
-                                    } else {
-                                        Some(q[ax] + 1).filter(|&v| v < n)
-                                    };
-                                    match next {
-                                        None => true,
-                                        Some(v) => {
-                                            let mut r = q;
-                                            r[ax] = v;
-                                            count[g.index(r)] < cq
-                                        }
-                                    }
-                                });
-                                if !tight {
-                                    continue;
-                                }
-                                for &e in table.get(table_key(hash[i])) {
-                                    let b = (e >> 3) as usize;
-                                    let db = (e & 7) as usize;
-                                    if b == a || info[b].voxels != cq {
-                                        continue;
-                                    }
-                                    let m = (d ^ db) as u8;
-                                    let Some(t) = Transform::from_parts(p, m) else {
-                                        continue;
-                                    };
-                                    if !set.contains(t) {
-                                        continue;
-                                    }
-                                    // In the frame of T(A): q'' = M_m(q); corner of B toward d_B.
-                                    let mut tr = [0i8; 3];
-                                    let mut origin = [0usize; 3];
-                                    let mut ok = true;
-                                    for ax in 0..3 {
-                                        let qm = if (m >> ax) & 1 == 1 {
-                                            n - 1 - q[ax]
-                                        } else {
-                                            q[ax]
-                                        } as i32;
-                                        let (t_ax, o) = if (db >> ax) & 1 == 0 {
-                                            let t_ax = info[b].lo[ax] as i32 - qm;
-                                            (t_ax, -t_ax)
-                                        } else {
-                                            let t_ax = info[b].hi[ax] as i32 - qm;
-                                            (t_ax, n as i32 - 1 - t_ax)
-                                        };
-                                        if ((db >> ax) & 1 == 0 && t_ax > 0)
-                                            || ((db >> ax) & 1 == 1 && t_ax < 0)
-                                        {
-                                            ok = false;
-                                            break;
-                                        }
-                                        tr[ax] = t_ax as i8;
-                                        // Window origin back in the frame of P(A).
-                                        origin[ax] = if (m >> ax) & 1 == 1 {
-                                            n - 1 - o as usize
-                                        } else {
-                                            o as usize
-                                        };
-                                    }
-                                    if !ok || count[g.index(origin)] != cq {
-                                        continue;
-                                    }
-                                    let key = pack(ra, t, tr);
-                                    if best[b].load(Ordering::Relaxed) >= key {
-                                        continue;
-                                    }
-                                    grid_of(b, &mut other);
-                                    if confirm(&g, &grid_a[..words], &other[..words], t, tr) {
-                                        best[b].fetch_max(key, Ordering::Relaxed);
-                                    }
-                                }
-                            }
+                let Scratch {
+                    hash: hashes,
+                    count: counts,
+                    tight,
+                    first,
+                    ..
+                } = s;
+                for_each_direction(&g, hashes, counts, |d, hash, count| {
+                    collect_tight(n, d, count, tight);
+                    // Independent loads first (they overlap in the memory system), then probes.
+                    first.clear();
+                    first.extend(tight.iter().map(|&i| table.first(hash[i as usize])));
+                    n_lookups += tight.len() as u64;
+                    for (&i, &f) in tight.iter().zip(first.iter()) {
+                        if f == 0 {
+                            continue;
                         }
+                        let i = i as usize;
+                        let q = [i % n, (i / n) % n, i / (n * n)];
+                        let cq = count[i];
+                        table.for_each(hash[i], |e| {
+                            let b = (e >> 6) as usize;
+                            let k = ((e >> 3) & 7) as usize;
+                            let db = (e & 7) as usize;
+                            let ib = &info[b];
+                            if b == a || ib.voxels != cq {
+                                return;
+                            }
+                            let m = (d ^ db) as u8;
+                            let order = super::transform::PERMUTATIONS[perms[k]];
+                            // P(b) = Tr_s(M_m(A)): corner of P(b) toward d_B minus M_m(q).
+                            let mut shift = [0i8; 3];
+                            let mut origin = [0usize; 3];
+                            for ax in 0..3 {
+                                let qm = if (m >> ax) & 1 == 1 {
+                                    n - 1 - q[ax]
+                                } else {
+                                    q[ax]
+                                } as i32;
+                                let j = order[ax] as usize;
+                                let o = if (db >> ax) & 1 == 0 {
+                                    let s_ax = ib.lo[j] as i32 - qm;
+                                    if s_ax > 0 {
+                                        return;
+                                    }
+                                    shift[ax] = s_ax as i8;
+                                    -s_ax
+                                } else {
+                                    let s_ax = ib.hi[j] as i32 - qm;
+                                    if s_ax < 0 {
+                                        return;
+                                    }
+                                    shift[ax] = s_ax as i8;
+                                    n as i32 - 1 - s_ax
+                                } as usize;
+                                origin[ax] = if (m >> ax) & 1 == 1 { n - 1 - o } else { o };
+                            }
+                            // The window of A that stays inside must hold |b| voxels.
+                            if count[origin[0] + n * (origin[1] + n * origin[2])] != cq {
+                                return;
+                            }
+                            // b = P⁻¹(Tr_s(M_m(A))) = Tr_{L(s)}((P⁻¹ ∘ M_m)(A)).
+                            let pinv = inverse_perms[k];
+                            let t = pinv.compose(Transform::from_parts(0, m).unwrap_or_default());
+                            if !set.contains(t) {
+                                return;
+                            }
+                            let tr = apply_to_vector(pinv, shift);
+                            let key = pack(ra, t, tr);
+                            if best[b].load(Ordering::Relaxed) >= key {
+                                return;
+                            }
+                            n_confirmed += 1;
+                            grid_of(b, &mut other);
+                            if confirm(&g, &grid_a[..words], &other[..words], t, tr) {
+                                best[b].fetch_max(key, Ordering::Relaxed);
+                            }
+                        });
                     }
                 });
-            }
-            progress.inc(1);
-        },
+                lookups.fetch_add(n_lookups, Ordering::Relaxed);
+                confirmed.fetch_add(n_confirmed, Ordering::Relaxed);
+                progress.inc(1);
+            },
+        );
+    }
+    log::info!(
+        "translations at {}^3: {} items, {:.1} s, {} lookups, {} confirmations",
+        n,
+        items.len(),
+        started.elapsed().as_secs_f64(),
+        lookups.load(Ordering::Relaxed),
+        confirmed.load(Ordering::Relaxed)
     );
     best.iter()
         .map(|k| {
