@@ -341,5 +341,9 @@ fn bench_compress_writes_consistent_tables() {
     assert!(b("ssvdag") < b("svdag32") && b("tsvdag") > 0 && b("tsvdag_base") > 0);
     assert!(std::fs::read_to_string(&md).unwrap().contains("S+A+T"));
     let chart = image::open(&png).unwrap();
-    assert_eq!((chart.width(), chart.height()), (18 + 5 * 14 + 18, 260), "one bar group");
+    assert_eq!(
+        (chart.width(), chart.height()),
+        (18 + 5 * 14 + 18, 260),
+        "one bar group"
+    );
 }

@@ -10,7 +10,8 @@ use serde::{Deserialize, Serialize};
 use voxdag::atomic_file::write_atomic;
 use voxdag::dag::encode::{EncodedDag, SsvdagEncoding, TsvdagEncoding, TsvdagOptions, VoxelDigest};
 use voxdag::dag::{
-    export_vox, export_xyz_u32_file, DagStats, Svdag, TransformSet, VdagFile, VoxelIndex,
+    analyze_symmetry, export_vox, export_xyz_u32_file, DagStats, Svdag, SymmetryAnalysis,
+    TransformSet, VdagFile, VoxelIndex,
 };
 use voxdag::gpu::{GpuContext, GpuOptions, Profiler};
 use voxdag::render::gpu::GpuRenderer;
@@ -236,18 +237,11 @@ pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
 }
 
 /// `voxdag stats`.
-pub fn stats(args: &StatsArgs) -> Result<()> {
+pub fn stats(args: &StatsArgs, quiet: bool) -> Result<()> {
     let dag = load_svdag(&args.file)?;
-    let stats = dag.stats_with_symmetry();
-    let bytes = encoded_bytes(&dag)?;
+    let (stats, bytes) = describe(&dag, quiet)?;
     if args.json {
-        let mut value = serde_json::to_value(&stats)?;
-        if let Some(b) = value.get_mut("bytes").and_then(|b| b.as_object_mut()) {
-            for (name, v) in &bytes {
-                b.insert(name.clone(), serde_json::Value::from(*v));
-            }
-        }
-        println!("{}", serde_json::to_string(&value)?);
+        println!("{}", serde_json::to_string(&stats_json(&stats, &bytes)?)?);
     } else {
         print!("{}", stats_table(&args.file, &stats));
         let line: Vec<String> = bytes.iter().map(|(n, v)| format!("{n} {v}")).collect();
@@ -256,15 +250,34 @@ pub fn stats(args: &StatsArgs) -> Result<()> {
     Ok(())
 }
 
+/// Statistics with the transform counts and the bytes of every encoding (runs each search once).
+fn describe(dag: &Svdag, quiet: bool) -> Result<(DagStats, Vec<(String, u64)>)> {
+    let bar = progress_bar(quiet);
+    bar.set_message("translations");
+    let analysis = analyze_symmetry(dag, &bar);
+    bar.finish_and_clear();
+    let bytes = encoded_bytes(dag, &analysis)?;
+    Ok((dag.stats().with_symmetry(&analysis.counts), bytes))
+}
+
+/// The `stats --json` document: [`DagStats`] with the encoded sizes added under `bytes`.
+fn stats_json(stats: &DagStats, bytes: &[(String, u64)]) -> Result<serde_json::Value> {
+    let mut value = serde_json::to_value(stats)?;
+    if let Some(b) = value.get_mut("bytes").and_then(|b| b.as_object_mut()) {
+        for (name, v) in bytes {
+            b.insert(name.clone(), serde_json::Value::from(*v));
+        }
+    }
+    Ok(value)
+}
+
 /// Bytes of the DAG in each encoding: `ssvdag`, `tsvdag` (S+A+T, tables, Huffman) and the
 /// ablations `tsvdag_base` (neither) and `tsvdag_lut` (tables only).
-pub fn encoded_bytes(dag: &Svdag) -> Result<Vec<(String, u64)>> {
-    let tdag = voxdag::dag::build_transform_dag(dag, TransformSet::All, true);
-    let graph = voxdag::dag::encode::TransformGraph::from_transform_dag(&tdag);
-    drop(tdag);
+pub fn encoded_bytes(dag: &Svdag, analysis: &SymmetryAnalysis) -> Result<Vec<(String, u64)>> {
+    let graph = voxdag::dag::encode::TransformGraph::from_transform_dag(&analysis.sat);
     let mut out = vec![(
         "ssvdag".to_string(),
-        SsvdagEncoding::build(dag)?.byte_size(),
+        SsvdagEncoding::encode(&analysis.ssvdag, dag.resolution)?.byte_size(),
     )];
     for (name, lut, huffman) in [
         ("tsvdag", true, true),
@@ -362,7 +375,7 @@ pub fn stats_table(file: &Path, stats: &DagStats) -> String {
         stats.bytes.svdag32
     );
     if symmetry {
-        out += "     ssvdag          s          a         sa";
+        out += "     ssvdag          s          a         sa        sat";
     }
     out += "\n";
     let cell = |v: Option<u64>| v.map_or_else(|| "-".to_string(), |v| v.to_string());
@@ -377,11 +390,12 @@ pub fn stats_table(file: &Path, stats: &DagStats) -> String {
         );
         if symmetry {
             out += &format!(
-                " {:>10} {:>10} {:>10} {:>10}",
+                " {:>10} {:>10} {:>10} {:>10} {:>10}",
                 cell(level.ssvdag),
                 cell(level.s),
                 cell(level.a),
-                cell(level.sa)
+                cell(level.sa),
+                cell(level.sat)
             );
         }
         out += "\n";
@@ -520,14 +534,11 @@ pub fn demo(args: &DemoArgs, quiet: bool) -> Result<()> {
         trace: Some(args.out_dir.join("avocado-trace.json")),
     };
     render(&render_args)?;
-    let stats_args = StatsArgs {
-        file: vdag.clone(),
-        json: false,
-    };
-    stats(&stats_args)?;
+    let (stats, bytes) = describe(&Svdag::load(&vdag)?, quiet)?;
+    print!("{}", stats_table(&vdag, &stats));
     write_json(
         &args.out_dir.join("avocado-stats.json"),
-        &Svdag::load(&vdag)?.stats(),
+        &stats_json(&stats, &bytes)?,
     )?;
     Ok(())
 }

@@ -194,7 +194,7 @@ fn main() {
         .init();
     let result = match cli.command {
         Command::Build(args) => commands::build(&args, cli.quiet),
-        Command::Stats(args) => commands::stats(&args),
+        Command::Stats(args) => commands::stats(&args, cli.quiet),
         Command::Verify(args) => commands::verify(&args),
         Command::ExportVoxels(args) => commands::export_voxels(&args),
         Command::Render(args) => commands::render(&args),

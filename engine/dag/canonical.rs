@@ -386,15 +386,34 @@ pub fn symmetry_counts_with_progress(
     dag: &Svdag,
     progress: &indicatif::ProgressBar,
 ) -> Vec<SymmetryLevelCounts> {
+    analyze_symmetry(dag, progress).counts
+}
+
+/// The per-level counts together with the structures they were counted on, so that callers
+/// that also encode (e.g. `voxdag stats`) run each search once.
+pub struct SymmetryAnalysis {
+    /// Per-level unique counts, level 0 first.
+    pub counts: Vec<SymmetryLevelCounts>,
+    /// The SSVDAG as published (3-bit invariance).
+    pub ssvdag: super::Ssvdag,
+    /// The S+A+T transform DAG.
+    pub sat: super::TransformDag,
+}
+
+/// Builds the SSVDAG, the S, A and S+A canonical DAGs and the S+A+T transform DAG of `dag`,
+/// reporting the translation search on `progress`.
+pub fn analyze_symmetry(dag: &Svdag, progress: &indicatif::ProgressBar) -> SymmetryAnalysis {
     let svdag: Vec<u64> = dag.level_stats().iter().map(|l| l.svdag).collect();
-    let ssvdag = super::Ssvdag::build(dag, super::Invariance::Axes3).level_counts();
+    let ssvdag_dag = super::Ssvdag::build(dag, super::Invariance::Axes3);
+    let ssvdag = ssvdag_dag.level_counts();
     let s = CanonicalDag::build(dag, TransformSet::Mirrors).level_counts();
     let a = CanonicalDag::build(dag, TransformSet::AxisPermutations).level_counts();
     let sa_dag = CanonicalDag::build(dag, TransformSet::All);
     let sa = sa_dag.level_counts();
-    let sat = super::TransformDag::from_canonical(&sa_dag, true, progress).level_counts();
+    let sat_dag = super::TransformDag::from_canonical(&sa_dag, true, progress);
     drop(sa_dag);
-    (0..svdag.len())
+    let sat = sat_dag.level_counts();
+    let counts = (0..svdag.len())
         .map(|l| SymmetryLevelCounts {
             level: l as u32,
             svdag: svdag[l],
@@ -404,5 +423,10 @@ pub fn symmetry_counts_with_progress(
             sa: sa[l],
             sat: sat[l],
         })
-        .collect()
+        .collect();
+    SymmetryAnalysis {
+        counts,
+        ssvdag: ssvdag_dag,
+        sat: sat_dag,
+    }
 }

@@ -33,8 +33,8 @@ mod validate;
 use std::path::PathBuf;
 
 pub use canonical::{
-    symmetry_counts, symmetry_counts_with_progress, CanonicalDag, SymmetryLevelCounts,
-    TransformPointer,
+    analyze_symmetry, symmetry_counts, symmetry_counts_with_progress, CanonicalDag,
+    SymmetryAnalysis, SymmetryLevelCounts, TransformPointer,
 };
 pub use export::{export_vox, export_xyz_u32, export_xyz_u32_file};
 pub use file::{ColorFormat, Encoding, VdagFile, FORMAT_VERSION, MAGIC};

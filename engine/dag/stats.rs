@@ -171,14 +171,20 @@ impl Svdag {
     /// `sa`, `sat`; see `docs/transforms.md`, `docs/translations.md`). Much slower than `stats`
     /// (the translation search dominates).
     pub fn stats_with_symmetry(&self) -> DagStats {
-        let mut stats = self.stats();
-        for (level, counts) in stats.levels.iter_mut().zip(super::symmetry_counts(self)) {
-            level.ssvdag = Some(counts.ssvdag);
-            level.s = Some(counts.s);
-            level.a = Some(counts.a);
-            level.sa = Some(counts.sa);
-            level.sat = Some(counts.sat);
+        self.stats().with_symmetry(&super::symmetry_counts(self))
+    }
+}
+
+impl DagStats {
+    /// Fills in the per-level transform counts (`ssvdag`, `s`, `a`, `sa`, `sat`).
+    pub fn with_symmetry(mut self, counts: &[super::SymmetryLevelCounts]) -> DagStats {
+        for (level, c) in self.levels.iter_mut().zip(counts) {
+            level.ssvdag = Some(c.ssvdag);
+            level.s = Some(c.s);
+            level.a = Some(c.a);
+            level.sa = Some(c.sa);
+            level.sat = Some(c.sat);
         }
-        stats
+        self
     }
 }

@@ -1005,7 +1005,7 @@ fn search_level(
             },
         );
     }
-    log::info!(
+    log::debug!(
         "translations at {}^3: {} items, {:.1} s, {} lookups, {} confirmations",
         n,
         items.len(),
