@@ -59,16 +59,18 @@ pub struct Hit {
     pub color_index: u64,
 }
 
-/// Per-ray constants shared by every box test.
+/// Per-ray constants shared by every box test (also used by the traversal of encoded DAGs).
 #[derive(Clone, Copy, Debug)]
-struct RaySetup {
+pub(crate) struct RaySetup {
     origin: [f32; 3],
     inv: [f32; 3],
-    mirror: u32,
+    /// Bit `k` set when the ray goes towards -k: the child visit order is `i ^ mirror`.
+    pub(crate) mirror: u32,
 }
 
 impl RaySetup {
-    fn new(ray: &Ray) -> RaySetup {
+    /// `1/dir` (a huge finite value for zero components) and the mirror mask of a ray.
+    pub(crate) fn new(ray: &Ray) -> RaySetup {
         let mut inv = [0.0f32; 3];
         let mut mirror = 0u32;
         for k in 0..3 {
@@ -93,7 +95,7 @@ impl RaySetup {
     /// The near plane of axis `k` is the low one unless mirror bit `k` is set; `t_near` is the
     /// maximum over x, y, z (ties keep the earlier axis), `t_far` the minimum.
     #[inline]
-    fn slab(&self, pos: [u32; 3], size: u32) -> (f32, f32, usize) {
+    pub(crate) fn slab(&self, pos: [u32; 3], size: u32) -> (f32, f32, usize) {
         let mut near = [0.0f32; 3];
         let mut far = [0.0f32; 3];
         for k in 0..3 {

@@ -9,7 +9,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use super::{DigestBuilder, EncodeError, VoxelDigest};
-use crate::dag::raycast::{Ray, MAX_FRAMES, PARALLEL_INV};
+use crate::dag::raycast::{Ray, RaySetup, MAX_FRAMES};
 use crate::dag::Svdag;
 use crate::scene::{morton, Voxels};
 
@@ -187,43 +187,6 @@ pub struct EncodedHit {
     pub normal: [i32; 3],
 }
 
-/// Per-ray constants.
-struct Setup {
-    origin: [f32; 3],
-    inv: [f32; 3],
-    mirror: u32,
-}
-
-impl Setup {
-    fn slab(&self, pos: [u32; 3], size: u32) -> (f32, f32, usize) {
-        let mut near = [0.0f32; 3];
-        let mut far = [0.0f32; 3];
-        for k in 0..3 {
-            let lo = (pos[k] as f32 - self.origin[k]) * self.inv[k];
-            let hi = ((pos[k] + size) as f32 - self.origin[k]) * self.inv[k];
-            if self.mirror & (1 << k) != 0 {
-                near[k] = hi;
-                far[k] = lo;
-            } else {
-                near[k] = lo;
-                far[k] = hi;
-            }
-        }
-        let axis = if near[0] >= near[1] && near[0] >= near[2] {
-            0
-        } else if near[1] >= near[2] {
-            1
-        } else {
-            2
-        };
-        (
-            near[0].max(near[1]).max(near[2]),
-            far[0].min(far[1]).min(far[2]),
-            axis,
-        )
-    }
-}
-
 fn hit_normal(dir: [f32; 3], t_near: f32, entry_axis: usize) -> [i32; 3] {
     let axis = if t_near < 0.0 {
         let a = [dir[0].abs(), dir[1].abs(), dir[2].abs()];
@@ -283,23 +246,7 @@ pub fn raycast<V: TreeView>(
     let Some(root) = view.root()? else {
         return Ok(None);
     };
-    let mut inv = [0.0f32; 3];
-    let mut mirror = 0u32;
-    for k in 0..3 {
-        inv[k] = if ray.dir[k] == 0.0 {
-            PARALLEL_INV
-        } else {
-            1.0 / ray.dir[k]
-        };
-        if ray.dir[k] < 0.0 {
-            mirror |= 1 << k;
-        }
-    }
-    let setup = Setup {
-        origin: ray.origin,
-        inv,
-        mirror,
-    };
+    let setup = RaySetup::new(ray);
     let (t_near, t_far, _) = setup.slab([0; 3], n);
     let t_enter = t_near.max(0.0);
     if !(t_enter < t_far && t_enter < t_max) {
