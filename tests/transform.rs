@@ -60,17 +60,7 @@ fn group(set: TransformSet) -> Vec<Elem> {
 }
 
 fn voxels(n: u32, coords: impl IntoIterator<Item = [u32; 3]>) -> Voxels {
-    let mut codes: Vec<u64> = coords
-        .into_iter()
-        .map(|[x, y, z]| morton::encode(x, y, z))
-        .collect();
-    codes.sort_unstable();
-    codes.dedup();
-    Voxels {
-        resolution: n,
-        codes,
-        colors: Vec::new(),
-    }
+    Voxels::from_coords(n, coords)
 }
 
 /// Per level: the distinct non-empty subtrees (local voxel sets) in order of first occurrence

@@ -16,18 +16,8 @@ use voxdag::scene::{morton, Voxels};
 
 type P = [i32; 3];
 
-fn voxels(n: u32, pts: impl IntoIterator<Item = [u32; 3]>) -> Voxels {
-    let mut codes: Vec<u64> = pts
-        .into_iter()
-        .map(|[x, y, z]| morton::encode(x, y, z))
-        .collect();
-    codes.sort_unstable();
-    codes.dedup();
-    Voxels {
-        resolution: n,
-        codes,
-        colors: Vec::new(),
-    }
+fn voxels(n: u32, coords: impl IntoIterator<Item = [u32; 3]>) -> Voxels {
+    Voxels::from_coords(n, coords)
 }
 
 /// Independent point action of transform `t` (ids: 8 * permutation + mirror mask).

@@ -201,6 +201,21 @@ pub struct Voxels {
 }
 
 impl Voxels {
+    /// An uncoloured voxel set from coordinates (any order, duplicates allowed; each below `resolution`).
+    pub fn from_coords(resolution: u32, coords: impl IntoIterator<Item = [u32; 3]>) -> Voxels {
+        let mut codes: Vec<u64> = coords
+            .into_iter()
+            .map(|[x, y, z]| morton::encode(x, y, z))
+            .collect();
+        codes.sort_unstable();
+        codes.dedup();
+        Voxels {
+            resolution,
+            codes,
+            colors: Vec::new(),
+        }
+    }
+
     /// Number of occupied voxels.
     pub fn len(&self) -> usize {
         self.codes.len()
