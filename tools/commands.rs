@@ -243,9 +243,7 @@ pub fn stats(args: &StatsArgs, quiet: bool) -> Result<()> {
     if args.json {
         println!("{}", serde_json::to_string(&stats_json(&stats, &bytes)?)?);
     } else {
-        print!("{}", stats_table(&args.file, &stats));
-        let line: Vec<String> = bytes.iter().map(|(n, v)| format!("{n} {v}")).collect();
-        println!("  encoded     {}", line.join("  "));
+        print!("{}", stats_table(&args.file, &stats, &bytes));
     }
     Ok(())
 }
@@ -364,7 +362,7 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
 }
 
 /// A human-readable table of DAG statistics (with the transform columns when computed).
-pub fn stats_table(file: &Path, stats: &DagStats) -> String {
+pub fn stats_table(file: &Path, stats: &DagStats, encoded: &[(String, u64)]) -> String {
     let symmetry = stats.levels.iter().any(|l| l.sa.is_some());
     let mut out = format!(
         "{}\n  resolution  {}^3\n  voxels      {}\n  bytes       svo {}  svdag32 {}\n  level  node size        svo      svdag",
@@ -400,6 +398,8 @@ pub fn stats_table(file: &Path, stats: &DagStats) -> String {
         }
         out += "\n";
     }
+    let line: Vec<String> = encoded.iter().map(|(n, v)| format!("{n} {v}")).collect();
+    out += &format!("  encoded     {}\n", line.join("  "));
     out
 }
 
@@ -535,7 +535,7 @@ pub fn demo(args: &DemoArgs, quiet: bool) -> Result<()> {
     };
     render(&render_args)?;
     let (stats, bytes) = describe(&Svdag::load(&vdag)?, quiet)?;
-    print!("{}", stats_table(&vdag, &stats));
+    print!("{}", stats_table(&vdag, &stats, &bytes));
     write_json(
         &args.out_dir.join("avocado-stats.json"),
         &stats_json(&stats, &bytes)?,
