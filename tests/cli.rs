@@ -94,6 +94,27 @@ fn build_stats_export_round_trip() {
     assert_eq!(levels[4]["svo"], 1);
     assert_eq!(levels[4]["svdag"], 1);
 
+    for key in ["ssvdag", "s", "a", "sa", "sat"] {
+        assert!(
+            levels[0][key].as_u64().unwrap() <= levels[0]["svdag"].as_u64().unwrap(),
+            "{key}"
+        );
+    }
+    // --quick: the same SVO/SVDAG numbers without the transform searches and encodings.
+    let out = voxdag(&["stats", s(&vdag), "--json", "--quick"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let quick: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(quick["voxels"], json["voxels"]);
+    assert_eq!(quick["bytes"]["svdag32"], json["bytes"]["svdag32"]);
+    assert!(quick["bytes"].get("tsvdag").is_none() && quick["levels"][0].get("sa").is_none());
+    for (q, full) in quick["levels"].as_array().unwrap().iter().zip(levels) {
+        assert_eq!((&q["svo"], &q["svdag"]), (&full["svo"], &full["svdag"]));
+    }
+
     let xyz = dir.path().join("tetra.xyz");
     let out = voxdag(&[
         "export-voxels",

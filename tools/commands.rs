@@ -239,7 +239,11 @@ pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
 /// `voxdag stats`.
 pub fn stats(args: &StatsArgs, quiet: bool) -> Result<()> {
     let dag = load_svdag(&args.file)?;
-    let (stats, bytes) = describe(&dag, quiet)?;
+    let (stats, bytes) = if args.quick {
+        (dag.stats(), Vec::new())
+    } else {
+        describe(&dag, quiet)?
+    };
     if args.json {
         println!("{}", serde_json::to_string(&stats_json(&stats, &bytes)?)?);
     } else {
@@ -398,8 +402,10 @@ pub fn stats_table(file: &Path, stats: &DagStats, encoded: &[(String, u64)]) -> 
         }
         out += "\n";
     }
-    let line: Vec<String> = encoded.iter().map(|(n, v)| format!("{n} {v}")).collect();
-    out += &format!("  encoded     {}\n", line.join("  "));
+    if !encoded.is_empty() {
+        let line: Vec<String> = encoded.iter().map(|(n, v)| format!("{n} {v}")).collect();
+        out += &format!("  encoded     {}\n", line.join("  "));
+    }
     out
 }
 

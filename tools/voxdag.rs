@@ -118,6 +118,10 @@ pub struct StatsArgs {
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
+    /// Only the SVO/SVDAG counts and bytes: skip the symmetry and translation searches (which take
+    /// minutes on large scenes) and the compact encodings.
+    #[arg(long)]
+    quick: bool,
 }
 
 /// Output formats of `voxdag export-voxels`.
