@@ -124,7 +124,7 @@ impl RaySetup {
 
 /// Face normal of a hit: the entry axis, or the dominant direction axis when `t_near < 0`
 /// (the ray starts inside the voxel). Points against the ray.
-fn hit_normal(dir: [f32; 3], t_near: f32, entry_axis: usize) -> [i32; 3] {
+pub(crate) fn hit_normal(dir: [f32; 3], t_near: f32, entry_axis: usize) -> [i32; 3] {
     let axis = if t_near < 0.0 {
         let a = [dir[0].abs(), dir[1].abs(), dir[2].abs()];
         if a[0] >= a[1] && a[0] >= a[2] {

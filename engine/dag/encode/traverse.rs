@@ -9,7 +9,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use super::{DigestBuilder, EncodeError, VoxelDigest};
-use crate::dag::raycast::{Ray, RaySetup, MAX_FRAMES};
+use crate::dag::raycast::{hit_normal, Ray, RaySetup, MAX_FRAMES};
 use crate::dag::Svdag;
 use crate::scene::{morton, Voxels};
 
@@ -185,24 +185,6 @@ pub struct EncodedHit {
     pub voxel: [u32; 3],
     /// Axis-aligned normal of the entry face, pointing against the ray.
     pub normal: [i32; 3],
-}
-
-fn hit_normal(dir: [f32; 3], t_near: f32, entry_axis: usize) -> [i32; 3] {
-    let axis = if t_near < 0.0 {
-        let a = [dir[0].abs(), dir[1].abs(), dir[2].abs()];
-        if a[0] >= a[1] && a[0] >= a[2] {
-            0
-        } else if a[1] >= a[2] {
-            1
-        } else {
-            2
-        }
-    } else {
-        entry_axis
-    };
-    let mut normal = [0i32; 3];
-    normal[axis] = if dir[axis] > 0.0 { -1 } else { 1 };
-    normal
 }
 
 /// What a ray-cast frame holds: an inner node's children, or the 64-bit mask of a leaf (whose
