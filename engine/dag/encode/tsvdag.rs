@@ -29,7 +29,6 @@ use super::huffman::Huffman;
 use super::ssvdag::{read_node, sort_by_refcount};
 use super::traverse::{root_level, TreeView};
 use super::{corrupt, EncodeError};
-use crate::dag::canonical::CanonicalDag;
 use crate::dag::transform::{Transform, TransformSet, PERMUTATIONS};
 use crate::scene::morton;
 use rustc_hash::FxHashMap;
@@ -103,33 +102,6 @@ pub struct TransformGraph {
     pub levels: Vec<GraphLevel>,
     /// The root pointer (`None` for an empty scene); its translation must be zero.
     pub root: Option<GraphPointer>,
-}
-
-impl TransformGraph {
-    /// The graph of a canonical DAG (all translations zero).
-    pub fn from_canonical(dag: &CanonicalDag) -> TransformGraph {
-        let conv = |p: &crate::dag::TransformPointer| GraphPointer {
-            node: p.node,
-            transform: p.transform,
-            translation: [0; 3],
-        };
-        TransformGraph {
-            resolution: dag.resolution,
-            set: dag.set,
-            translations: false,
-            levels: dag
-                .levels
-                .iter()
-                .map(|l| GraphLevel {
-                    leaves: l.leaves.clone(),
-                    child_masks: l.child_masks.clone(),
-                    child_starts: l.child_starts.clone(),
-                    children: l.children.iter().map(conv).collect(),
-                })
-                .collect(),
-            root: dag.root().map(|p| conv(&p)),
-        }
-    }
 }
 
 impl TransformGraph {
@@ -272,8 +244,7 @@ impl TsvdagEncoding {
         set: TransformSet,
         options: TsvdagOptions,
     ) -> Result<TsvdagEncoding, EncodeError> {
-        let canonical = CanonicalDag::build(dag, set);
-        Self::encode(&TransformGraph::from_canonical(&canonical), options)
+        Self::build_with_translations(dag, set, false, options)
     }
 
     /// Builds the transform DAG of an SVDAG (`set`, plus translations when asked: S+A+T with
