@@ -406,6 +406,32 @@ fn bad_input_is_an_error() {
     }
 }
 
+/// Writes a .vox file whose scene graph `scenes` places one 1^3 model (palette index 1).
+fn write_one_voxel_scene(dir: &Path, name: &str, scenes: Vec<dot_vox::SceneNode>) -> PathBuf {
+    use dot_vox::{DotVoxData, Model, Size, Voxel};
+    let data = DotVoxData {
+        version: 150,
+        index_map: (0..=255).collect(),
+        models: vec![Model {
+            size: Size { x: 1, y: 1, z: 1 },
+            voxels: vec![Voxel {
+                x: 0,
+                y: 0,
+                z: 0,
+                i: 1,
+            }],
+        }],
+        palette: dot_vox::DEFAULT_PALETTE.to_vec(),
+        materials: Vec::new(),
+        scenes,
+        layers: Vec::new(),
+    };
+    let f = dir.join(name);
+    let mut out = std::fs::File::create(&f).unwrap();
+    data.write_vox(&mut out).unwrap();
+    f
+}
+
 #[test]
 fn huge_vox_scales_are_errors() {
     // Scaled voxel counts and extents are checked products: no panic, no wrap-around.
@@ -421,7 +447,7 @@ fn huge_vox_scales_are_errors() {
     }
     // Two one-voxel shapes 2^33 apart (nested i32 translations) at scale 2^31: the scaled
     // extent 2^64 and the voxel count 2 * 2^93 wrap to 0 in unchecked u64 arithmetic.
-    use dot_vox::{DotVoxData, Frame, Model, SceneNode, ShapeModel, Size, Voxel};
+    use dot_vox::{Frame, SceneNode, ShapeModel};
     type Dict = dot_vox::Dict;
     let translate = |t: &str, child: u32| {
         let mut a = Dict::default();
@@ -454,28 +480,8 @@ fn huge_vox_scales_are_errors() {
         translate("-2147483648 0 0", 8),
         shape(),
     ];
-    let data = DotVoxData {
-        version: 150,
-        index_map: (0..=255).collect(),
-        models: vec![Model {
-            size: Size { x: 1, y: 1, z: 1 },
-            voxels: vec![Voxel {
-                x: 0,
-                y: 0,
-                z: 0,
-                i: 1,
-            }],
-        }],
-        palette: dot_vox::DEFAULT_PALETTE.to_vec(),
-        materials: Vec::new(),
-        scenes,
-        layers: Vec::new(),
-    };
     let dir = tempfile::tempdir().unwrap();
-    let f = dir.path().join("far.vox");
-    let mut out = std::fs::File::create(&f).unwrap();
-    data.write_vox(&mut out).unwrap();
-    drop(out);
+    let f = write_one_voxel_scene(dir.path(), "far.vox", scenes);
     for scale in [1, 1 << 31] {
         let opts = ImportOptions {
             vox_scale: scale,
@@ -489,7 +495,7 @@ fn huge_vox_scales_are_errors() {
 
 #[test]
 fn exponentially_branching_vox_scene_graph_is_rejected_quickly() {
-    use dot_vox::{DotVoxData, Frame, Model, SceneNode, ShapeModel, Size, Voxel};
+    use dot_vox::{Frame, SceneNode, ShapeModel};
     type Dict = dot_vox::Dict;
     // Node 0: transform -> group 1; group i (1..=40) lists group i + 1 twice; node 41 is a
     // shape: 2^40 paths to one shape in a file of a few hundred bytes.
@@ -512,28 +518,8 @@ fn exponentially_branching_vox_scene_graph_is_rejected_quickly() {
             attributes: Dict::default(),
         }],
     });
-    let data = DotVoxData {
-        version: 150,
-        index_map: (0..=255).collect(),
-        models: vec![Model {
-            size: Size { x: 1, y: 1, z: 1 },
-            voxels: vec![Voxel {
-                x: 0,
-                y: 0,
-                z: 0,
-                i: 1,
-            }],
-        }],
-        palette: dot_vox::DEFAULT_PALETTE.to_vec(),
-        materials: Vec::new(),
-        scenes,
-        layers: Vec::new(),
-    };
     let dir = tempfile::tempdir().unwrap();
-    let f = dir.path().join("branching.vox");
-    let mut out = std::fs::File::create(&f).unwrap();
-    data.write_vox(&mut out).unwrap();
-    drop(out);
+    let f = write_one_voxel_scene(dir.path(), "branching.vox", scenes);
     let start = std::time::Instant::now();
     let e = load_vox(&f, &ImportOptions::default()).expect_err("2^40 placements");
     assert!(matches!(e, SceneError::Parse { .. }), "{e}");
