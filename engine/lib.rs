@@ -7,6 +7,7 @@
 #![warn(missing_docs)]
 
 pub mod atomic_file;
+pub mod attr;
 pub mod color;
 pub mod dag;
 pub mod gpu;
