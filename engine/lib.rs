@@ -11,5 +11,6 @@ pub mod attr;
 pub mod color;
 pub mod dag;
 pub mod gpu;
+pub mod hash;
 pub mod render;
 pub mod scene;

@@ -1,0 +1,99 @@
+// Slab hash tables: specialization constants, slab addressing and the item hash.
+// Twin of engine/hash/layout.rs. Include after shared/hash_layout.h.
+#extension GL_KHR_shader_subgroup_basic : require
+
+// Specialization constants shared by every hash pass.
+layout(local_size_x_id = 0) in;                     // workgroup size (a multiple of SUBGROUP_SIZE)
+layout(constant_id = 1) const uint SUBGROUP_SIZE = 32;
+layout(constant_id = 2) const uint VARIANT = 0;     // HASH_ATOMIC64 ...
+layout(constant_id = 3) const uint ITEM_WORDS = 1;  // 1..10
+
+#define HASH_MAX_ITEM_WORDS 10
+
+layout(buffer_reference, std430, buffer_reference_align = 4) coherent buffer HashWords {
+    uint w[];
+};
+layout(buffer_reference, std430, buffer_reference_align = 8) coherent buffer HashWords64 {
+    uint64_t w[];
+};
+
+// Atomic64 with 2+ words: a 64-bit prefix per slot; 1-word Atomic64 claims 32-bit words.
+bool hash_prefix64() {
+    return VARIANT == HASH_ATOMIC64 && ITEM_WORDS >= 2u;
+}
+
+// First word of the per-slot secondary hashes (Acceleration Hash).
+uint hash_hashes_offset() {
+    return 4u;
+}
+
+// First word of the item storage.
+uint hash_items_offset() {
+    if (VARIANT == HASH_ATOMIC64) return 2u;
+    if (VARIANT == HASH_TICKET_BOARD) return 4u;
+    if (VARIANT == HASH_ACCEL32) return 4u + HASH_SLAB_SLOTS;
+    return 4u + HASH_SLAB_SLOTS / 4u;
+}
+
+// Words per slab (even: 64-bit prefixes stay 8-byte aligned).
+uint hash_slab_words() {
+    uint end = hash_prefix64() ? 2u + 2u * HASH_SLAB_SLOTS + HASH_SLAB_SLOTS * (ITEM_WORDS - 2u)
+                               : hash_items_offset() + HASH_SLAB_SLOTS * ITEM_WORDS;
+    return (end + 1u) & ~1u;
+}
+
+// Word of the slab holding word w of the item in slot.
+uint hash_item_word(uint slot, uint w) {
+    uint items = hash_items_offset();
+    if (hash_prefix64()) {
+        return w < 2u ? items + 2u * slot + w
+                      : items + 2u * HASH_SLAB_SLOTS + slot * (ITEM_WORDS - 2u) + (w - 2u);
+    }
+    return items + slot * ITEM_WORDS + w;
+}
+
+// Device address of a super block buffer.
+uint64_t hash_super_block(uint64_t super_blocks, uint sb) {
+    return HashWords64(super_blocks).w[sb];
+}
+
+// Device address of a slab.
+uint64_t hash_slab_address(uint64_t super_blocks, uint slab) {
+    uint64_t base = hash_super_block(super_blocks, slab / HASH_SLABS_PER_SUPER_BLOCK);
+    uint local = slab % HASH_SLABS_PER_SUPER_BLOCK;
+    return base + uint64_t(HASH_SUPER_BLOCK_BITMASK_WORDS * 4u)
+         + uint64_t(local) * uint64_t(hash_slab_words() * 4u);
+}
+
+uint hash_fmix32(uint h) {
+    h ^= h >> 16;
+    h *= 0x85ebca6bu;
+    h ^= h >> 13;
+    h *= 0xc2b2ae35u;
+    h ^= h >> 16;
+    return h;
+}
+
+uint hash_rotl(uint x, uint r) {
+    return (x << r) | (x >> (32u - r));
+}
+
+// Primary hash: murmur3-style mix of every word (twin of layout::hash_item).
+uint hash_item(uint item[HASH_MAX_ITEM_WORDS]) {
+    uint h = HASH_SEED ^ ITEM_WORDS;
+    for (uint i = 0u; i < ITEM_WORDS; ++i) {
+        uint k = hash_rotl(item[i] * 0xcc9e2d51u, 15u) * 0x1b873593u;
+        h = hash_rotl(h ^ k, 13u) * 5u + 0xe6546b64u;
+    }
+    return hash_fmix32(h);
+}
+
+uint hash_secondary(uint h) {
+    return hash_fmix32(h ^ HASH_SECONDARY_SALT);
+}
+
+// Whether the layout can store the item (Atomic64 reserves the all-zero prefix for "empty").
+bool hash_item_valid(uint item[HASH_MAX_ITEM_WORDS]) {
+    if (VARIANT != HASH_ATOMIC64) return true;
+    return ITEM_WORDS == 1u ? item[0] != 0u : (item[0] | item[1]) != 0u;
+}

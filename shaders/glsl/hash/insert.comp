@@ -1,0 +1,173 @@
+#version 460
+// Slab hash insert pass: places every item whose handle is still HASH_MISS and writes its new
+// handle. Items are assumed absent (no search here; duplicates inside a batch get separate
+// slots). One item per subgroup at a time: walk the bucket's chain, claim a free slot in the
+// first slab that has one, else allocate a slab and link it at the end with a CAS. When no
+// slab can be allocated the handle stays HASH_MISS and status.exhausted counts it: the host
+// grows the pool and runs the pass again (only HASH_MISS items are retried).
+// Driven by engine/hash/table.rs.
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
+#extension GL_EXT_shader_atomic_int64 : require
+#extension GL_KHR_shader_subgroup_ballot : require
+#extension GL_KHR_shader_subgroup_vote : require
+#extension GL_KHR_shader_subgroup_arithmetic : require
+
+#include "shared/hash_layout.h"
+#include "hash/common.glsl"
+#include "hash/alloc.glsl"
+#include "hash/slab.glsl"
+
+layout(push_constant, std430) uniform Push { HASH_PUSH_MEMBERS } push;
+
+// Writes the item words the claim did not write, lanes in parallel.
+void write_item(HashWords slab, uint slot, uint item[HASH_MAX_ITEM_WORDS], uint first) {
+    for (uint w = first + gl_SubgroupInvocationID; w < ITEM_WORDS; w += SUBGROUP_SIZE) {
+        uint v = 0u;
+        // Dynamic indexing of a register array: pick the word with a loop the compiler unrolls.
+        for (uint k = 0u; k < HASH_MAX_ITEM_WORDS; ++k) {
+            if (k == w) v = item[k];
+        }
+        slab.w[hash_item_word(slot, w)] = v;
+    }
+}
+
+// Atomic64: claim an empty prefix with a CAS; returns the slot or HASH_MISS when the slab is full.
+uint claim_atomic64(uint64_t slab_addr, uint item[HASH_MAX_ITEM_WORDS]) {
+    HashWords words = HashWords(slab_addr);
+    uint64_t prefix = hash_prefix64() ? packUint2x32(uvec2(item[0], item[1])) : 0ul;
+    for (uint chunk = 0u; chunk < HASH_SLAB_SLOTS; chunk += SUBGROUP_SIZE) {
+        uint slot = chunk + gl_SubgroupInvocationID;
+        bool empty = false;
+        if (slot < HASH_SLAB_SLOTS) {
+            empty = hash_prefix64() ? HashWords64(slab_addr).w[1u + slot] == 0ul
+                                    : words.w[hash_item_word(slot, 0u)] == 0u;
+        }
+        while (subgroupAny(empty)) {
+            uint winner = subgroupBallotFindLSB(subgroupBallot(empty));
+            uint won = HASH_MISS;
+            if (gl_SubgroupInvocationID == winner) {
+                bool ok = hash_prefix64()
+                    ? atomicCompSwap(HashWords64(slab_addr).w[1u + slot], 0ul, prefix) == 0ul
+                    : atomicCompSwap(words.w[hash_item_word(slot, 0u)], 0u, item[0]) == 0u;
+                won = ok ? slot : HASH_MISS;
+                empty = false;
+            }
+            won = subgroupMin(won);
+            if (won != HASH_MISS) {
+                return won;
+            }
+        }
+    }
+    return HASH_MISS;
+}
+
+// Ticket Board / Acceleration Hash: claim a clear occupancy bit; slot or HASH_MISS when full.
+uint claim_ticket(HashWords words) {
+    uint slot = HASH_MISS;
+    if (subgroupElect()) {
+        uint mask = words.w[HASH_SLAB_OCCUPANCY];
+        while (mask != 0xFFFFFFFFu) {
+            uint bit = 1u << uint(findLSB(~mask));
+            uint old = atomicOr(words.w[HASH_SLAB_OCCUPANCY], bit);
+            if ((old & bit) == 0u) {
+                slot = uint(findLSB(bit));
+                break;
+            }
+            mask = old | bit;
+        }
+    }
+    return subgroupBroadcastFirst(slot);
+}
+
+// Inserts one item; returns its handle or HASH_MISS when the pool is exhausted.
+uint insert_item(uint item[HASH_MAX_ITEM_WORDS], uint h, uint rng) {
+    HashWords link_words = HashWords(push.heads);
+    uint link_index = h % push.buckets;
+    uint link = link_words.w[link_index];
+    for (uint attempt = 0u;; ++attempt) {
+        if (link == 0u) {
+            // End of the chain: allocate a zeroed slab and link it with a CAS.
+            uint result = 0u;
+            if (subgroupElect()) {
+                uint slab = hash_alloc_slab(push.super_blocks, push.status, push.blocks,
+                                            rng + attempt * 0x632be5abu);
+                if (slab == HASH_NO_SLAB) {
+                    atomicAdd(HashStatus(push.status).exhausted, 1u);
+                } else {
+                    result = atomicCompSwap(link_words.w[link_index], 0u, slab + 1u);
+                    if (result != 0u) {
+                        hash_free_slab(push.super_blocks, push.status, slab); // lost the race
+                    } else {
+                        result = slab + 1u;
+                    }
+                }
+            }
+            link = subgroupBroadcastFirst(result);
+            if (link == 0u) {
+                return HASH_MISS;
+            }
+        }
+        uint slab = link - 1u;
+        uint64_t addr = hash_slab_address(push.super_blocks, slab);
+        HashWords words = HashWords(addr);
+        uint slot;
+        if (VARIANT == HASH_ATOMIC64) {
+            slot = claim_atomic64(addr, item);
+            if (slot != HASH_MISS) {
+                write_item(words, slot, item, hash_prefix64() ? 2u : 1u);
+            }
+        } else {
+            slot = claim_ticket(words);
+            if (slot != HASH_MISS) {
+                write_item(words, slot, item, 0u);
+                uint sec = hash_secondary_stored_form(h);
+                if (subgroupElect()) {
+                    if (VARIANT == HASH_ACCEL32) {
+                        words.w[hash_hashes_offset() + slot] = sec;
+                    } else if (VARIANT == HASH_ACCEL8) {
+                        // Four slots share a word: OR the byte in (it starts at zero).
+                        atomicOr(words.w[hash_hashes_offset() + slot / 4u], sec << (8u * (slot % 4u)));
+                    }
+                }
+            }
+        }
+        if (slot != HASH_MISS) {
+            return (slab << 5u) | slot;
+        }
+        link_words = words;
+        link_index = HASH_SLAB_NEXT;
+        link = words.w[HASH_SLAB_NEXT];
+    }
+    return HASH_MISS;
+}
+
+void main() {
+    if (gl_SubgroupSize != SUBGROUP_SIZE) {
+        HashStatus(push.status).subgroup_mismatch = gl_SubgroupSize;
+        return;
+    }
+    uint per_group = gl_WorkGroupSize.x / SUBGROUP_SIZE;
+    uint first = gl_WorkGroupID.x * per_group + gl_SubgroupID;
+    uint stride = gl_NumWorkGroups.x * per_group;
+    HashWords handles = HashWords(push.handles);
+    for (uint i = first; i < push.count; i += stride) {
+        if (handles.w[i] != HASH_MISS) {
+            continue;
+        }
+        uint item[HASH_MAX_ITEM_WORDS];
+        hash_load_item(push.items, i, item);
+        uint handle;
+        if (!hash_item_valid(item)) {
+            handle = HASH_INVALID;
+            if (subgroupElect()) {
+                atomicAdd(HashStatus(push.status).invalid_items, 1u);
+            }
+        } else {
+            handle = insert_item(item, hash_item(item), hash_fmix32(push.seed ^ (i * 0x9e3779b9u)));
+        }
+        if (subgroupElect()) {
+            handles.w[i] = handle;
+        }
+    }
+}

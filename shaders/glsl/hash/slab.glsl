@@ -1,0 +1,58 @@
+// Cooperative slab scans shared by the search and insert passes: one item per subgroup, the
+// 32 slots of a slab looked at in chunks of SUBGROUP_SIZE lanes (lane l takes slot chunk + l).
+// Include after hash/common.glsl; needs subgroup ballot.
+
+// Loads an item (every lane the same words).
+void hash_load_item(uint64_t items, uint i, out uint item[HASH_MAX_ITEM_WORDS]) {
+    HashWords src = HashWords(items);
+    for (uint w = 0u; w < HASH_MAX_ITEM_WORDS; ++w) {
+        item[w] = w < ITEM_WORDS ? src.w[i * ITEM_WORDS + w] : 0u;
+    }
+}
+
+// Whether `slot` of the slab holds exactly `item`, words from `first` on.
+bool hash_slot_equals(HashWords slab, uint slot, uint item[HASH_MAX_ITEM_WORDS], uint first) {
+    for (uint w = first; w < ITEM_WORDS; ++w) {
+        if (slab.w[hash_item_word(slot, w)] != item[w]) return false;
+    }
+    return true;
+}
+
+// Secondary hash stored in `slot` (Acceleration Hash).
+uint hash_stored_secondary(HashWords slab, uint slot) {
+    if (VARIANT == HASH_ACCEL32) return slab.w[hash_hashes_offset() + slot];
+    return (slab.w[hash_hashes_offset() + slot / 4u] >> (8u * (slot % 4u))) & 0xFFu;
+}
+
+// The secondary hash as stored by this variant.
+uint hash_secondary_stored_form(uint h) {
+    uint s = hash_secondary(h);
+    return VARIANT == HASH_ACCEL8 ? s & 0xFFu : s;
+}
+
+// Handle of `item` in the slab at `slab_addr` (index `slab`), or HASH_MISS. Subgroup-uniform.
+uint hash_find_in_slab(uint64_t slab_addr, uint slab, uint item[HASH_MAX_ITEM_WORDS], uint sec) {
+    HashWords words = HashWords(slab_addr);
+    uint occupancy = VARIANT == HASH_ATOMIC64 ? 0u : words.w[HASH_SLAB_OCCUPANCY];
+    uint64_t prefix = hash_prefix64() ? packUint2x32(uvec2(item[0], item[1])) : 0ul;
+    for (uint chunk = 0u; chunk < HASH_SLAB_SLOTS; chunk += SUBGROUP_SIZE) {
+        uint slot = chunk + gl_SubgroupInvocationID;
+        bool match = false;
+        if (slot < HASH_SLAB_SLOTS) {
+            if (hash_prefix64()) {
+                match = HashWords64(slab_addr).w[1u + slot] == prefix
+                     && hash_slot_equals(words, slot, item, 2u);
+            } else if (VARIANT == HASH_ATOMIC64) {
+                match = words.w[hash_item_word(slot, 0u)] == item[0];
+            } else if (((occupancy >> slot) & 1u) != 0u) {
+                match = (VARIANT == HASH_TICKET_BOARD || hash_stored_secondary(words, slot) == sec)
+                     && hash_slot_equals(words, slot, item, 0u);
+            }
+        }
+        uvec4 ballot = subgroupBallot(match);
+        if (subgroupAny(match)) {
+            return (slab << 5u) | (chunk + subgroupBallotFindLSB(ballot));
+        }
+    }
+    return HASH_MISS;
+}
