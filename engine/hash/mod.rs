@@ -46,7 +46,9 @@ pub enum HashError {
         reason: &'static str,
     },
     /// The pool could not be grown enough for an insert (the device limit or [`layout::MAX_SUPER_BLOCKS`]).
-    #[error("slab pool exhausted: {items} items still not inserted with {super_blocks} super blocks")]
+    #[error(
+        "slab pool exhausted: {items} items still not inserted with {super_blocks} super blocks"
+    )]
     Exhausted {
         /// Items left without a slot.
         items: u32,

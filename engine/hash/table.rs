@@ -13,7 +13,7 @@ use std::sync::Arc;
 use super::alloc::SlabPool;
 use super::layout::{
     Handle, HashPush, HashStatus, HashVariant, SlabLayout, HANDLE_INVALID, HANDLE_MISS,
-    MAX_SUPER_BLOCKS, SLAB_SLOTS, SLABS_PER_SUPER_BLOCK,
+    MAX_SUPER_BLOCKS, SLABS_PER_SUPER_BLOCK, SLAB_SLOTS,
 };
 use super::reference::TableImage;
 use super::HashError;
@@ -91,10 +91,15 @@ impl GpuHashTable {
     /// specialised for the device's subgroup size.
     pub fn new(ctx: &Arc<GpuContext>, config: &HashTableConfig) -> Result<GpuHashTable, HashError> {
         let layout = SlabLayout::new(config.variant, config.item_words).ok_or_else(|| {
-            HashError::Config(format!("item size {} is outside 1..=10 words", config.item_words))
+            HashError::Config(format!(
+                "item size {} is outside 1..=10 words",
+                config.item_words
+            ))
         })?;
         if config.buckets == 0 {
-            return Err(HashError::Config("a table needs at least one bucket".into()));
+            return Err(HashError::Config(
+                "a table needs at least one bucket".into(),
+            ));
         }
         if config.initial_super_blocks > MAX_SUPER_BLOCKS || config.max_insert_rounds == 0 {
             return Err(HashError::Config(format!(
@@ -103,7 +108,9 @@ impl GpuHashTable {
         }
         let subgroup = ctx.info().subgroup_size;
         if subgroup == 0 || !subgroup.is_power_of_two() {
-            return Err(HashError::Config(format!("unsupported subgroup size {subgroup}")));
+            return Err(HashError::Config(format!(
+                "unsupported subgroup size {subgroup}"
+            )));
         }
         let workgroup = subgroup.max(64);
         let spec = [workgroup, subgroup, config.variant.id(), config.item_words];
@@ -229,7 +236,12 @@ impl GpuHashTable {
         Ok(())
     }
 
-    fn check_count(buffer: &Buffer, count: u32, words_each: u32, what: &str) -> Result<(), HashError> {
+    fn check_count(
+        buffer: &Buffer,
+        count: u32,
+        words_each: u32,
+        what: &str,
+    ) -> Result<(), HashError> {
         let need = count as u64 * words_each as u64 * 4;
         if buffer.size() < need {
             return Err(HashError::InvalidArgument(format!(
@@ -258,7 +270,14 @@ impl GpuHashTable {
         let push = self.push_constants(items.address(), handles.address(), count);
         let mut cmd = self.ctx.begin_commands("hash search")?;
         let groups = self.cooperative_groups(count);
-        self.record(&mut cmd, &mut profiler, "hash search", &self.search, groups, &push)?;
+        self.record(
+            &mut cmd,
+            &mut profiler,
+            "hash search",
+            &self.search,
+            groups,
+            &push,
+        )?;
         cmd.submit()?;
         if let Some(p) = profiler {
             p.resolve()?;
@@ -346,7 +365,14 @@ impl GpuHashTable {
             let push = self.push_constants(items.address(), handles.address(), count);
             let mut cmd = self.ctx.begin_commands("hash insert")?;
             let groups = self.cooperative_groups(count);
-            self.record(&mut cmd, &mut profiler, "hash insert", &self.insert, groups, &push)?;
+            self.record(
+                &mut cmd,
+                &mut profiler,
+                "hash insert",
+                &self.insert,
+                groups,
+                &push,
+            )?;
             cmd.submit()?;
             if let Some(p) = profiler.as_deref_mut() {
                 p.resolve()?;
@@ -420,7 +446,14 @@ impl GpuHashTable {
             .div_ceil(self.workgroup)
             .clamp(1, self.ctx.info().max_compute_workgroup_count[0]);
         let mut cmd = self.ctx.begin_commands("hash read")?;
-        self.record(&mut cmd, &mut profiler, "hash read", &self.read, groups, &push)?;
+        self.record(
+            &mut cmd,
+            &mut profiler,
+            "hash read",
+            &self.read,
+            groups,
+            &push,
+        )?;
         cmd.submit()?;
         if let Some(p) = profiler {
             p.resolve()?;
@@ -454,11 +487,9 @@ impl GpuHashTable {
     fn upload_batch(&self, items: &[u32]) -> Result<(u32, Buffer, Buffer), HashError> {
         let count = self.validate_items(items)?;
         let items = self.ctx.upload("hash items", items)?;
-        let handles = self.ctx.create_buffer(
-            "hash handles",
-            4 * count as u64,
-            MemLocation::GpuOnly,
-        )?;
+        let handles =
+            self.ctx
+                .create_buffer("hash handles", 4 * count as u64, MemLocation::GpuOnly)?;
         Ok((count, items, handles))
     }
 
@@ -518,7 +549,11 @@ impl GpuHashTable {
                 Handle::from_raw(h).ok_or_else(|| {
                     HashError::InvalidArgument(format!(
                         "item {i} has no handle after insert ({})",
-                        if h == HANDLE_INVALID { "invalid" } else { "missing" }
+                        if h == HANDLE_INVALID {
+                            "invalid"
+                        } else {
+                            "missing"
+                        }
                     ))
                 })
             })
