@@ -11,7 +11,7 @@ use std::sync::Arc;
 use voxdag::gpu::{GpuContext, MemLocation, Profiler};
 use voxdag::hash::{
     GpuHashTable, Handle, HashError, HashTableConfig, HashVariant, ReferenceTable, TableImage,
-    HANDLE_INVALID, HANDLE_MISS,
+    TeamMode, HANDLE_INVALID, HANDLE_MISS,
 };
 
 fn assert_clean(ctx: &Arc<GpuContext>) {
@@ -66,15 +66,19 @@ fn walk_map(image: &TableImage) -> HashMap<Handle, Vec<u32>> {
 
 /// GPU and CPU tables on the same workload: insert, searches with hits and misses,
 /// find-or-insert of half old, half new items, dereference, walk.
-fn check_variant(ctx: &Arc<GpuContext>, variant: HashVariant, w: u32) {
+fn check_variant(ctx: &Arc<GpuContext>, variant: HashVariant, w: u32, team: TeamMode) {
     let buckets = 11;
     let mut taken = HashSet::new();
     let first = random_items(1200, w, 7 * w as u64 + variant.id() as u64, &mut taken);
     let absent = random_items(300, w, 1000 + w as u64, &mut taken);
     let fresh = random_items(400, w, 2000 + w as u64, &mut taken);
-    let ctx_msg = format!("{variant:?} w={w}");
+    let ctx_msg = format!("{variant:?} w={w} {team:?}");
 
-    let mut gpu = GpuHashTable::new(ctx, &HashTableConfig::new(variant, w, buckets)).unwrap();
+    let config = HashTableConfig {
+        team,
+        ..HashTableConfig::new(variant, w, buckets)
+    };
+    let mut gpu = GpuHashTable::new(ctx, &config).unwrap();
     let mut cpu = ReferenceTable::new(variant, w, buckets).unwrap();
 
     let (handles, report) = gpu.insert(&flat(&first), None).unwrap();
@@ -148,10 +152,13 @@ fn check_variant(ctx: &Arc<GpuContext>, variant: HashVariant, w: u32) {
     );
 }
 
+/// Both team modes: the cooperative subgroup algorithm and one lane per item.
 fn check_all_sizes(variant: HashVariant) {
     let ctx = common::gpu();
-    for w in 1..=10 {
-        check_variant(&ctx, variant, w);
+    for team in [TeamMode::Subgroup, TeamMode::SingleLane] {
+        for w in 1..=10 {
+            check_variant(&ctx, variant, w, team);
+        }
     }
     assert_clean(&ctx);
 }
@@ -181,10 +188,15 @@ fn accel8_matches_reference_for_all_item_sizes() {
 #[test]
 fn exhaustion_grows_the_pool_and_retries() {
     let ctx = common::gpu();
-    for variant in [HashVariant::Atomic64, HashVariant::AccelHash8] {
+    let cases = [
+        (HashVariant::Atomic64, TeamMode::Subgroup),
+        (HashVariant::AccelHash8, TeamMode::SingleLane),
+    ];
+    for (variant, team) in cases {
         let buckets = 24_000;
         let config = HashTableConfig {
             grow_before_insert: false,
+            team,
             ..HashTableConfig::new(variant, 2, buckets)
         };
         let mut gpu = GpuHashTable::new(&ctx, &config).unwrap();

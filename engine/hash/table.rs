@@ -38,11 +38,25 @@ pub struct HashTableConfig {
     pub grow_before_insert: bool,
     /// Insert rounds (pass + grow) before giving up with [`HashError::Exhausted`].
     pub max_insert_rounds: u32,
+    /// How many lanes work on one item.
+    pub team: TeamMode,
+}
+
+/// How many lanes of a subgroup work on one item.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TeamMode {
+    /// [`TeamMode::SingleLane`] on CPU devices (lavapipe), [`TeamMode::Subgroup`] elsewhere.
+    Auto,
+    /// The whole subgroup cooperates on one item, scanning a slab in chunks of subgroup size.
+    Subgroup,
+    /// Every lane works on its own item and scans slabs alone (no subgroup operations: on a
+    /// CPU implementation they cost more than the loads they spread).
+    SingleLane,
 }
 
 impl HashTableConfig {
     /// A table of `variant` for `item_words`-word items with `buckets` buckets, one initial
-    /// super block, growth before inserts and 8 insert rounds.
+    /// super block, growth before inserts, 8 insert rounds and the device's team mode.
     pub fn new(variant: HashVariant, item_words: u32, buckets: u32) -> HashTableConfig {
         HashTableConfig {
             variant,
@@ -51,6 +65,7 @@ impl HashTableConfig {
             initial_super_blocks: 1,
             grow_before_insert: true,
             max_insert_rounds: 8,
+            team: TeamMode::Auto,
         }
     }
 }
@@ -80,6 +95,7 @@ pub struct GpuHashTable {
     read: ComputePipeline,
     workgroup: u32,
     subgroup: u32,
+    team: u32,
     /// Status read after the last insert round (counters are cumulative).
     status: HashStatus,
     /// Seed of the next pass's random block choice.
@@ -113,7 +129,19 @@ impl GpuHashTable {
             )));
         }
         let workgroup = subgroup.max(64);
-        let spec = [workgroup, subgroup, config.variant.id(), config.item_words];
+        let single_lane = match config.team {
+            TeamMode::Auto => ctx.info().device_type == "cpu",
+            TeamMode::Subgroup => false,
+            TeamMode::SingleLane => true,
+        };
+        let team = if single_lane { 1 } else { subgroup };
+        let spec = [
+            workgroup,
+            subgroup,
+            config.variant.id(),
+            config.item_words,
+            team,
+        ];
         let pipeline = |name: &str, spirv: &[u32]| {
             ctx.create_compute_pipeline(&ComputePipelineDesc {
                 name,
@@ -146,6 +174,7 @@ impl GpuHashTable {
             read,
             workgroup,
             subgroup,
+            team,
             status: HashStatus::default(),
             pass_seed: 0x2545_f491,
         })
@@ -177,14 +206,20 @@ impl GpuHashTable {
     }
 
     /// Specialization constants of every hash pass: workgroup size, subgroup size, variant id,
-    /// item words (ids 0..=3 in `hash/common.glsl`).
-    pub fn spec_constants(&self) -> [u32; 4] {
+    /// item words, team size (ids 0..=4 in `hash/common.glsl`).
+    pub fn spec_constants(&self) -> [u32; 5] {
         [
             self.workgroup,
             self.subgroup,
             self.config.variant.id(),
             self.config.item_words,
+            self.team,
         ]
+    }
+
+    /// Lanes working on one item: the subgroup size, or 1 (see [`TeamMode`]).
+    pub fn team_size(&self) -> u32 {
+        self.team
     }
 
     /// Push constants naming this table plus an items and a handles buffer (addresses).
@@ -207,9 +242,9 @@ impl GpuHashTable {
         self.heads.size() + self.pool.gpu_bytes()
     }
 
-    /// Workgroups for `count` items at one item per subgroup (grid-stride beyond the limit).
+    /// Workgroups for `count` items at one item per team (grid-stride beyond the limit).
     fn cooperative_groups(&self, count: u32) -> u32 {
-        let per_group = self.workgroup / self.subgroup;
+        let per_group = self.workgroup / self.team;
         count
             .div_ceil(per_group)
             .clamp(1, self.ctx.info().max_compute_workgroup_count[0])

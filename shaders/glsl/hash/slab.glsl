@@ -1,6 +1,57 @@
-// Cooperative slab scans shared by the search and insert passes: one item per subgroup, the
-// 32 slots of a slab looked at in chunks of SUBGROUP_SIZE lanes (lane l takes slot chunk + l).
-// Include after hash/common.glsl; needs subgroup ballot.
+// Cooperative slab scans shared by the search and insert passes: one item per team (the whole
+// subgroup, or a single lane when TEAM == 1), the 32 slots of a slab looked at in chunks of
+// TEAM lanes (lane l takes slot chunk + l). Include after hash/common.glsl; needs subgroup
+// ballot, vote and arithmetic. With TEAM == 1 the team_* helpers are plain values (the
+// subgroup branches are removed at specialization).
+
+// The team's lane index.
+uint team_lane() {
+    return TEAM == 1u ? 0u : gl_SubgroupInvocationID;
+}
+
+// Whether this lane is the team's leader (the one that runs scalar sections).
+bool team_leader() {
+    if (TEAM == 1u) return true;
+    return subgroupElect();
+}
+
+// The leader's value, in every lane of the team.
+uint team_from_leader(uint v) {
+    if (TEAM == 1u) return v;
+    return subgroupBroadcastFirst(v);
+}
+
+bool team_any(bool b) {
+    if (TEAM == 1u) return b;
+    return subgroupAny(b);
+}
+
+// Lowest team lane where b holds (only call when team_any(b)).
+uint team_first(bool b) {
+    if (TEAM == 1u) return 0u;
+    return subgroupBallotFindLSB(subgroupBallot(b));
+}
+
+uint team_min(uint v) {
+    if (TEAM == 1u) return v;
+    return subgroupMin(v);
+}
+
+// Index of this lane's team among all teams of the dispatch, and the number of teams.
+uint team_index() {
+    uint per_group = gl_WorkGroupSize.x / TEAM;
+    uint in_group = TEAM == 1u ? gl_LocalInvocationIndex : gl_SubgroupID;
+    return gl_WorkGroupID.x * per_group + in_group;
+}
+
+uint team_count() {
+    return gl_NumWorkGroups.x * (gl_WorkGroupSize.x / TEAM);
+}
+
+// Whether the pass runs with the subgroup size it was specialised for (cooperative teams only).
+bool team_size_ok() {
+    return TEAM == 1u || gl_SubgroupSize == SUBGROUP_SIZE;
+}
 
 // Loads an item (every lane the same words).
 void hash_load_item(uint64_t items, uint i, out uint item[HASH_MAX_ITEM_WORDS]) {
@@ -30,13 +81,13 @@ uint hash_secondary_stored_form(uint h) {
     return VARIANT == HASH_ACCEL8 ? s & 0xFFu : s;
 }
 
-// Handle of `item` in the slab at `slab_addr` (index `slab`), or HASH_MISS. Subgroup-uniform.
+// Handle of `item` in the slab at `slab_addr` (index `slab`), or HASH_MISS. Team-uniform.
 uint hash_find_in_slab(uint64_t slab_addr, uint slab, uint item[HASH_MAX_ITEM_WORDS], uint sec) {
     HashWords words = HashWords(slab_addr);
     uint occupancy = VARIANT == HASH_ATOMIC64 ? 0u : words.w[HASH_SLAB_OCCUPANCY];
     uint64_t prefix = hash_prefix64() ? packUint2x32(uvec2(item[0], item[1])) : 0ul;
-    for (uint chunk = 0u; chunk < HASH_SLAB_SLOTS; chunk += SUBGROUP_SIZE) {
-        uint slot = chunk + gl_SubgroupInvocationID;
+    for (uint chunk = 0u; chunk < HASH_SLAB_SLOTS; chunk += TEAM) {
+        uint slot = chunk + team_lane();
         bool match = false;
         if (slot < HASH_SLAB_SLOTS) {
             if (hash_prefix64()) {
@@ -45,13 +96,13 @@ uint hash_find_in_slab(uint64_t slab_addr, uint slab, uint item[HASH_MAX_ITEM_WO
             } else if (VARIANT == HASH_ATOMIC64) {
                 match = words.w[hash_item_word(slot, 0u)] == item[0];
             } else if (((occupancy >> slot) & 1u) != 0u) {
+                // Acceleration Hash: the item words are read only on a secondary-hash match.
                 match = (VARIANT == HASH_TICKET_BOARD || hash_stored_secondary(words, slot) == sec)
                      && hash_slot_equals(words, slot, item, 0u);
             }
         }
-        uvec4 ballot = subgroupBallot(match);
-        if (subgroupAny(match)) {
-            return (slab << 5u) | (chunk + subgroupBallotFindLSB(ballot));
+        if (team_any(match)) {
+            return (slab << 5u) | (chunk + team_first(match));
         }
     }
     return HASH_MISS;
