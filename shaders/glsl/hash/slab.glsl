@@ -81,9 +81,46 @@ uint hash_secondary_stored_form(uint h) {
     return VARIANT == HASH_ACCEL8 ? s & 0xFFu : s;
 }
 
+// Slots of a slab whose 8-bit secondary hash equals `sec`: four at a time per word (bit s =
+// slot s), with the exact zero-byte test of x = word ^ (sec in every byte).
+uint hash_accel8_candidates(HashWords words, uint sec) {
+    uint hits = 0u;
+    uint pattern = sec * 0x01010101u;
+    for (uint g = 0u; g < HASH_SLAB_SLOTS / 4u; ++g) {
+        uint x = words.w[hash_hashes_offset() + g] ^ pattern;
+        uint zero = ~(((x & 0x7F7F7F7Fu) + 0x7F7F7F7Fu) | x | 0x7F7F7F7Fu); // 0x80 per zero byte
+        uint four = ((zero >> 7u) & 1u) | ((zero >> 14u) & 2u) | ((zero >> 21u) & 4u)
+                  | ((zero >> 28u) & 8u);
+        hits |= four << (4u * g);
+    }
+    return hits;
+}
+
+// One lane alone (TEAM == 1), occupancy-mask layouts: visit only occupied slots (Accel8: only
+// those whose hash byte matches), comparing the secondary hash before the item.
+uint hash_find_in_slab_single(HashWords words, uint slab, uint item[HASH_MAX_ITEM_WORDS],
+                              uint sec) {
+    uint candidates = words.w[HASH_SLAB_OCCUPANCY];
+    if (VARIANT == HASH_ACCEL8) {
+        candidates &= hash_accel8_candidates(words, sec);
+    }
+    while (candidates != 0u) {
+        uint slot = uint(findLSB(candidates));
+        candidates &= candidates - 1u;
+        if ((VARIANT != HASH_ACCEL32 || words.w[hash_hashes_offset() + slot] == sec)
+            && hash_slot_equals(words, slot, item, 0u)) {
+            return (slab << 5u) | slot;
+        }
+    }
+    return HASH_MISS;
+}
+
 // Handle of `item` in the slab at `slab_addr` (index `slab`), or HASH_MISS. Team-uniform.
 uint hash_find_in_slab(uint64_t slab_addr, uint slab, uint item[HASH_MAX_ITEM_WORDS], uint sec) {
     HashWords words = HashWords(slab_addr);
+    if (TEAM == 1u && VARIANT != HASH_ATOMIC64) {
+        return hash_find_in_slab_single(words, slab, item, sec);
+    }
     uint occupancy = VARIANT == HASH_ATOMIC64 ? 0u : words.w[HASH_SLAB_OCCUPANCY];
     uint64_t prefix = hash_prefix64() ? packUint2x32(uvec2(item[0], item[1])) : 0ul;
     for (uint chunk = 0u; chunk < HASH_SLAB_SLOTS; chunk += TEAM) {
