@@ -96,7 +96,7 @@ pub struct GpuHashTable {
     workgroup: u32,
     subgroup: u32,
     team: u32,
-    /// Status read after the last insert round (counters are cumulative).
+    /// Status read before and after each insert round (counters are cumulative).
     status: HashStatus,
     /// Seed of the next pass's random block choice.
     pass_seed: u32,
@@ -365,16 +365,24 @@ impl GpuHashTable {
     }
 
     /// Grows the pool so `new_items` more items fit at the worst case: each bucket they touch
-    /// may need one new slab beyond `items / 32`, with the pool kept at most 7/8 full.
+    /// may need one new slab beyond `items / 32`, with the pool kept at most 7/8 full. Stops at
+    /// [`MAX_SUPER_BLOCKS`] (the insert rounds then report what still does not fit).
     pub fn reserve(&mut self, new_items: u32) -> Result<(), HashError> {
         let new_slabs =
-            new_items as u64 / SLAB_SLOTS as u64 + (new_items.min(self.config.buckets)) as u64 + 1;
-        let want = (self.status.allocated_slabs as u64 + new_slabs) * 8 / 7;
-        let have = self.pool.capacity_slabs();
-        if want > have {
-            let more = (want - have).div_ceil(SLABS_PER_SUPER_BLOCK as u64);
-            let room = (MAX_SUPER_BLOCKS - self.pool.super_block_count()) as u64;
-            self.pool.grow(more.min(room).max(1).min(room) as u32)?;
+            new_items as u64 / SLAB_SLOTS as u64 + new_items.min(self.config.buckets) as u64 + 1;
+        self.grow_for(self.status.allocated_slabs as u64 + new_slabs, false)
+    }
+
+    /// Adds super blocks until `slabs` fill at most 7/8 of the pool (at least one when `force`).
+    fn grow_for(&mut self, slabs: u64, force: bool) -> Result<(), HashError> {
+        let want = slabs * 8 / 7;
+        let more = want
+            .saturating_sub(self.pool.capacity_slabs())
+            .div_ceil(SLABS_PER_SUPER_BLOCK as u64)
+            .max(force as u64);
+        let room = (MAX_SUPER_BLOCKS - self.pool.super_block_count()) as u64;
+        if more.min(room) > 0 {
+            self.pool.grow(more.min(room) as u32)?;
         }
         Ok(())
     }
@@ -389,6 +397,8 @@ impl GpuHashTable {
     ) -> Result<InsertReport, HashError> {
         Self::check_count(items, count, self.config.item_words, "items")?;
         Self::check_count(handles, count, 1, "handles")?;
+        // Fresh counters: other passes on this pool (garbage collection) change them.
+        self.status = self.pool.read_status()?;
         if self.config.grow_before_insert {
             self.reserve(expected_new)?;
         }
@@ -428,15 +438,10 @@ impl GpuHashTable {
                 });
             }
             // Grow for the left-over items, at least one super block.
-            let want = self.status.allocated_slabs as u64
+            let slabs = self.status.allocated_slabs as u64
                 + left as u64 / SLAB_SLOTS as u64
                 + left.min(self.config.buckets) as u64;
-            let more = (want * 8 / 7)
-                .saturating_sub(self.pool.capacity_slabs())
-                .div_ceil(SLABS_PER_SUPER_BLOCK as u64)
-                .max(1)
-                .min(room as u64);
-            self.pool.grow(more as u32)?;
+            self.grow_for(slabs, true)?;
         }
         report.invalid_items = self.status.invalid_items.wrapping_sub(before.invalid_items);
         report.super_blocks = self.pool.super_block_count();
