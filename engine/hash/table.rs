@@ -277,6 +277,12 @@ impl GpuHashTable {
         words_each: u32,
         what: &str,
     ) -> Result<(), HashError> {
+        // The shaders index words with a 32-bit uint.
+        if count as u64 * words_each as u64 > u32::MAX as u64 {
+            return Err(HashError::InvalidArgument(format!(
+                "{count} entries of {words_each} words exceed the 2^32-word limit of one batch"
+            )));
+        }
         let need = count as u64 * words_each as u64 * 4;
         if buffer.size() < need {
             return Err(HashError::InvalidArgument(format!(
