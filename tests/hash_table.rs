@@ -317,3 +317,34 @@ fn bad_configurations_are_errors() {
     drop(gpu);
     assert_clean(&ctx);
 }
+
+/// Duplicates inside one insert batch each get their own slot (documented behaviour; the
+/// duplicate-detection table exists for callers that need one copy): every copy is readable and
+/// the walk sees the item as often as it was inserted.
+#[test]
+fn duplicates_in_one_batch_get_separate_slots() {
+    let ctx = common::gpu();
+    for team in [TeamMode::Subgroup, TeamMode::SingleLane] {
+        let config = HashTableConfig {
+            team,
+            ..HashTableConfig::new(HashVariant::AccelHash32, 2, 3)
+        };
+        let mut gpu = GpuHashTable::new(&ctx, &config).unwrap();
+        let batch = [5u32, 6, 7, 8, 5, 6, 5, 6];
+        let (handles, _) = gpu.insert(&batch, None).unwrap();
+        let distinct: HashSet<Handle> = handles.iter().copied().collect();
+        assert_eq!(distinct.len(), 4, "{team:?}");
+        assert_eq!(gpu.read_items(&handles).unwrap(), batch.to_vec());
+        let report = gpu.download().unwrap().walk().unwrap();
+        let copies = report
+            .items
+            .iter()
+            .filter(|(_, it)| it == &vec![5, 6])
+            .count();
+        assert_eq!(copies, 3, "{team:?}");
+        // A search finds one of the copies.
+        let found = gpu.search(&[5, 6], None).unwrap()[0].unwrap();
+        assert!(handles.contains(&found));
+    }
+    assert_clean(&ctx);
+}
