@@ -81,11 +81,29 @@ uint claim_ticket(HashWords words) {
 }
 
 // Inserts one item; returns its handle or HASH_MISS when the pool is exhausted.
+// Atomic64 has no occupancy mask: whether a slab's last slot is empty. Slots are claimed lowest
+// first and only cleared by garbage collection, so a taken last slot means a full slab unless GC
+// punched holes since.
+bool last_slot_empty(uint64_t slab_addr) {
+    if (hash_prefix64()) return HashWords64(slab_addr).w[HASH_SLAB_SLOTS] == 0ul;
+    return HashWords(slab_addr).w[hash_item_word(HASH_SLAB_SLOTS - 1u, 0u)] == 0u;
+}
+
 uint insert_item(uint item[HASH_MAX_ITEM_WORDS], uint h, uint rng) {
     HashWords link_words = HashWords(push.heads);
     uint link_index = h % push.buckets;
     uint link = link_words.w[link_index];
+    // Atomic64 walks the chain twice before allocating: first scanning only slabs whose last
+    // slot is empty (one load per full slab instead of 32 prefixes), then every slab (holes left
+    // by garbage collection).
+    bool thorough = VARIANT != HASH_ATOMIC64;
     for (uint attempt = 0u;; ++attempt) {
+        if (link == 0u && !thorough) {
+            thorough = true;
+            link_words = HashWords(push.heads);
+            link_index = h % push.buckets;
+            link = link_words.w[link_index];
+        }
         if (link == 0u) {
             // End of the chain: allocate a zeroed slab and link it with a CAS.
             uint result = 0u;
@@ -113,7 +131,7 @@ uint insert_item(uint item[HASH_MAX_ITEM_WORDS], uint h, uint rng) {
         HashWords words = HashWords(addr);
         uint slot;
         if (VARIANT == HASH_ATOMIC64) {
-            slot = claim_atomic64(addr, item);
+            slot = thorough || last_slot_empty(addr) ? claim_atomic64(addr, item) : HASH_MISS;
             if (slot != HASH_MISS) {
                 write_item(words, slot, item, hash_prefix64() ? 2u : 1u);
             }
