@@ -230,7 +230,7 @@ pub struct ReferenceTable {
 }
 
 impl ReferenceTable {
-    /// An empty table; `None`-equivalent errors for item sizes outside 1..=10 or zero buckets.
+    /// An empty table (one super block); errors for item sizes outside 1..=10 or zero buckets.
     pub fn new(
         variant: HashVariant,
         item_words: u32,

@@ -342,7 +342,7 @@ impl GpuHashTable {
         let mut cmd = self.ctx.begin_commands("hash insert reset")?;
         cmd.fill_buffer(handles, HANDLE_MISS);
         cmd.submit()?;
-        self.insert_rounds(items, handles, count, count, profiler)
+        self.insert_rounds(items, handles, count, profiler)
     }
 
     /// Find-or-insert: a search pass, then insert rounds for the misses. Every item ends with a
@@ -359,8 +359,7 @@ impl GpuHashTable {
             return Ok(self.empty_report());
         }
         self.search_buffers(items, handles, count, profiler.as_deref_mut())?;
-        // The misses are unknown without a readback: reserve for all of them.
-        self.insert_rounds(items, handles, count, count, profiler)
+        self.insert_rounds(items, handles, count, profiler)
     }
 
     fn empty_report(&self) -> InsertReport {
@@ -398,7 +397,6 @@ impl GpuHashTable {
         items: &Buffer,
         handles: &Buffer,
         count: u32,
-        expected_new: u32,
         mut profiler: Option<&mut Profiler>,
     ) -> Result<InsertReport, HashError> {
         Self::check_count(items, count, self.config.item_words, "items")?;
@@ -406,7 +404,8 @@ impl GpuHashTable {
         // Fresh counters: other passes on this pool (garbage collection) change them.
         self.status = self.pool.read_status()?;
         if self.config.grow_before_insert {
-            self.reserve(expected_new)?;
+            // Every item may be new (find-or-insert cannot tell without a readback).
+            self.reserve(count)?;
         }
         let before = self.status;
         let mut report = InsertReport::default();
