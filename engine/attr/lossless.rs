@@ -539,6 +539,32 @@ fn read_bits(words: &[u32], pos: u64, width: u32) -> u32 {
     (v & ((1u64 << width) - 1)) as u32
 }
 
+/// Checks everything a decoder without validation (`shaders/glsl/attr/lossless.glsl`) relies on
+/// to stay inside the chunk: the chunk header, every block offset, header and run mask, and every
+/// palette index. Channel values are not checked (that needs every colour: [`decode_all`]).
+pub fn validate(words: &[u32], count: usize) -> Result<(), AttrError> {
+    let chunk = Chunk::open(words, count)?;
+    (0..chunk.blocks).into_par_iter().try_for_each(|b| {
+        let block = chunk.block(b)?;
+        let p = &block.plan;
+        if p.indexed {
+            let stream = block.start + BLOCK_HEADER_WORDS + p.mask_words();
+            let palette_bits = p.palette as u64 * PALETTE_ENTRY_BITS as u64;
+            let ib = p.index_bits();
+            for run in 0..p.runs as u64 {
+                let idx = read_bits(&words[stream..], palette_bits + run * ib as u64, ib);
+                if idx >= p.palette {
+                    return Err(corrupt(
+                        stream,
+                        format!("palette index {idx} ≥ {}", p.palette),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    })
+}
+
 /// Decodes every colour of a chunk of `count` colours (opaque RGBA8).
 pub fn decode_all(words: &[u32], count: usize) -> Result<Vec<u32>, AttrError> {
     let chunk = Chunk::open(words, count)?;
