@@ -55,7 +55,7 @@ fn structured(n: usize, seed: u64) -> Vec<u32> {
         let len = (xorshift(&mut s) % 300 + 1) as usize;
         let base = xorshift(&mut s);
         match xorshift(&mut s) % 3 {
-            0 => out.extend(std::iter::repeat_n(base, len)),
+            0 => out.extend(std::iter::repeat(base).take(len)),
             1 => out.extend((0..len as u32).map(|i| {
                 let [r, g, b] = voxdag::attr::rgb(base);
                 pack_rgb([
