@@ -345,11 +345,10 @@ struct Chunk<'a> {
     count: usize,
 }
 
-/// A validated block header with its word range inside the chunk.
+/// A validated block header and the block's first word inside the chunk.
 struct Block {
     plan: BlockPlan,
     start: usize,
-    colors: usize,
 }
 
 impl<'a> Chunk<'a> {
@@ -441,11 +440,10 @@ impl<'a> Chunk<'a> {
         Ok(Block {
             plan,
             start,
-            colors,
         })
     }
 
-    /// Colour `i` (0..block.colors) of a validated block.
+    /// Colour `i` (below the block's colour count) of a validated block.
     fn color(&self, block: &Block, i: usize) -> Result<u32, AttrError> {
         let p = &block.plan;
         let mask_words = p.mask_words();
