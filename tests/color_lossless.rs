@@ -212,7 +212,8 @@ fn textured_scenes_round_trip_and_report_ratio() {
                 colors.len(),
                 100.0 * ratio
             );
-            assert!(ratio < 1.0, "{name} {v:?}: {ratio}");
+            // The target for RGB888 on textured scenes; RGB565 is always smaller.
+            assert!(ratio <= 0.70, "{name} {v:?}: {ratio}");
         }
     }
 }

@@ -143,8 +143,9 @@ impl LosslessGpu {
         })
     }
 
-    /// Encodes the first `count` RGBA8 words of `colors` into a new GPU buffer holding exactly
-    /// the words [`lossless::encode`] returns; also returns their number. Passes are profiled
+    /// Encodes the first `count` RGBA8 words of `colors` into a new GPU buffer holding the words
+    /// [`lossless::encode`] returns (exactly; one unused word when `count` is 0) and returns
+    /// their number. Passes are profiled
     /// as "lossless plan", "lossless scan" and "lossless write".
     pub fn encode(
         &self,
@@ -162,8 +163,9 @@ impl LosslessGpu {
             )));
         }
         if count == 0 {
-            let words = lossless::encode(&[], variant);
-            return Ok((ctx.upload("lossless chunk", &words)?, words.len()));
+            // No colours encode to no words; Vulkan has no empty buffers.
+            let out = ctx.create_buffer("lossless chunk (empty)", 4, MemLocation::GpuOnly)?;
+            return Ok((out, 0));
         }
         let blocks = count.div_ceil(BLOCK_COLORS as u32);
         let groups = [blocks.div_ceil(WORKGROUP), 1, 1];
@@ -268,14 +270,12 @@ impl LosslessGpu {
         profiler: Option<&mut Profiler>,
     ) -> Result<Vec<u32>, GpuError> {
         let count = gpu_count(colors.len())?;
-        // A zero-size buffer is invalid: an empty chunk still gets one (unread) word.
-        let input = if colors.is_empty() {
-            self.ctx.upload("lossless input colours", &[0u32])?
-        } else {
-            self.ctx.upload("lossless input colours", colors)?
-        };
-        let (out, _) = self.encode(&input, count, variant, profiler)?;
-        self.ctx.download(&out)
+        if count == 0 {
+            return Ok(Vec::new());
+        }
+        let input = self.ctx.upload("lossless input colours", colors)?;
+        let (out, words) = self.encode(&input, count, variant, profiler)?;
+        self.ctx.read_buffer(&out, 0, words)
     }
 
     /// Validates `words` on the CPU ([`lossless::validate`]), then decodes them with
