@@ -11,7 +11,7 @@
 
 use std::sync::Arc;
 
-use crate::attr::lossless::{self, LosslessVariant, BLOCK_COLORS};
+use crate::attr::lossless::{self, LosslessVariant, BLOCK_COLORS, EXTRA_SHIFTS};
 use crate::gpu::{
     shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, MemLocation,
     Profiler,
@@ -105,11 +105,13 @@ impl LosslessGpu {
         let scan_size = SCAN_WORKGROUP
             .min(info.max_compute_workgroup_invocations)
             .min(info.max_compute_workgroup_size[0]);
+        // Specialization constants: 0 = workgroup size, 1 = the encoder's extra shifts (read by
+        // the plan pass only; the same value everywhere keeps one source of truth).
         let pipeline = |name: &str, spirv: &[u32], size: u32, push: usize| {
             ctx.create_compute_pipeline(&ComputePipelineDesc {
                 name,
                 spirv,
-                spec_constants: &[size],
+                spec_constants: &[size, EXTRA_SHIFTS],
                 push_constant_size: push as u32,
                 storage_image: false,
             })

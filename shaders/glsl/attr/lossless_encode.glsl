@@ -8,7 +8,8 @@
 #define VOXDAG_ATTR_LOSSLESS_ENCODE_GLSL
 
 #define LOSSLESS_BLOCK_COLORS 128u
-#define LOSSLESS_EXTRA_SHIFTS 4u
+// Extra shifts tried per block: `attr::lossless::EXTRA_SHIFTS`, set by the host (constant 1).
+layout(constant_id = 1) const uint LOSSLESS_EXTRA_SHIFTS = 4u;
 
 layout(buffer_reference, std430, buffer_reference_align = 4) buffer LosslessEncWords {
     uint w[];
