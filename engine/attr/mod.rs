@@ -17,6 +17,8 @@
 //!
 //! and decoding never panics on corrupt words: it returns `AttrError::Corrupt`.
 
+pub mod lossless;
+
 use serde::{Deserialize, Serialize};
 
 /// Stored format of an encoded colour chunk; the ids are part of the `.vdag` format.
