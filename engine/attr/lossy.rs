@@ -2,16 +2,20 @@
 //! stream that fits line segments with the continuous Hough transform, written in the Dolonius et
 //! al. variable-bitrate format (`varbit`).
 //!
-//! A segment grows one colour at a time. Each of the three planes RG, GB and RB keeps, for
-//! [`THETA_STEPS`] line angles θ, the range [ρmin, ρmax] of `ρ = x cos θ + y sin θ` over the
-//! segment's colours (channels in [0, 1]); an angle is dropped once ρmax - ρmin exceeds twice the
-//! Hough band (a line at that angle can no longer pass within the band of every colour). The
-//! segment ends before the colour that would leave some plane without angles. The 3D line is then
-//! rebuilt from the two planes whose colours spread widest, the colours are projected on it, and
-//! `varbit::endpoint_block` picks the fewest bits (1-4) whose decoded colours, after RGB565
+//! A segment grows one colour at a time, up to [`MAX_SEGMENT`] colours. Each of the three planes
+//! RG, GB and RB keeps, for [`THETA_STEPS`] line angles θ, the range [ρmin, ρmax] of
+//! `ρ = x cos θ + y sin θ` over the segment's colours (channels in [0, 1]); an angle is dropped
+//! once ρmax - ρmin exceeds twice the Hough band (no line at that angle passes within the band of
+//! every colour). The segment ends before the colour that would leave some plane without angles.
+//! The 3D line is rebuilt from the two planes whose colours spread widest (the intersection of
+//! their best lines, each a plane in RGB space), and clipped to the colours' projections.
+//! `varbit::endpoint_block` then picks the fewest bits (1-4) whose decoded colours, after RGB565
 //! endpoint quantization, all stay within the threshold; a segment that fails even with 4 bits is
-//! cut before its first failing colour and refitted. Segments within the threshold of one colour
-//! become single-colour blocks. Macro blocks are encoded in parallel.
+//! cut before its first failing colour (or halved) and refitted.
+//!
+//! The block emitted is the cheapest in stored bits per colour (64 header bits + weights) of: the
+//! longest run one single colour holds, the Hough segment, and the segment's prefixes that its
+//! line (clipped to the prefix) holds with fewer bits. Macro blocks are encoded in parallel.
 
 use rayon::prelude::*;
 
