@@ -307,12 +307,25 @@ proptest! {
 }
 
 #[test]
-fn lossy_encoders_are_deterministic_and_exact_at_threshold_zero() {
+fn encoders_are_deterministic_handle_empty_input_and_are_exact_at_threshold_zero() {
     for (name, encode, most) in LOSSY {
         let colors = textured_colors(70_000.min(most), 11);
         assert_eq!(encode(&colors, 0.06), encode(&colors, 0.06), "{name}");
     }
     // A zero threshold still round-trips exactly.
+    for (name, encode, _) in LOSSY {
+        let words = encode(&[], 0.06);
+        assert_eq!(
+            varbit::decode_all(&words, 0).unwrap(),
+            Vec::<u32>::new(),
+            "{name}"
+        );
+        assert!(varbit::decode_all(&words, 1).is_err(), "{name}");
+    }
+    assert_eq!(
+        dado::decode_all(&dado::encode(&[]), 0).unwrap(),
+        Vec::<u32>::new()
+    );
     let colors = textured_colors(5000, 12);
     let words = voxdag::attr::lossy::encode(&colors, 0.0);
     assert_eq!(varbit::decode_all(&words, 5000).unwrap(), colors);
