@@ -87,6 +87,11 @@ fn next_block(
     let run = single_run(colors, max_delta);
     let single = varbit::single_block(&colors[..run], start, max_delta)
         .expect("single_run checked the block");
+    let cost = |len: usize, bits: u8| (64 + usize::from(bits) * len) as f64 / len as f64;
+    // No endpoint block (1 bit per weight at least) can beat a long enough single run.
+    if cost(run, 0) <= cost(colors.len(), 1) {
+        return (run, single);
+    }
     let mut best = (run, single);
     let mut limit = colors.len();
     let (len, line, block) = loop {
@@ -101,7 +106,6 @@ fn next_block(
             Err(fail) => limit = fail,
         }
     };
-    let cost = |len: usize, bits: u8| (64 + usize::from(bits) * len) as f64 / len as f64;
     if cost(len, block.bits) < cost(best.0, 0) {
         best = (len, block);
     }
