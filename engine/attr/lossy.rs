@@ -15,7 +15,8 @@
 //!
 //! The block emitted is the cheapest in stored bits per colour (64 header bits + weights) of: the
 //! longest run one single colour holds, the Hough segment, and the segment's prefixes that its
-//! line (clipped to the prefix) holds with fewer bits. Macro blocks are encoded in parallel.
+//! line (clipped to the prefix) holds with fewer bits; a single run that no endpoint block could
+//! beat skips the Hough pass. Macro blocks are encoded in parallel.
 
 use rayon::prelude::*;
 
