@@ -67,7 +67,7 @@ pub struct VarbitBlock {
     pub weights: Vec<u8>,
 }
 
-/// Words of an empty chunk, and the size of the layout's fixed header.
+/// Words before the macro block headers (block count, macro block count).
 const FIXED_WORDS: usize = 2;
 
 /// Writes a block list covering colours `0..count` in the word layout of the module docs.
