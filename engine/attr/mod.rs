@@ -96,3 +96,8 @@ pub fn rgb(color: u32) -> [u8; 3] {
 pub fn pack_rgb([r, g, b]: [u8; 3]) -> u32 {
     r as u32 | (g as u32) << 8 | (b as u32) << 16 | 0xff00_0000
 }
+
+pub mod dado;
+pub mod dolonius;
+pub mod lossy;
+pub mod varbit;
