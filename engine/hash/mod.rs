@@ -12,6 +12,7 @@
 //! See `docs/hash.md`.
 
 pub mod alloc;
+pub mod dedup;
 pub mod layout;
 pub mod reference;
 pub mod table;
@@ -46,7 +47,9 @@ pub enum HashError {
         reason: &'static str,
     },
     /// The pool could not be grown enough for an insert (the device limit or [`layout::MAX_SUPER_BLOCKS`]).
-    #[error("slab pool exhausted: {items} items still not inserted with {super_blocks} super blocks")]
+    #[error(
+        "slab pool exhausted: {items} items still not inserted with {super_blocks} super blocks"
+    )]
     Exhausted {
         /// Items left without a slot.
         items: u32,
