@@ -13,6 +13,7 @@
 
 pub mod alloc;
 pub mod dedup;
+pub mod gc;
 pub mod layout;
 pub mod reference;
 pub mod table;
