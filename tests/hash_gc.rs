@@ -176,17 +176,35 @@ fn gc_of_nothing_live_empties_the_table_but_keeps_first_slabs() {
     )
     .unwrap();
     let batch = items(&mut rng, 4, 2000, &HashSet::new());
-    table.insert(&flat(&batch), None).unwrap();
+    let (stale, _) = table.insert(&flat(&batch), None).unwrap();
     let gc = GpuGarbageCollector::new(&ctx, &table).unwrap();
     let report = gc.collect(&mut table, &[], None).unwrap();
     assert_eq!(report.freed_items, 2000);
-    let walk = table.download().unwrap().walk().unwrap();
+    let image = table.download().unwrap();
+    let walk = image.walk().unwrap();
     assert!(walk.items.is_empty());
     assert_eq!(
         walk.slabs, buckets as u64,
         "one (first) slab per bucket stays"
     );
     assert_eq!(walk.max_chain, 1);
+
+    // Stale handles: those in freed slabs are counted and ignored (a free slab stays all
+    // zeros), those in the kept first slabs name empty slots and change nothing.
+    let mut expected = image.clone();
+    let cpu = collect_cpu(&mut expected, &stale);
+    let report = gc.collect(&mut table, &stale, None).unwrap();
+    assert_eq!(report, cpu);
+    let in_free_slabs = stale
+        .iter()
+        .filter(|h| !image.is_allocated(h.slab()))
+        .count();
+    assert!(in_free_slabs > 0);
+    assert_eq!(report.bad_handles as usize, in_free_slabs);
+    assert!(
+        table.download().unwrap() == expected,
+        "stale handles changed the table"
+    );
     drop((gc, table));
     assert_clean(&ctx);
 }
@@ -213,4 +231,49 @@ fn handles_beyond_the_pool_are_rejected() {
     );
     drop((gc, table));
     assert_clean(&ctx);
+}
+
+/// `voxdag bench hash` end to end at a tiny size (the hidden `--fill-log2`): every variant, two
+/// item sizes, two load factors; the run verifies its own answers and writes all three outputs.
+/// (Here rather than in tests/cli.rs to keep the hash work in the files it owns.)
+#[test]
+fn bench_hash_cli_runs_and_verifies_at_a_tiny_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = |name: &str| dir.path().join(name).to_string_lossy().into_owned();
+    let (json, md, png) = (out("h.json"), out("h.md"), out("h.png"));
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_voxdag"))
+        .args(["--quiet", "bench", "hash", "--quick", "--fill-log2", "12"])
+        .args(["--item-words", "1,3", "--load-factor", "16,96"])
+        .args(["--json", &json, "--markdown", &md, "--chart", &png])
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "bench hash failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let rows: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let rows = rows.as_array().unwrap();
+    assert_eq!(rows.len(), 4 * 2 * 2);
+    for row in rows {
+        for key in [
+            "insert_ms",
+            "insert_mitems_s",
+            "memory_mib",
+            "cpu_insert_mitems_s",
+            "insert_ratio_gpu_cpu",
+        ] {
+            assert!(row[key].as_f64().is_some_and(|v| v > 0.0), "{key} in {row}");
+        }
+        for rate in ["25", "50", "75"] {
+            assert!(
+                row["search_ms"][rate].as_f64().is_some_and(|v| v > 0.0),
+                "{row}"
+            );
+        }
+    }
+    assert!(std::fs::read_to_string(&md)
+        .unwrap()
+        .contains("| accel8 | 3 | 96 |"));
+    assert!(image::open(&png).is_ok());
 }

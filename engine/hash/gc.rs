@@ -32,7 +32,7 @@ const MAX_WORKGROUPS: u32 = 65_535;
 /// What a collection did.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct GcReport {
-    /// Live handles that name no slab of the pool (ignored by the mark pass).
+    /// Live handles naming no allocated slab of the pool (beyond it, or stale: ignored).
     pub bad_handles: u32,
     /// Items removed (occupied slots whose handle was not live).
     pub freed_items: u32,
@@ -85,7 +85,7 @@ pub fn collect_cpu(image: &mut TableImage, live: &[Handle]) -> GcReport {
         if Handle::from_raw(handle.0).is_none() {
             continue;
         }
-        if handle.slab() as u64 >= capacity {
+        if handle.slab() as u64 >= capacity || !image.is_allocated(handle.slab()) {
             report.bad_handles += 1;
             continue;
         }
@@ -187,7 +187,8 @@ impl GpuGarbageCollector {
     }
 
     /// Collects `table`, keeping the items named by the host handles `live` (sentinels are
-    /// skipped; a handle beyond the pool is an error and nothing is collected).
+    /// skipped; a handle beyond the pool is an error and nothing is collected; a handle in a
+    /// free slab is counted in [`GcReport::bad_handles`] and ignored).
     pub fn collect(
         &self,
         table: &mut GpuHashTable,
@@ -217,8 +218,8 @@ impl GpuGarbageCollector {
     }
 
     /// Collects `table`, keeping the items named by the first `count` handles of `live` (a GPU
-    /// buffer of `u32` handles; sentinels skipped, handles beyond the pool counted in
-    /// [`GcReport::bad_handles`] and ignored).
+    /// buffer of `u32` handles; sentinels skipped; handles beyond the pool or in a free slab
+    /// counted in [`GcReport::bad_handles`] and ignored).
     pub fn collect_buffers(
         &self,
         table: &mut GpuHashTable,

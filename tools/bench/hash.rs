@@ -243,7 +243,8 @@ pub fn bench_hash(args: &BenchHashArgs, quiet: bool) -> Result<()> {
                 row.insert_ratio_gpu_cpu = row.insert_mitems_s / cpu_mitems_s;
                 row.reference_fill_items = reference.0;
                 row.reference_insert_mitems_s = reference.1;
-                bar.println(format!(
+                bar.suspend(|| {
+                    eprintln!(
                     "{} {w} words lf {lf}: insert {:.2} ms ({:.1} M/s, {:.2}x CPU), search {:.2}/{:.2}/{:.2} ms, {:.0} MiB",
                     variant.name(),
                     row.insert_ms,
@@ -253,7 +254,8 @@ pub fn bench_hash(args: &BenchHashArgs, quiet: bool) -> Result<()> {
                     row.search_ms.p50,
                     row.search_ms.p75,
                     row.memory_mib
-                ));
+                )
+                });
                 rows.push(row);
                 bar.inc(1);
             }

@@ -1,7 +1,8 @@
 #version 460
 // Garbage collection, mark: every live handle sets its slot's bit in its slab's active word
-// (atomicOr). Sentinels (HASH_MISS, HASH_INVALID) are skipped; handles beyond the pool are
-// counted in GC_BAD_HANDLES. Loop bounds are uniform in the subgroup (no early exit).
+// (atomicOr). Sentinels (HASH_MISS, HASH_INVALID) are skipped; handles beyond the pool or in a
+// free slab (stale) are counted in GC_BAD_HANDLES and ignored: a bit in a free slab would break
+// the allocator's all-zero invariant. Loop bounds are uniform in the subgroup (no early exit).
 #include "hash/gc_common.glsl"
 
 void main() {
@@ -12,9 +13,16 @@ void main() {
         uint i = base + gl_LocalInvocationID.x;
         uint handle = i < push.count ? handles.w[i] : HASH_MISS;
         bool sentinel = handle == HASH_MISS || handle == HASH_INVALID;
-        bool valid = !sentinel && (handle >> 5u) < pool_slabs;
+        uint slab_index = handle >> 5u;
+        bool valid = !sentinel && slab_index < pool_slabs;
         if (valid) {
-            HashWords slab = HashWords(hash_slab_address(push.super_blocks, handle >> 5u));
+            uint local = slab_index % HASH_SLABS_PER_SUPER_BLOCK;
+            HashWords bitmasks = HashWords(hash_super_block(push.super_blocks,
+                                                            slab_index / HASH_SLABS_PER_SUPER_BLOCK));
+            valid = ((bitmasks.w[local / 32u] >> (local % 32u)) & 1u) != 0u;
+        }
+        if (valid) {
+            HashWords slab = HashWords(hash_slab_address(push.super_blocks, slab_index));
             atomicOr(slab.w[HASH_SLAB_ACTIVE], 1u << (handle & 31u));
         }
         uint bad = subgroupAdd(!sentinel && !valid ? 1u : 0u);
