@@ -347,6 +347,9 @@ impl GpuDedup {
                 p.end_pass(&mut cmd);
             }
             cmd.submit()?;
+            if let Some(p) = profiler.as_deref_mut() {
+                p.resolve()?;
+            }
             let state: Vec<u32> = self.ctx.read_buffer(&counters, 0, 3)?;
             // Bit 0: the pool ran out in pass 1 (pass 2 then also misses keys: bit 1).
             // Bit 1 alone: a key without an entry, which pass 1 never leaves behind.

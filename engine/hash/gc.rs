@@ -277,6 +277,9 @@ impl GpuGarbageCollector {
             p.end_pass(&mut cmd);
         }
         cmd.submit()?;
+        if let Some(p) = profiler {
+            p.resolve()?;
+        }
         let c: Vec<GcCounters> = self.ctx.download(&counters)?;
         Ok(GcReport {
             bad_handles: c[0].bad_handles,
