@@ -47,11 +47,8 @@ impl SlabPool {
             8 * MAX_SUPER_BLOCKS as u64,
             MemLocation::GpuOnly,
         )?;
-        let status = ctx.create_buffer(
-            "hash status",
-            4 * STATUS_WORDS as u64,
-            MemLocation::GpuOnly,
-        )?;
+        let status =
+            ctx.create_buffer("hash status", 4 * STATUS_WORDS as u64, MemLocation::GpuOnly)?;
         let mut cmd = ctx.begin_commands("hash pool init")?;
         cmd.fill_buffer(&table, 0);
         cmd.fill_buffer(&status, 0);

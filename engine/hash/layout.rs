@@ -201,8 +201,14 @@ pub fn fmix32(mut h: u32) -> u32 {
 pub fn hash_item(item: &[u32]) -> u32 {
     let mut h = HASH_SEED ^ item.len() as u32;
     for &w in item {
-        let k = w.wrapping_mul(0xcc9e_2d51).rotate_left(15).wrapping_mul(0x1b87_3593);
-        h = (h ^ k).rotate_left(13).wrapping_mul(5).wrapping_add(0xe654_6b64);
+        let k = w
+            .wrapping_mul(0xcc9e_2d51)
+            .rotate_left(15)
+            .wrapping_mul(0x1b87_3593);
+        h = (h ^ k)
+            .rotate_left(13)
+            .wrapping_mul(5)
+            .wrapping_add(0xe654_6b64);
     }
     fmix32(h)
 }
@@ -301,7 +307,10 @@ mod tests {
         assert!(last.0 < HANDLE_INVALID);
         assert_eq!(Handle::from_raw(last.0), Some(last));
         assert_eq!(Handle::from_raw(HANDLE_MISS), None);
-        assert_eq!((last.slab(), last.slot()), (MAX_SUPER_BLOCKS * SLABS_PER_SUPER_BLOCK - 1, 31));
+        assert_eq!(
+            (last.slab(), last.slot()),
+            (MAX_SUPER_BLOCKS * SLABS_PER_SUPER_BLOCK - 1, 31)
+        );
     }
 
     #[test]

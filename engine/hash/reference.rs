@@ -9,8 +9,7 @@ use std::collections::HashSet;
 
 use super::layout::{
     bucket_of, hash_item, secondary_hash, Handle, HashStatus, HashVariant, SlabLayout,
-    BLOCK_BITMASK_WORDS, SLABS_PER_SUPER_BLOCK, SLAB_NEXT, SLAB_OCCUPANCY, SLAB_SLOTS,
-    SUPER_BLOCK_BITMASK_WORDS,
+    SLABS_PER_SUPER_BLOCK, SLAB_NEXT, SLAB_OCCUPANCY, SLAB_SLOTS, SUPER_BLOCK_BITMASK_WORDS,
 };
 use super::HashError;
 
@@ -170,7 +169,9 @@ impl TableImage {
                     return Err(format!("bucket {bucket}: slab {slab} is linked twice"));
                 }
                 if !self.is_allocated(slab) {
-                    return Err(format!("bucket {bucket}: slab {slab} is not marked allocated"));
+                    return Err(format!(
+                        "bucket {bucket}: slab {slab} is not marked allocated"
+                    ));
                 }
                 if l.variant != HashVariant::Atomic64 && words[3] != 0 {
                     return Err(format!("slab {slab}: reserved header word is {}", words[3]));
@@ -190,7 +191,10 @@ impl TableImage {
                             bucket_of(h, buckets)
                         ));
                     }
-                    let is_accel = matches!(l.variant, HashVariant::AccelHash32 | HashVariant::AccelHash8);
+                    let is_accel = matches!(
+                        l.variant,
+                        HashVariant::AccelHash32 | HashVariant::AccelHash8
+                    );
                     if is_accel && self.slot_secondary(words, slot) != self.stored_secondary(h) {
                         return Err(format!("slab {slab} slot {slot}: wrong secondary hash"));
                     }
@@ -226,12 +230,19 @@ pub struct ReferenceTable {
 }
 
 impl ReferenceTable {
-    /// An empty table; `None`-equivalent errors for item sizes outside 1..=10 or zero buckets.
-    pub fn new(variant: HashVariant, item_words: u32, buckets: u32) -> Result<ReferenceTable, HashError> {
-        let layout = SlabLayout::new(variant, item_words)
-            .ok_or_else(|| HashError::Config(format!("item size {item_words} is outside 1..=10")))?;
+    /// An empty table (one super block); errors for item sizes outside 1..=10 or zero buckets.
+    pub fn new(
+        variant: HashVariant,
+        item_words: u32,
+        buckets: u32,
+    ) -> Result<ReferenceTable, HashError> {
+        let layout = SlabLayout::new(variant, item_words).ok_or_else(|| {
+            HashError::Config(format!("item size {item_words} is outside 1..=10"))
+        })?;
         if buckets == 0 {
-            return Err(HashError::Config("a table needs at least one bucket".into()));
+            return Err(HashError::Config(
+                "a table needs at least one bucket".into(),
+            ));
         }
         Ok(ReferenceTable {
             image: TableImage::new(layout, buckets, 1),
@@ -357,19 +368,23 @@ impl ReferenceTable {
 
     /// Lowest free slab; adds a super block when the pool is full.
     fn alloc_slab(&mut self) -> u32 {
-        let found = self.image.super_blocks.iter().enumerate().find_map(|(sb, b)| {
-            b[..SUPER_BLOCK_BITMASK_WORDS as usize]
-                .iter()
-                .position(|&m| m != u32::MAX)
-                .map(|wi| (sb, wi, b[wi].trailing_ones()))
-        });
+        let found = self
+            .image
+            .super_blocks
+            .iter()
+            .enumerate()
+            .find_map(|(sb, b)| {
+                b[..SUPER_BLOCK_BITMASK_WORDS as usize]
+                    .iter()
+                    .position(|&m| m != u32::MAX)
+                    .map(|wi| (sb, wi, b[wi].trailing_ones()))
+            });
         let (sb, wi, bit) = found.unwrap_or_else(|| {
             self.image.grow(1);
             (self.image.super_blocks.len() - 1, 0, 0)
         });
         self.image.super_blocks[sb][wi] |= 1 << bit;
         self.image.status.allocated_slabs += 1;
-        debug_assert!(BLOCK_BITMASK_WORDS * 16 == SUPER_BLOCK_BITMASK_WORDS);
         sb as u32 * SLABS_PER_SUPER_BLOCK + wi as u32 * 32 + bit
     }
 }
@@ -412,7 +427,10 @@ mod tests {
     #[test]
     fn reference_rejects_zero_prefix_in_atomic64_only() {
         let mut a = ReferenceTable::new(HashVariant::Atomic64, 3, 4).unwrap();
-        assert!(matches!(a.insert(&[0, 0, 5]), Err(HashError::InvalidItem { .. })));
+        assert!(matches!(
+            a.insert(&[0, 0, 5]),
+            Err(HashError::InvalidItem { .. })
+        ));
         assert!(a.insert(&[0, 1, 0]).is_ok());
         let mut t = ReferenceTable::new(HashVariant::TicketBoard, 3, 4).unwrap();
         let h = t.insert(&[0, 0, 0]).unwrap();

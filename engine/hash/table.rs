@@ -13,7 +13,7 @@ use std::sync::Arc;
 use super::alloc::SlabPool;
 use super::layout::{
     Handle, HashPush, HashStatus, HashVariant, SlabLayout, HANDLE_INVALID, HANDLE_MISS,
-    MAX_SUPER_BLOCKS, SLAB_SLOTS, SLABS_PER_SUPER_BLOCK,
+    MAX_SUPER_BLOCKS, SLABS_PER_SUPER_BLOCK, SLAB_SLOTS,
 };
 use super::reference::TableImage;
 use super::HashError;
@@ -38,11 +38,25 @@ pub struct HashTableConfig {
     pub grow_before_insert: bool,
     /// Insert rounds (pass + grow) before giving up with [`HashError::Exhausted`].
     pub max_insert_rounds: u32,
+    /// How many lanes work on one item.
+    pub team: TeamMode,
+}
+
+/// How many lanes of a subgroup work on one item.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TeamMode {
+    /// [`TeamMode::SingleLane`] on CPU devices (lavapipe), [`TeamMode::Subgroup`] elsewhere.
+    Auto,
+    /// The whole subgroup cooperates on one item, scanning a slab in chunks of subgroup size.
+    Subgroup,
+    /// Every lane works on its own item and scans slabs alone (no subgroup operations: on a
+    /// CPU implementation they cost more than the loads they spread).
+    SingleLane,
 }
 
 impl HashTableConfig {
     /// A table of `variant` for `item_words`-word items with `buckets` buckets, one initial
-    /// super block, growth before inserts and 8 insert rounds.
+    /// super block, growth before inserts, 8 insert rounds and the device's team mode.
     pub fn new(variant: HashVariant, item_words: u32, buckets: u32) -> HashTableConfig {
         HashTableConfig {
             variant,
@@ -51,6 +65,7 @@ impl HashTableConfig {
             initial_super_blocks: 1,
             grow_before_insert: true,
             max_insert_rounds: 8,
+            team: TeamMode::Auto,
         }
     }
 }
@@ -80,7 +95,8 @@ pub struct GpuHashTable {
     read: ComputePipeline,
     workgroup: u32,
     subgroup: u32,
-    /// Status read after the last insert round (counters are cumulative).
+    team: u32,
+    /// Status read before and after each insert round (counters are cumulative).
     status: HashStatus,
     /// Seed of the next pass's random block choice.
     pass_seed: u32,
@@ -91,10 +107,15 @@ impl GpuHashTable {
     /// specialised for the device's subgroup size.
     pub fn new(ctx: &Arc<GpuContext>, config: &HashTableConfig) -> Result<GpuHashTable, HashError> {
         let layout = SlabLayout::new(config.variant, config.item_words).ok_or_else(|| {
-            HashError::Config(format!("item size {} is outside 1..=10 words", config.item_words))
+            HashError::Config(format!(
+                "item size {} is outside 1..=10 words",
+                config.item_words
+            ))
         })?;
         if config.buckets == 0 {
-            return Err(HashError::Config("a table needs at least one bucket".into()));
+            return Err(HashError::Config(
+                "a table needs at least one bucket".into(),
+            ));
         }
         if config.initial_super_blocks > MAX_SUPER_BLOCKS || config.max_insert_rounds == 0 {
             return Err(HashError::Config(format!(
@@ -103,10 +124,24 @@ impl GpuHashTable {
         }
         let subgroup = ctx.info().subgroup_size;
         if subgroup == 0 || !subgroup.is_power_of_two() {
-            return Err(HashError::Config(format!("unsupported subgroup size {subgroup}")));
+            return Err(HashError::Config(format!(
+                "unsupported subgroup size {subgroup}"
+            )));
         }
         let workgroup = subgroup.max(64);
-        let spec = [workgroup, subgroup, config.variant.id(), config.item_words];
+        let single_lane = match config.team {
+            TeamMode::Auto => ctx.info().device_type == "cpu",
+            TeamMode::Subgroup => false,
+            TeamMode::SingleLane => true,
+        };
+        let team = if single_lane { 1 } else { subgroup };
+        let spec = [
+            workgroup,
+            subgroup,
+            config.variant.id(),
+            config.item_words,
+            team,
+        ];
         let pipeline = |name: &str, spirv: &[u32]| {
             ctx.create_compute_pipeline(&ComputePipelineDesc {
                 name,
@@ -139,6 +174,7 @@ impl GpuHashTable {
             read,
             workgroup,
             subgroup,
+            team,
             status: HashStatus::default(),
             pass_seed: 0x2545_f491,
         })
@@ -170,14 +206,20 @@ impl GpuHashTable {
     }
 
     /// Specialization constants of every hash pass: workgroup size, subgroup size, variant id,
-    /// item words (ids 0..=3 in `hash/common.glsl`).
-    pub fn spec_constants(&self) -> [u32; 4] {
+    /// item words, team size (ids 0..=4 in `hash/common.glsl`).
+    pub fn spec_constants(&self) -> [u32; 5] {
         [
             self.workgroup,
             self.subgroup,
             self.config.variant.id(),
             self.config.item_words,
+            self.team,
         ]
+    }
+
+    /// Lanes working on one item: the subgroup size, or 1 (see [`TeamMode`]).
+    pub fn team_size(&self) -> u32 {
+        self.team
     }
 
     /// Push constants naming this table plus an items and a handles buffer (addresses).
@@ -200,9 +242,9 @@ impl GpuHashTable {
         self.heads.size() + self.pool.gpu_bytes()
     }
 
-    /// Workgroups for `count` items at one item per subgroup (grid-stride beyond the limit).
+    /// Workgroups for `count` items at one item per team (grid-stride beyond the limit).
     fn cooperative_groups(&self, count: u32) -> u32 {
-        let per_group = self.workgroup / self.subgroup;
+        let per_group = self.workgroup / self.team;
         count
             .div_ceil(per_group)
             .clamp(1, self.ctx.info().max_compute_workgroup_count[0])
@@ -229,7 +271,18 @@ impl GpuHashTable {
         Ok(())
     }
 
-    fn check_count(buffer: &Buffer, count: u32, words_each: u32, what: &str) -> Result<(), HashError> {
+    fn check_count(
+        buffer: &Buffer,
+        count: u32,
+        words_each: u32,
+        what: &str,
+    ) -> Result<(), HashError> {
+        // The shaders index words with a 32-bit uint.
+        if count as u64 * words_each as u64 > u32::MAX as u64 {
+            return Err(HashError::InvalidArgument(format!(
+                "{count} entries of {words_each} words exceed the 2^32-word limit of one batch"
+            )));
+        }
         let need = count as u64 * words_each as u64 * 4;
         if buffer.size() < need {
             return Err(HashError::InvalidArgument(format!(
@@ -258,7 +311,14 @@ impl GpuHashTable {
         let push = self.push_constants(items.address(), handles.address(), count);
         let mut cmd = self.ctx.begin_commands("hash search")?;
         let groups = self.cooperative_groups(count);
-        self.record(&mut cmd, &mut profiler, "hash search", &self.search, groups, &push)?;
+        self.record(
+            &mut cmd,
+            &mut profiler,
+            "hash search",
+            &self.search,
+            groups,
+            &push,
+        )?;
         cmd.submit()?;
         if let Some(p) = profiler {
             p.resolve()?;
@@ -282,7 +342,7 @@ impl GpuHashTable {
         let mut cmd = self.ctx.begin_commands("hash insert reset")?;
         cmd.fill_buffer(handles, HANDLE_MISS);
         cmd.submit()?;
-        self.insert_rounds(items, handles, count, count, profiler)
+        self.insert_rounds(items, handles, count, profiler)
     }
 
     /// Find-or-insert: a search pass, then insert rounds for the misses. Every item ends with a
@@ -299,8 +359,7 @@ impl GpuHashTable {
             return Ok(self.empty_report());
         }
         self.search_buffers(items, handles, count, profiler.as_deref_mut())?;
-        // The misses are unknown without a readback: reserve for all of them.
-        self.insert_rounds(items, handles, count, count, profiler)
+        self.insert_rounds(items, handles, count, profiler)
     }
 
     fn empty_report(&self) -> InsertReport {
@@ -311,16 +370,24 @@ impl GpuHashTable {
     }
 
     /// Grows the pool so `new_items` more items fit at the worst case: each bucket they touch
-    /// may need one new slab beyond `items / 32`, with the pool kept at most 7/8 full.
+    /// may need one new slab beyond `items / 32`, with the pool kept at most 7/8 full. Stops at
+    /// [`MAX_SUPER_BLOCKS`] (the insert rounds then report what still does not fit).
     pub fn reserve(&mut self, new_items: u32) -> Result<(), HashError> {
         let new_slabs =
-            new_items as u64 / SLAB_SLOTS as u64 + (new_items.min(self.config.buckets)) as u64 + 1;
-        let want = (self.status.allocated_slabs as u64 + new_slabs) * 8 / 7;
-        let have = self.pool.capacity_slabs();
-        if want > have {
-            let more = (want - have).div_ceil(SLABS_PER_SUPER_BLOCK as u64);
-            let room = (MAX_SUPER_BLOCKS - self.pool.super_block_count()) as u64;
-            self.pool.grow(more.min(room).max(1).min(room) as u32)?;
+            new_items as u64 / SLAB_SLOTS as u64 + new_items.min(self.config.buckets) as u64 + 1;
+        self.grow_for(self.status.allocated_slabs as u64 + new_slabs, false)
+    }
+
+    /// Adds super blocks until `slabs` fill at most 7/8 of the pool (at least one when `force`).
+    fn grow_for(&mut self, slabs: u64, force: bool) -> Result<(), HashError> {
+        let want = slabs * 8 / 7;
+        let more = want
+            .saturating_sub(self.pool.capacity_slabs())
+            .div_ceil(SLABS_PER_SUPER_BLOCK as u64)
+            .max(force as u64);
+        let room = (MAX_SUPER_BLOCKS - self.pool.super_block_count()) as u64;
+        if more.min(room) > 0 {
+            self.pool.grow(more.min(room) as u32)?;
         }
         Ok(())
     }
@@ -330,13 +397,15 @@ impl GpuHashTable {
         items: &Buffer,
         handles: &Buffer,
         count: u32,
-        expected_new: u32,
         mut profiler: Option<&mut Profiler>,
     ) -> Result<InsertReport, HashError> {
         Self::check_count(items, count, self.config.item_words, "items")?;
         Self::check_count(handles, count, 1, "handles")?;
+        // Fresh counters: other passes on this pool (garbage collection) change them.
+        self.status = self.pool.read_status()?;
         if self.config.grow_before_insert {
-            self.reserve(expected_new)?;
+            // Every item may be new (find-or-insert cannot tell without a readback).
+            self.reserve(count)?;
         }
         let before = self.status;
         let mut report = InsertReport::default();
@@ -346,7 +415,14 @@ impl GpuHashTable {
             let push = self.push_constants(items.address(), handles.address(), count);
             let mut cmd = self.ctx.begin_commands("hash insert")?;
             let groups = self.cooperative_groups(count);
-            self.record(&mut cmd, &mut profiler, "hash insert", &self.insert, groups, &push)?;
+            self.record(
+                &mut cmd,
+                &mut profiler,
+                "hash insert",
+                &self.insert,
+                groups,
+                &push,
+            )?;
             cmd.submit()?;
             if let Some(p) = profiler.as_deref_mut() {
                 p.resolve()?;
@@ -367,15 +443,10 @@ impl GpuHashTable {
                 });
             }
             // Grow for the left-over items, at least one super block.
-            let want = self.status.allocated_slabs as u64
+            let slabs = self.status.allocated_slabs as u64
                 + left as u64 / SLAB_SLOTS as u64
                 + left.min(self.config.buckets) as u64;
-            let more = (want * 8 / 7)
-                .saturating_sub(self.pool.capacity_slabs())
-                .div_ceil(SLABS_PER_SUPER_BLOCK as u64)
-                .max(1)
-                .min(room as u64);
-            self.pool.grow(more as u32)?;
+            self.grow_for(slabs, true)?;
         }
         report.invalid_items = self.status.invalid_items.wrapping_sub(before.invalid_items);
         report.super_blocks = self.pool.super_block_count();
@@ -420,7 +491,14 @@ impl GpuHashTable {
             .div_ceil(self.workgroup)
             .clamp(1, self.ctx.info().max_compute_workgroup_count[0]);
         let mut cmd = self.ctx.begin_commands("hash read")?;
-        self.record(&mut cmd, &mut profiler, "hash read", &self.read, groups, &push)?;
+        self.record(
+            &mut cmd,
+            &mut profiler,
+            "hash read",
+            &self.read,
+            groups,
+            &push,
+        )?;
         cmd.submit()?;
         if let Some(p) = profiler {
             p.resolve()?;
@@ -454,11 +532,9 @@ impl GpuHashTable {
     fn upload_batch(&self, items: &[u32]) -> Result<(u32, Buffer, Buffer), HashError> {
         let count = self.validate_items(items)?;
         let items = self.ctx.upload("hash items", items)?;
-        let handles = self.ctx.create_buffer(
-            "hash handles",
-            4 * count as u64,
-            MemLocation::GpuOnly,
-        )?;
+        let handles =
+            self.ctx
+                .create_buffer("hash handles", 4 * count as u64, MemLocation::GpuOnly)?;
         Ok((count, items, handles))
     }
 
@@ -518,7 +594,11 @@ impl GpuHashTable {
                 Handle::from_raw(h).ok_or_else(|| {
                     HashError::InvalidArgument(format!(
                         "item {i} has no handle after insert ({})",
-                        if h == HANDLE_INVALID { "invalid" } else { "missing" }
+                        if h == HANDLE_INVALID {
+                            "invalid"
+                        } else {
+                            "missing"
+                        }
                     ))
                 })
             })

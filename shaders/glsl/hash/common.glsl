@@ -7,6 +7,9 @@ layout(local_size_x_id = 0) in;                     // workgroup size (a multipl
 layout(constant_id = 1) const uint SUBGROUP_SIZE = 32;
 layout(constant_id = 2) const uint VARIANT = 0;     // HASH_ATOMIC64 ...
 layout(constant_id = 3) const uint ITEM_WORDS = 1;  // 1..10
+// Lanes that cooperate on one item: SUBGROUP_SIZE (the cooperative algorithm), or 1 (every
+// lane its own item, no subgroup operations: faster on CPU implementations such as lavapipe).
+layout(constant_id = 4) const uint TEAM = 32;
 
 #define HASH_MAX_ITEM_WORDS 10
 

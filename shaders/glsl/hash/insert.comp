@@ -1,7 +1,7 @@
 #version 460
 // Slab hash insert pass: places every item whose handle is still HASH_MISS and writes its new
 // handle. Items are assumed absent (no search here; duplicates inside a batch get separate
-// slots). One item per subgroup at a time: walk the bucket's chain, claim a free slot in the
+// slots). One item per team (a subgroup, or one lane) at a time: walk the bucket's chain, claim a free slot in the
 // first slab that has one, else allocate a slab and link it at the end with a CAS. When no
 // slab can be allocated the handle stays HASH_MISS and status.exhausted counts it: the host
 // grows the pool and runs the pass again (only HASH_MISS items are retried).
@@ -22,7 +22,7 @@ layout(push_constant, std430) uniform Push { HASH_PUSH_MEMBERS } push;
 
 // Writes the item words the claim did not write, lanes in parallel.
 void write_item(HashWords slab, uint slot, uint item[HASH_MAX_ITEM_WORDS], uint first) {
-    for (uint w = first + gl_SubgroupInvocationID; w < ITEM_WORDS; w += SUBGROUP_SIZE) {
+    for (uint w = first + team_lane(); w < ITEM_WORDS; w += TEAM) {
         uint v = 0u;
         // Dynamic indexing of a register array: pick the word with a loop the compiler unrolls.
         for (uint k = 0u; k < HASH_MAX_ITEM_WORDS; ++k) {
@@ -36,24 +36,24 @@ void write_item(HashWords slab, uint slot, uint item[HASH_MAX_ITEM_WORDS], uint 
 uint claim_atomic64(uint64_t slab_addr, uint item[HASH_MAX_ITEM_WORDS]) {
     HashWords words = HashWords(slab_addr);
     uint64_t prefix = hash_prefix64() ? packUint2x32(uvec2(item[0], item[1])) : 0ul;
-    for (uint chunk = 0u; chunk < HASH_SLAB_SLOTS; chunk += SUBGROUP_SIZE) {
-        uint slot = chunk + gl_SubgroupInvocationID;
+    for (uint chunk = 0u; chunk < HASH_SLAB_SLOTS; chunk += TEAM) {
+        uint slot = chunk + team_lane();
         bool empty = false;
         if (slot < HASH_SLAB_SLOTS) {
             empty = hash_prefix64() ? HashWords64(slab_addr).w[1u + slot] == 0ul
                                     : words.w[hash_item_word(slot, 0u)] == 0u;
         }
-        while (subgroupAny(empty)) {
-            uint winner = subgroupBallotFindLSB(subgroupBallot(empty));
+        while (team_any(empty)) {
+            uint winner = team_first(empty);
             uint won = HASH_MISS;
-            if (gl_SubgroupInvocationID == winner) {
+            if (team_lane() == winner) {
                 bool ok = hash_prefix64()
                     ? atomicCompSwap(HashWords64(slab_addr).w[1u + slot], 0ul, prefix) == 0ul
                     : atomicCompSwap(words.w[hash_item_word(slot, 0u)], 0u, item[0]) == 0u;
                 won = ok ? slot : HASH_MISS;
                 empty = false;
             }
-            won = subgroupMin(won);
+            won = team_min(won);
             if (won != HASH_MISS) {
                 return won;
             }
@@ -65,7 +65,7 @@ uint claim_atomic64(uint64_t slab_addr, uint item[HASH_MAX_ITEM_WORDS]) {
 // Ticket Board / Acceleration Hash: claim a clear occupancy bit; slot or HASH_MISS when full.
 uint claim_ticket(HashWords words) {
     uint slot = HASH_MISS;
-    if (subgroupElect()) {
+    if (team_leader()) {
         uint mask = words.w[HASH_SLAB_OCCUPANCY];
         while (mask != 0xFFFFFFFFu) {
             uint bit = 1u << uint(findLSB(~mask));
@@ -77,19 +77,37 @@ uint claim_ticket(HashWords words) {
             mask = old | bit;
         }
     }
-    return subgroupBroadcastFirst(slot);
+    return team_from_leader(slot);
 }
 
 // Inserts one item; returns its handle or HASH_MISS when the pool is exhausted.
+// Atomic64 has no occupancy mask: whether a slab's last slot is empty. Slots are claimed lowest
+// first and only cleared by garbage collection, so a taken last slot means a full slab unless GC
+// punched holes since.
+bool last_slot_empty(uint64_t slab_addr) {
+    if (hash_prefix64()) return HashWords64(slab_addr).w[HASH_SLAB_SLOTS] == 0ul;
+    return HashWords(slab_addr).w[hash_item_word(HASH_SLAB_SLOTS - 1u, 0u)] == 0u;
+}
+
 uint insert_item(uint item[HASH_MAX_ITEM_WORDS], uint h, uint rng) {
     HashWords link_words = HashWords(push.heads);
     uint link_index = h % push.buckets;
     uint link = link_words.w[link_index];
+    // Atomic64 walks the chain twice before allocating: first scanning only slabs whose last
+    // slot is empty (one load per full slab instead of 32 prefixes), then every slab (holes left
+    // by garbage collection).
+    bool thorough = VARIANT != HASH_ATOMIC64;
     for (uint attempt = 0u;; ++attempt) {
+        if (link == 0u && !thorough) {
+            thorough = true;
+            link_words = HashWords(push.heads);
+            link_index = h % push.buckets;
+            link = link_words.w[link_index];
+        }
         if (link == 0u) {
             // End of the chain: allocate a zeroed slab and link it with a CAS.
             uint result = 0u;
-            if (subgroupElect()) {
+            if (team_leader()) {
                 uint slab = hash_alloc_slab(push.super_blocks, push.status, push.blocks,
                                             rng + attempt * 0x632be5abu);
                 if (slab == HASH_NO_SLAB) {
@@ -103,7 +121,7 @@ uint insert_item(uint item[HASH_MAX_ITEM_WORDS], uint h, uint rng) {
                     }
                 }
             }
-            link = subgroupBroadcastFirst(result);
+            link = team_from_leader(result);
             if (link == 0u) {
                 return HASH_MISS;
             }
@@ -113,7 +131,7 @@ uint insert_item(uint item[HASH_MAX_ITEM_WORDS], uint h, uint rng) {
         HashWords words = HashWords(addr);
         uint slot;
         if (VARIANT == HASH_ATOMIC64) {
-            slot = claim_atomic64(addr, item);
+            slot = thorough || last_slot_empty(addr) ? claim_atomic64(addr, item) : HASH_MISS;
             if (slot != HASH_MISS) {
                 write_item(words, slot, item, hash_prefix64() ? 2u : 1u);
             }
@@ -122,7 +140,7 @@ uint insert_item(uint item[HASH_MAX_ITEM_WORDS], uint h, uint rng) {
             if (slot != HASH_MISS) {
                 write_item(words, slot, item, 0u);
                 uint sec = hash_secondary_stored_form(h);
-                if (subgroupElect()) {
+                if (team_leader()) {
                     if (VARIANT == HASH_ACCEL32) {
                         words.w[hash_hashes_offset() + slot] = sec;
                     } else if (VARIANT == HASH_ACCEL8) {
@@ -143,13 +161,12 @@ uint insert_item(uint item[HASH_MAX_ITEM_WORDS], uint h, uint rng) {
 }
 
 void main() {
-    if (gl_SubgroupSize != SUBGROUP_SIZE) {
+    if (!team_size_ok()) {
         HashStatus(push.status).subgroup_mismatch = gl_SubgroupSize;
         return;
     }
-    uint per_group = gl_WorkGroupSize.x / SUBGROUP_SIZE;
-    uint first = gl_WorkGroupID.x * per_group + gl_SubgroupID;
-    uint stride = gl_NumWorkGroups.x * per_group;
+    uint first = team_index();
+    uint stride = team_count();
     HashWords handles = HashWords(push.handles);
     for (uint i = first; i < push.count; i += stride) {
         if (handles.w[i] != HASH_MISS) {
@@ -160,13 +177,13 @@ void main() {
         uint handle;
         if (!hash_item_valid(item)) {
             handle = HASH_INVALID;
-            if (subgroupElect()) {
+            if (team_leader()) {
                 atomicAdd(HashStatus(push.status).invalid_items, 1u);
             }
         } else {
             handle = insert_item(item, hash_item(item), hash_fmix32(push.seed ^ (i * 0x9e3779b9u)));
         }
-        if (subgroupElect()) {
+        if (team_leader()) {
             handles.w[i] = handle;
         }
     }

@@ -1,11 +1,12 @@
 #version 460
-// Slab hash search pass: handles[i] = handle of items[i], or HASH_MISS. One item per subgroup
-// at a time; every slab of the item's bucket scanned cooperatively (hash/slab.glsl).
+// Slab hash search pass: handles[i] = handle of items[i], or HASH_MISS. One item per team (a
+// subgroup, or one lane) at a time; every slab of the item's bucket scanned cooperatively (hash/slab.glsl).
 // Driven by engine/hash/table.rs.
 #extension GL_EXT_buffer_reference : require
 #extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
 #extension GL_KHR_shader_subgroup_ballot : require
 #extension GL_KHR_shader_subgroup_vote : require
+#extension GL_KHR_shader_subgroup_arithmetic : require
 
 #include "shared/hash_layout.h"
 #include "hash/common.glsl"
@@ -14,13 +15,12 @@
 layout(push_constant, std430) uniform Push { HASH_PUSH_MEMBERS } push;
 
 void main() {
-    if (gl_SubgroupSize != SUBGROUP_SIZE) {
+    if (!team_size_ok()) {
         HashStatus(push.status).subgroup_mismatch = gl_SubgroupSize;
         return;
     }
-    uint per_group = gl_WorkGroupSize.x / SUBGROUP_SIZE;
-    uint first = gl_WorkGroupID.x * per_group + gl_SubgroupID;
-    uint stride = gl_NumWorkGroups.x * per_group;
+    uint first = team_index();
+    uint stride = team_count();
     HashWords heads = HashWords(push.heads);
     HashWords handles = HashWords(push.handles);
     for (uint i = first; i < push.count; i += stride) {
@@ -37,7 +37,7 @@ void main() {
                 link = HashWords(addr).w[HASH_SLAB_NEXT];
             }
         }
-        if (subgroupElect()) {
+        if (team_leader()) {
             handles.w[i] = found;
         }
     }

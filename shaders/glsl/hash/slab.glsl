@@ -1,6 +1,57 @@
-// Cooperative slab scans shared by the search and insert passes: one item per subgroup, the
-// 32 slots of a slab looked at in chunks of SUBGROUP_SIZE lanes (lane l takes slot chunk + l).
-// Include after hash/common.glsl; needs subgroup ballot.
+// Cooperative slab scans shared by the search and insert passes: one item per team (the whole
+// subgroup, or a single lane when TEAM == 1), the 32 slots of a slab looked at in chunks of
+// TEAM lanes (lane l takes slot chunk + l). Include after hash/common.glsl; needs subgroup
+// ballot, vote and arithmetic. With TEAM == 1 the team_* helpers are plain values (the
+// subgroup branches are removed at specialization).
+
+// The team's lane index.
+uint team_lane() {
+    return TEAM == 1u ? 0u : gl_SubgroupInvocationID;
+}
+
+// Whether this lane is the team's leader (the one that runs scalar sections).
+bool team_leader() {
+    if (TEAM == 1u) return true;
+    return subgroupElect();
+}
+
+// The leader's value, in every lane of the team.
+uint team_from_leader(uint v) {
+    if (TEAM == 1u) return v;
+    return subgroupBroadcastFirst(v);
+}
+
+bool team_any(bool b) {
+    if (TEAM == 1u) return b;
+    return subgroupAny(b);
+}
+
+// Lowest team lane where b holds (only call when team_any(b)).
+uint team_first(bool b) {
+    if (TEAM == 1u) return 0u;
+    return subgroupBallotFindLSB(subgroupBallot(b));
+}
+
+uint team_min(uint v) {
+    if (TEAM == 1u) return v;
+    return subgroupMin(v);
+}
+
+// Index of this lane's team among all teams of the dispatch, and the number of teams.
+uint team_index() {
+    uint per_group = gl_WorkGroupSize.x / TEAM;
+    uint in_group = TEAM == 1u ? gl_LocalInvocationIndex : gl_SubgroupID;
+    return gl_WorkGroupID.x * per_group + in_group;
+}
+
+uint team_count() {
+    return gl_NumWorkGroups.x * (gl_WorkGroupSize.x / TEAM);
+}
+
+// Whether the pass runs with the subgroup size it was specialised for (cooperative teams only).
+bool team_size_ok() {
+    return TEAM == 1u || gl_SubgroupSize == SUBGROUP_SIZE;
+}
 
 // Loads an item (every lane the same words).
 void hash_load_item(uint64_t items, uint i, out uint item[HASH_MAX_ITEM_WORDS]) {
@@ -30,13 +81,50 @@ uint hash_secondary_stored_form(uint h) {
     return VARIANT == HASH_ACCEL8 ? s & 0xFFu : s;
 }
 
-// Handle of `item` in the slab at `slab_addr` (index `slab`), or HASH_MISS. Subgroup-uniform.
+// Slots of a slab whose 8-bit secondary hash equals `sec`: four at a time per word (bit s =
+// slot s), with the exact zero-byte test of x = word ^ (sec in every byte).
+uint hash_accel8_candidates(HashWords words, uint sec) {
+    uint hits = 0u;
+    uint pattern = sec * 0x01010101u;
+    for (uint g = 0u; g < HASH_SLAB_SLOTS / 4u; ++g) {
+        uint x = words.w[hash_hashes_offset() + g] ^ pattern;
+        uint zero = ~(((x & 0x7F7F7F7Fu) + 0x7F7F7F7Fu) | x | 0x7F7F7F7Fu); // 0x80 per zero byte
+        uint four = ((zero >> 7u) & 1u) | ((zero >> 14u) & 2u) | ((zero >> 21u) & 4u)
+                  | ((zero >> 28u) & 8u);
+        hits |= four << (4u * g);
+    }
+    return hits;
+}
+
+// One lane alone (TEAM == 1), occupancy-mask layouts: visit only occupied slots (Accel8: only
+// those whose hash byte matches), comparing the secondary hash before the item.
+uint hash_find_in_slab_single(HashWords words, uint slab, uint item[HASH_MAX_ITEM_WORDS],
+                              uint sec) {
+    uint candidates = words.w[HASH_SLAB_OCCUPANCY];
+    if (VARIANT == HASH_ACCEL8) {
+        candidates &= hash_accel8_candidates(words, sec);
+    }
+    while (candidates != 0u) {
+        uint slot = uint(findLSB(candidates));
+        candidates &= candidates - 1u;
+        if ((VARIANT != HASH_ACCEL32 || words.w[hash_hashes_offset() + slot] == sec)
+            && hash_slot_equals(words, slot, item, 0u)) {
+            return (slab << 5u) | slot;
+        }
+    }
+    return HASH_MISS;
+}
+
+// Handle of `item` in the slab at `slab_addr` (index `slab`), or HASH_MISS. Team-uniform.
 uint hash_find_in_slab(uint64_t slab_addr, uint slab, uint item[HASH_MAX_ITEM_WORDS], uint sec) {
     HashWords words = HashWords(slab_addr);
+    if (TEAM == 1u && VARIANT != HASH_ATOMIC64) {
+        return hash_find_in_slab_single(words, slab, item, sec);
+    }
     uint occupancy = VARIANT == HASH_ATOMIC64 ? 0u : words.w[HASH_SLAB_OCCUPANCY];
     uint64_t prefix = hash_prefix64() ? packUint2x32(uvec2(item[0], item[1])) : 0ul;
-    for (uint chunk = 0u; chunk < HASH_SLAB_SLOTS; chunk += SUBGROUP_SIZE) {
-        uint slot = chunk + gl_SubgroupInvocationID;
+    for (uint chunk = 0u; chunk < HASH_SLAB_SLOTS; chunk += TEAM) {
+        uint slot = chunk + team_lane();
         bool match = false;
         if (slot < HASH_SLAB_SLOTS) {
             if (hash_prefix64()) {
@@ -45,13 +133,13 @@ uint hash_find_in_slab(uint64_t slab_addr, uint slab, uint item[HASH_MAX_ITEM_WO
             } else if (VARIANT == HASH_ATOMIC64) {
                 match = words.w[hash_item_word(slot, 0u)] == item[0];
             } else if (((occupancy >> slot) & 1u) != 0u) {
+                // Acceleration Hash: the item words are read only on a secondary-hash match.
                 match = (VARIANT == HASH_TICKET_BOARD || hash_stored_secondary(words, slot) == sec)
                      && hash_slot_equals(words, slot, item, 0u);
             }
         }
-        uvec4 ballot = subgroupBallot(match);
-        if (subgroupAny(match)) {
-            return (slab << 5u) | (chunk + subgroupBallotFindLSB(ballot));
+        if (team_any(match)) {
+            return (slab << 5u) | (chunk + team_first(match));
         }
     }
     return HASH_MISS;
