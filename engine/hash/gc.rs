@@ -166,8 +166,10 @@ impl GpuGarbageCollector {
                 "unsupported subgroup size {subgroup}"
             )));
         }
-        let [_, _, variant, item_words] = table.spec_constants();
-        let spec = [subgroup, subgroup, variant, item_words];
+        // The table's constants with a workgroup of one subgroup; the GC passes always work as a
+        // whole subgroup (team = subgroup size).
+        let [_, _, variant, item_words, _] = table.spec_constants();
+        let spec = [subgroup, subgroup, variant, item_words, subgroup];
         let pipeline = |name: &str, spirv: &[u32]| {
             ctx.create_compute_pipeline(&ComputePipelineDesc {
                 name,
