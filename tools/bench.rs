@@ -1,6 +1,7 @@
 //! `voxdag bench ...`: benchmarks writing JSON plus a Markdown table (never timed unit tests).
 
 mod compress;
+mod hash;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -28,6 +29,8 @@ pub enum BenchCommand {
     Render(BenchRenderArgs),
     /// Tables 3.2-3.4: unique elements per transform set, encoded bytes, stage times, peak RSS.
     Compress(compress::BenchCompressArgs),
+    /// Table 4.2: GPU slab hash tables (fill, search at 25/50/75% hits, insert) vs a CPU baseline.
+    Hash(hash::BenchHashArgs),
 }
 
 /// Arguments of `voxdag bench build`.
@@ -83,6 +86,7 @@ pub fn run(command: BenchCommand, quiet: bool) -> Result<()> {
         BenchCommand::Build(args) => bench_build(&args),
         BenchCommand::Render(args) => bench_render(&args, quiet),
         BenchCommand::Compress(args) => compress::bench_compress(&args),
+        BenchCommand::Hash(args) => hash::bench_hash(&args, quiet),
     }
 }
 

@@ -12,6 +12,8 @@
 //! See `docs/hash.md`.
 
 pub mod alloc;
+pub mod dedup;
+pub mod gc;
 pub mod layout;
 pub mod reference;
 pub mod table;

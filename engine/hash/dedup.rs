@@ -1,0 +1,374 @@
+//! The duplicate-detection table of a temporary SVO (dissertation §4.4.2): a batch of keys (items
+//! of `key_words` words, e.g. new nodes) with a `u32` value each (e.g. the temporary node id) is
+//! reduced to one representative per distinct key, the smallest value among the inputs with that
+//! key, and every input learns its representative.
+//!
+//! Three GPU passes over a slab table that lives for one batch (`shaders/glsl/hash/dedup_*.comp`,
+//! layout in `dedup_common.glsl`, mirrored by [`DedupLayout`]):
+//! 1. insert: each input checks its bucket's first slab for an equal key (the cheap duplicate
+//!    check) and otherwise inserts its key; duplicates the check misses are inserted again;
+//! 2. min: each input finds the first entry with its key along the chain (the same entry for all
+//!    equal keys) and folds its value into that entry's minimum;
+//! 3. resolve: each input reads its entry's minimum.
+//!
+//! The result is deterministic (the minimum over all equal keys) although the table's contents
+//! are not; [`dedup_cpu`] is the reference. Overflow slabs come from a bump pool sized for the
+//! worst case; if it still runs out the batch is run again with a bigger pool (never a wrong
+//! answer).
+
+use std::sync::Arc;
+
+use rustc_hash::FxHashMap;
+
+use crate::gpu::{
+    shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, MemLocation,
+    Profiler,
+};
+
+/// Most workgroups one dedup dispatch launches (the passes loop over the rest).
+const MAX_WORKGROUPS: u32 = 65_535;
+/// Largest key size the dedup table accepts, in 32-bit words.
+pub const MAX_KEY_WORDS: u32 = 32;
+/// Slots per slab.
+const SLOTS: u64 = 32;
+
+/// Errors of the duplicate-detection table.
+#[derive(Debug, thiserror::Error)]
+pub enum DedupError {
+    /// The GPU layer failed.
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    /// Inputs the table cannot take (sizes, lengths).
+    #[error("invalid dedup input: {0}")]
+    InvalidInput(String),
+    /// The table lost track of a key (a bug, reported instead of a wrong answer).
+    #[error("dedup table inconsistent: {0}")]
+    Inconsistent(String),
+}
+
+/// Representatives of a batch: `representatives[i]` is the smallest value among the inputs whose
+/// key equals key `i`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct DedupOutput {
+    /// One representative value per input.
+    pub representatives: Vec<u32>,
+    /// Table entries made (distinct keys plus the duplicates the first-slab check missed).
+    pub entries: u32,
+    /// Times the batch ran (more than 1 when the overflow pool had to grow).
+    pub attempts: u32,
+}
+
+/// CPU reference: for every input, the smallest value among the inputs with an equal key.
+pub fn dedup_cpu(keys: &[u32], key_words: usize, values: &[u32]) -> Result<Vec<u32>, DedupError> {
+    check_input(keys.len(), key_words, values.len())?;
+    let mut smallest: FxHashMap<&[u32], u32> = FxHashMap::default();
+    for (key, &value) in keys.chunks_exact(key_words).zip(values) {
+        smallest
+            .entry(key)
+            .and_modify(|v| *v = (*v).min(value))
+            .or_insert(value);
+    }
+    Ok(keys.chunks_exact(key_words).map(|k| smallest[k]).collect())
+}
+
+/// Checks key size and input lengths.
+fn check_input(key_len: usize, key_words: usize, values: usize) -> Result<(), DedupError> {
+    if key_words == 0 || key_words > MAX_KEY_WORDS as usize {
+        return Err(DedupError::InvalidInput(format!(
+            "key size {key_words} words is outside 1..={MAX_KEY_WORDS}"
+        )));
+    }
+    if key_len != values * key_words {
+        return Err(DedupError::InvalidInput(format!(
+            "{key_len} key words for {values} values of {key_words}-word keys"
+        )));
+    }
+    if values >= u32::MAX as usize {
+        return Err(DedupError::InvalidInput(format!(
+            "{values} inputs is too many"
+        )));
+    }
+    Ok(())
+}
+
+/// Word layout of one slab of the dedup table (mirror of `dedup_common.glsl`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DedupLayout {
+    /// Key size in words.
+    pub key_words: u32,
+}
+
+impl DedupLayout {
+    /// Words of one slab: 32 tags, 32 values, 32 keys, the next-slab index.
+    pub fn slab_words(self) -> u64 {
+        2 * SLOTS + SLOTS * self.key_words as u64 + 1
+    }
+
+    /// Buckets for a batch of `count` inputs: about 16 keys per bucket, so that most keys'
+    /// duplicates are in the bucket's first slab.
+    pub fn buckets(count: u32) -> u32 {
+        count.div_ceil(16).max(1)
+    }
+
+    /// Overflow slabs that always suffice when no slab is wasted by a lost link race: every
+    /// overflow slab but a bucket's last is full, and a bucket with one holds at least 33 entries.
+    pub fn pool_slabs(count: u32) -> u32 {
+        count / 32 + count / 33 + 1
+    }
+}
+
+/// Murmur3-style hash of a key (the same function as `hash_key` in `dedup_common.glsl`).
+pub fn hash_key(key: &[u32]) -> u32 {
+    let mut h = 0x9e37_79b9u32 ^ key.len() as u32;
+    for &word in key {
+        let k = word
+            .wrapping_mul(0xcc9e_2d51)
+            .rotate_left(15)
+            .wrapping_mul(0x1b87_3593);
+        h = (h ^ k)
+            .rotate_left(13)
+            .wrapping_mul(5)
+            .wrapping_add(0xe654_6b64);
+    }
+    h ^= h >> 16;
+    h = h.wrapping_mul(0x85eb_ca6b);
+    h ^= h >> 13;
+    h = h.wrapping_mul(0xc2b2_ae35);
+    h ^ (h >> 16)
+}
+
+/// Push constants of the dedup passes (mirror of `Push` in `dedup_common.glsl`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+struct DedupPush {
+    keys: u64,
+    values: u64,
+    table: u64,
+    canon: u64,
+    reps: u64,
+    counters: u64,
+    count: u32,
+    buckets: u32,
+    pool_slabs: u32,
+    slab_words: u32,
+}
+
+const _: () = {
+    assert!(std::mem::size_of::<DedupPush>() == 64);
+    assert!(std::mem::offset_of!(DedupPush, counters) == 40);
+    assert!(std::mem::offset_of!(DedupPush, count) == 48);
+    assert!(std::mem::offset_of!(DedupPush, pool_slabs) == 56);
+};
+
+/// Counters written by the passes (`counters[]` in `dedup_common.glsl`).
+const COUNTER_POOL_USED: usize = 0;
+const COUNTER_ENTRIES: usize = 1;
+const COUNTER_OVERFLOW: usize = 2;
+
+/// GPU duplicate detection for keys of one size: the three compiled passes.
+pub struct GpuDedup {
+    ctx: Arc<GpuContext>,
+    layout: DedupLayout,
+    /// Invocations per workgroup (specialization constant 0): one subgroup.
+    workgroup: u32,
+    /// Overflow pool of the first attempt; `None`: [`DedupLayout::pool_slabs`].
+    initial_pool: Option<u32>,
+    /// Bucket count; `None`: [`DedupLayout::buckets`].
+    buckets: Option<u32>,
+    insert: ComputePipeline,
+    min: ComputePipeline,
+    resolve: ComputePipeline,
+}
+
+impl GpuDedup {
+    /// Compiles the passes for keys of `key_words` words (1..=[`MAX_KEY_WORDS`]).
+    pub fn new(ctx: &Arc<GpuContext>, key_words: u32) -> Result<GpuDedup, DedupError> {
+        if key_words == 0 || key_words > MAX_KEY_WORDS {
+            return Err(DedupError::InvalidInput(format!(
+                "key size {key_words} words is outside 1..={MAX_KEY_WORDS}"
+            )));
+        }
+        let subgroup = ctx.info().subgroup_size.max(1);
+        // One subgroup per workgroup: on lavapipe (Mesa 22.3) a workgroup whose subgroups leave
+        // the pass at different times (fewer inputs than subgroups) gave wrong ballots.
+        let workgroup = subgroup;
+        let spec = [workgroup, key_words];
+        let pipeline = |name: &str, spirv: &[u32]| {
+            ctx.create_compute_pipeline(&ComputePipelineDesc {
+                name,
+                spirv,
+                spec_constants: &spec,
+                push_constant_size: std::mem::size_of::<DedupPush>() as u32,
+                storage_image: false,
+            })
+        };
+        Ok(GpuDedup {
+            ctx: Arc::clone(ctx),
+            layout: DedupLayout { key_words },
+            workgroup,
+            initial_pool: None,
+            buckets: None,
+            insert: pipeline("dedup insert", shaders::HASH_DEDUP_INSERT)?,
+            min: pipeline("dedup min", shaders::HASH_DEDUP_MIN)?,
+            resolve: pipeline("dedup resolve", shaders::HASH_DEDUP_RESOLVE)?,
+        })
+    }
+
+    /// Starts every batch with an overflow pool of `slabs` slabs instead of the worst-case
+    /// estimate (a too-small pool makes the batch run again with a bigger one).
+    pub fn with_initial_pool(mut self, slabs: u32) -> GpuDedup {
+        self.initial_pool = Some(slabs);
+        self
+    }
+
+    /// Uses `buckets` buckets (at least 1) instead of one per 16 inputs: fewer buckets make
+    /// longer chains and more duplicates that the first-slab check misses.
+    pub fn with_buckets(mut self, buckets: u32) -> GpuDedup {
+        self.buckets = Some(buckets.max(1));
+        self
+    }
+
+    /// The slab layout of this table.
+    pub fn layout(&self) -> DedupLayout {
+        self.layout
+    }
+
+    /// Uploads `keys` (`values.len()` keys of `key_words` words) and `values`, runs the passes and
+    /// reads the representatives back.
+    pub fn dedup(
+        &self,
+        keys: &[u32],
+        values: &[u32],
+        profiler: Option<&mut Profiler>,
+    ) -> Result<DedupOutput, DedupError> {
+        check_input(keys.len(), self.layout.key_words as usize, values.len())?;
+        if values.is_empty() {
+            return Ok(DedupOutput {
+                representatives: Vec::new(),
+                entries: 0,
+                attempts: 0,
+            });
+        }
+        let keys = self.ctx.upload("dedup keys", keys)?;
+        let values = self.ctx.upload("dedup values", values)?;
+        let count = (values.size() / 4) as u32;
+        let reps = self.ctx.create_buffer(
+            "dedup representatives",
+            count as u64 * 4,
+            MemLocation::GpuOnly,
+        )?;
+        let (entries, attempts) = self.dedup_buffers(&keys, &values, count, &reps, profiler)?;
+        Ok(DedupOutput {
+            representatives: self.ctx.download(&reps)?,
+            entries,
+            attempts,
+        })
+    }
+
+    /// Runs the passes on GPU buffers: `count` keys and values in, `count` representatives out.
+    /// Returns the table entries made and the attempts needed.
+    pub fn dedup_buffers(
+        &self,
+        keys: &Buffer,
+        values: &Buffer,
+        count: u32,
+        reps: &Buffer,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<(u32, u32), DedupError> {
+        let key_words = self.layout.key_words as u64;
+        let n = count as u64;
+        for (buffer, words) in [(keys, n * key_words), (values, n), (reps, n)] {
+            if buffer.size() < words * 4 {
+                return Err(DedupError::InvalidInput(format!(
+                    "buffer '{}' has {} bytes, needs {}",
+                    buffer.name(),
+                    buffer.size(),
+                    words * 4
+                )));
+            }
+        }
+        if count == 0 {
+            return Ok((0, 0));
+        }
+        let buckets = self.buckets.unwrap_or_else(|| DedupLayout::buckets(count));
+        let mut pool_slabs = self
+            .initial_pool
+            .unwrap_or_else(|| DedupLayout::pool_slabs(count));
+        let canon = self
+            .ctx
+            .create_buffer("dedup canon", n * 4, MemLocation::GpuOnly)?;
+        let counters = self
+            .ctx
+            .create_buffer("dedup counters", 16, MemLocation::GpuOnly)?;
+        let mut attempt = 0;
+        loop {
+            attempt += 1;
+            let table_bytes = (buckets as u64 + pool_slabs as u64) * self.layout.slab_words() * 4;
+            let table = self
+                .ctx
+                .create_buffer("dedup table", table_bytes, MemLocation::GpuOnly)?;
+            let push = DedupPush {
+                keys: keys.address(),
+                values: values.address(),
+                table: table.address(),
+                canon: canon.address(),
+                reps: reps.address(),
+                counters: counters.address(),
+                count,
+                buckets,
+                pool_slabs,
+                slab_words: self.layout.slab_words() as u32,
+            };
+            let per_subgroup = [count.min(MAX_WORKGROUPS), 1, 1];
+            let per_invocation = [count.div_ceil(self.workgroup).min(MAX_WORKGROUPS), 1, 1];
+            let mut cmd = self.ctx.begin_commands("dedup")?;
+            cmd.fill_buffer(&table, 0);
+            cmd.fill_buffer(&counters, 0);
+            if let Some(p) = profiler.as_deref_mut() {
+                p.begin_pass(&mut cmd, "dedup insert");
+            }
+            cmd.dispatch(&self.insert, per_subgroup, bytemuck::bytes_of(&push), None)?;
+            if let Some(p) = profiler.as_deref_mut() {
+                p.end_pass(&mut cmd);
+            }
+            cmd.barrier();
+            if let Some(p) = profiler.as_deref_mut() {
+                p.begin_pass(&mut cmd, "dedup representatives");
+            }
+            cmd.dispatch(&self.min, per_subgroup, bytemuck::bytes_of(&push), None)?;
+            cmd.barrier();
+            cmd.dispatch(
+                &self.resolve,
+                per_invocation,
+                bytemuck::bytes_of(&push),
+                None,
+            )?;
+            if let Some(p) = profiler.as_deref_mut() {
+                p.end_pass(&mut cmd);
+            }
+            cmd.submit()?;
+            if let Some(p) = profiler.as_deref_mut() {
+                p.resolve()?;
+            }
+            let state: Vec<u32> = self.ctx.read_buffer(&counters, 0, 3)?;
+            // Bit 0: the pool ran out in pass 1 (pass 2 then also misses keys: bit 1).
+            // Bit 1 alone: a key without an entry, which pass 1 never leaves behind.
+            let overflow = state[COUNTER_OVERFLOW];
+            if overflow == 0 {
+                return Ok((state[COUNTER_ENTRIES], attempt));
+            }
+            // Every input links at most one slab per entry it makes and wastes at most one, so a
+            // pool of 2 * count slabs never runs out.
+            if overflow & 1 == 0 || pool_slabs >= 2 * count {
+                return Err(DedupError::Inconsistent(format!(
+                    "overflow state {overflow} with a pool of {pool_slabs} slabs"
+                )));
+            }
+            log::debug!(
+                "dedup: pool of {pool_slabs} slabs ran out ({} taken), growing",
+                state[COUNTER_POOL_USED]
+            );
+            pool_slabs = pool_slabs.saturating_mul(2).min(2 * count);
+        }
+    }
+}

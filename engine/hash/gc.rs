@@ -1,0 +1,292 @@
+//! Garbage collection of a slab hash table (dissertation §4.4.3): keep exactly the items named
+//! by a list of live handles, free every other item and return wholly empty slabs to the
+//! allocator.
+//!
+//! Two GPU passes (`shaders/glsl/hash/gc_{mark,sweep}.comp`) in one submission:
+//! 1. mark: each live handle sets its slot's bit in its slab's `active` word (header word 1,
+//!    reserved for GC by the table layout, zero between collections);
+//! 2. sweep: one subgroup per bucket walks the chain, clears every occupied slot whose bit is
+//!    clear (the slot's words, the occupancy bit, the secondary hash), resets `active` to zero,
+//!    and unlinks, zeroes and frees every slab left empty except the bucket's first.
+//!
+//! Handles of kept items do not change. [`collect_cpu`] does the same on a [`TableImage`]; since
+//! GC allocates nothing its result is deterministic, and the GPU's image equals the CPU's word
+//! for word.
+
+use std::sync::Arc;
+
+use super::layout::{
+    Handle, HashVariant, SlabLayout, HANDLE_INVALID, HANDLE_MISS, SLABS_PER_SUPER_BLOCK,
+    SLAB_ACTIVE, SLAB_NEXT, SLAB_OCCUPANCY, SLAB_SLOTS, SUPER_BLOCK_BITMASK_WORDS,
+};
+use super::reference::TableImage;
+use super::table::GpuHashTable;
+use super::HashError;
+use crate::gpu::{
+    shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, MemLocation, Profiler,
+};
+
+/// Most workgroups one GC dispatch launches (the passes loop over the rest).
+const MAX_WORKGROUPS: u32 = 65_535;
+
+/// What a collection did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct GcReport {
+    /// Live handles naming no allocated slab of the pool (beyond it, or stale: ignored).
+    pub bad_handles: u32,
+    /// Items removed (occupied slots whose handle was not live).
+    pub freed_items: u32,
+    /// Slabs unlinked and returned to the allocator.
+    pub freed_slabs: u32,
+}
+
+/// GC counters written by the passes (mirror of `GC_*` in `gc_common.glsl`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+struct GcCounters {
+    bad_handles: u32,
+    freed_items: u32,
+    freed_slabs: u32,
+    pad: u32,
+}
+
+/// Word range of a slab inside its super block: (super block, first word).
+fn slab_start(layout: &SlabLayout, slab: u32) -> (usize, usize) {
+    let local = (slab % SLABS_PER_SUPER_BLOCK) as usize;
+    (
+        (slab / SLABS_PER_SUPER_BLOCK) as usize,
+        SUPER_BLOCK_BITMASK_WORDS as usize + local * layout.slab_words as usize,
+    )
+}
+
+/// Occupied slots of a slab, by the layout's own marker.
+fn occupied_mask(layout: &SlabLayout, words: &[u32]) -> u32 {
+    if layout.variant != HashVariant::Atomic64 {
+        return words[SLAB_OCCUPANCY as usize];
+    }
+    (0..SLAB_SLOTS)
+        .filter(|&slot| {
+            let first = words[layout.item_word(slot, 0) as usize];
+            if layout.item_words == 1 {
+                first != 0
+            } else {
+                first | words[layout.item_word(slot, 1) as usize] != 0
+            }
+        })
+        .fold(0, |mask, slot| mask | 1 << slot)
+}
+
+/// CPU reference of a collection on a table image: keeps exactly the items named by `live`.
+pub fn collect_cpu(image: &mut TableImage, live: &[Handle]) -> GcReport {
+    let layout = image.layout;
+    let capacity = image.capacity_slabs();
+    let mut report = GcReport::default();
+    for handle in live {
+        if Handle::from_raw(handle.0).is_none() {
+            continue;
+        }
+        if handle.slab() as u64 >= capacity || !image.is_allocated(handle.slab()) {
+            report.bad_handles += 1;
+            continue;
+        }
+        let (sb, start) = slab_start(&layout, handle.slab());
+        image.super_blocks[sb][start + SLAB_ACTIVE as usize] |= 1 << handle.slot();
+    }
+    let slab_words = layout.slab_words as usize;
+    for bucket in 0..image.heads.len() {
+        let mut link = image.heads[bucket];
+        let mut prev: Option<u32> = None;
+        while link != 0 {
+            let slab = link - 1;
+            let (sb, start) = slab_start(&layout, slab);
+            let words = &mut image.super_blocks[sb][start..start + slab_words];
+            let next = words[SLAB_NEXT as usize];
+            let occupied = occupied_mask(&layout, words);
+            let kept = occupied & words[SLAB_ACTIVE as usize];
+            let garbage = occupied & !kept;
+            report.freed_items += garbage.count_ones();
+            for slot in (0..SLAB_SLOTS).filter(|s| garbage >> s & 1 == 1) {
+                for w in 0..layout.item_words {
+                    words[layout.item_word(slot, w) as usize] = 0;
+                }
+                let h = layout.hashes as usize;
+                match layout.variant {
+                    HashVariant::AccelHash32 => words[h + slot as usize] = 0,
+                    HashVariant::AccelHash8 => {
+                        words[h + slot as usize / 4] &= !(0xff << (8 * (slot % 4)))
+                    }
+                    _ => {}
+                }
+            }
+            match prev {
+                Some(prev_slab) if kept == 0 => {
+                    words.fill(0);
+                    let (psb, pstart) = slab_start(&layout, prev_slab);
+                    image.super_blocks[psb][pstart + SLAB_NEXT as usize] = next;
+                    let local = slab % SLABS_PER_SUPER_BLOCK;
+                    image.super_blocks[sb][(local / 32) as usize] &= !(1 << (local % 32));
+                    image.status.allocated_slabs = image.status.allocated_slabs.wrapping_sub(1);
+                    report.freed_slabs += 1;
+                }
+                _ => {
+                    if layout.variant != HashVariant::Atomic64 {
+                        words[SLAB_OCCUPANCY as usize] = kept;
+                    }
+                    words[SLAB_ACTIVE as usize] = 0;
+                    prev = Some(slab);
+                }
+            }
+            link = next;
+        }
+    }
+    report
+}
+
+/// The GC passes of one table layout (variant and item size).
+pub struct GpuGarbageCollector {
+    ctx: Arc<GpuContext>,
+    layout: SlabLayout,
+    /// Invocations per workgroup: one subgroup (the sweep walks one bucket per subgroup; on
+    /// lavapipe, Mesa 22.3, subgroups of one workgroup leaving a pass at different times gave
+    /// wrong ballots, so a workgroup is a single subgroup).
+    workgroup: u32,
+    mark: ComputePipeline,
+    sweep: ComputePipeline,
+}
+
+impl GpuGarbageCollector {
+    /// Compiles the passes for `table`'s layout (usable with any table of the same layout).
+    pub fn new(
+        ctx: &Arc<GpuContext>,
+        table: &GpuHashTable,
+    ) -> Result<GpuGarbageCollector, HashError> {
+        let subgroup = ctx.info().subgroup_size;
+        if subgroup == 0 || !subgroup.is_power_of_two() {
+            return Err(HashError::Config(format!(
+                "unsupported subgroup size {subgroup}"
+            )));
+        }
+        // The table's constants with a workgroup of one subgroup; the GC passes always work as a
+        // whole subgroup (team = subgroup size).
+        let [_, _, variant, item_words, _] = table.spec_constants();
+        let spec = [subgroup, subgroup, variant, item_words, subgroup];
+        let pipeline = |name: &str, spirv: &[u32]| {
+            ctx.create_compute_pipeline(&ComputePipelineDesc {
+                name,
+                spirv,
+                spec_constants: &spec,
+                push_constant_size: std::mem::size_of::<super::layout::HashPush>() as u32,
+                storage_image: false,
+            })
+        };
+        Ok(GpuGarbageCollector {
+            ctx: Arc::clone(ctx),
+            layout: table.layout(),
+            workgroup: subgroup,
+            mark: pipeline("hash gc mark", shaders::HASH_GC_MARK)?,
+            sweep: pipeline("hash gc sweep", shaders::HASH_GC_SWEEP)?,
+        })
+    }
+
+    /// Collects `table`, keeping the items named by the host handles `live` (sentinels are
+    /// skipped; a handle beyond the pool is an error and nothing is collected; a handle in a
+    /// free slab is counted in [`GcReport::bad_handles`] and ignored).
+    pub fn collect(
+        &self,
+        table: &mut GpuHashTable,
+        live: &[Handle],
+        profiler: Option<&mut Profiler>,
+    ) -> Result<GcReport, HashError> {
+        let capacity = table.pool().capacity_slabs();
+        if let Some(bad) = live
+            .iter()
+            .find(|h| h.0 != HANDLE_MISS && h.0 != HANDLE_INVALID && h.slab() as u64 >= capacity)
+        {
+            return Err(HashError::InvalidArgument(format!(
+                "live handle {:#x} names slab {} beyond the pool of {capacity} slabs",
+                bad.0,
+                bad.slab()
+            )));
+        }
+        let count = u32::try_from(live.len())
+            .map_err(|_| HashError::InvalidArgument("more than 2^32 live handles".into()))?;
+        let raw: Vec<u32> = if live.is_empty() {
+            vec![HANDLE_MISS]
+        } else {
+            live.iter().map(|h| h.0).collect()
+        };
+        let buffer = self.ctx.upload("hash gc live handles", &raw)?;
+        self.collect_buffers(table, &buffer, count, profiler)
+    }
+
+    /// Collects `table`, keeping the items named by the first `count` handles of `live` (a GPU
+    /// buffer of `u32` handles; sentinels skipped; handles beyond the pool or in a free slab
+    /// counted in [`GcReport::bad_handles`] and ignored).
+    pub fn collect_buffers(
+        &self,
+        table: &mut GpuHashTable,
+        live: &Buffer,
+        count: u32,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<GcReport, HashError> {
+        if table.layout() != self.layout {
+            return Err(HashError::InvalidArgument(format!(
+                "collector built for {:?}, table is {:?}",
+                self.layout,
+                table.layout()
+            )));
+        }
+        if live.size() < 4 * count as u64 {
+            return Err(HashError::InvalidArgument(format!(
+                "buffer '{}' holds fewer than {count} handles",
+                live.name()
+            )));
+        }
+        let counters = self.ctx.create_buffer(
+            "hash gc counters",
+            std::mem::size_of::<GcCounters>() as u64,
+            MemLocation::GpuOnly,
+        )?;
+        let push = table.push_constants(counters.address(), live.address(), count);
+        let buckets = table.config().buckets;
+        let mut cmd = self.ctx.begin_commands("hash gc")?;
+        cmd.fill_buffer(&counters, 0);
+        if let Some(p) = profiler.as_deref_mut() {
+            p.begin_pass(&mut cmd, "hash gc mark");
+        }
+        let mark_groups = count.div_ceil(self.workgroup).min(MAX_WORKGROUPS);
+        cmd.dispatch(
+            &self.mark,
+            [mark_groups, 1, 1],
+            bytemuck::bytes_of(&push),
+            None,
+        )?;
+        if let Some(p) = profiler.as_deref_mut() {
+            p.end_pass(&mut cmd);
+        }
+        cmd.barrier();
+        if let Some(p) = profiler.as_deref_mut() {
+            p.begin_pass(&mut cmd, "hash gc sweep");
+        }
+        let sweep_groups = buckets.min(MAX_WORKGROUPS);
+        cmd.dispatch(
+            &self.sweep,
+            [sweep_groups, 1, 1],
+            bytemuck::bytes_of(&push),
+            None,
+        )?;
+        if let Some(p) = profiler.as_deref_mut() {
+            p.end_pass(&mut cmd);
+        }
+        cmd.submit()?;
+        if let Some(p) = profiler {
+            p.resolve()?;
+        }
+        let c: Vec<GcCounters> = self.ctx.download(&counters)?;
+        Ok(GcReport {
+            bad_handles: c[0].bad_handles,
+            freed_items: c[0].freed_items,
+            freed_slabs: c[0].freed_slabs,
+        })
+    }
+}

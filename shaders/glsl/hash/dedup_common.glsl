@@ -1,0 +1,112 @@
+// Shared by the dedup_*.comp passes: the duplicate-detection table of a temporary SVO
+// (dissertation §4.4.2), driven by engine/hash/dedup.rs (which mirrors this layout).
+//
+// Slabs of 32 slots, stored structure-of-arrays so that a scan touches the tags only:
+//   tags[32] | values[32] | keys[32][KEY_WORDS] | next
+// tag: 0 empty, 1 being written, 2 ready (key published). value: bitwise NOT of the smallest
+// value of the inputs with this key (atomicMax on a zeroed word = atomicMin without an init pass).
+// next: slab index of the next slab of the bucket, 0 = none (slab 0 is bucket 0's first slab and is
+// never anyone's successor). Slabs [0, buckets) are the buckets' first slabs; overflow slabs come
+// from a bump pool after them: the table lives for one batch, so it is freed as a whole.
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
+#extension GL_KHR_shader_subgroup_basic : require
+#extension GL_KHR_shader_subgroup_ballot : require
+#extension GL_KHR_shader_subgroup_vote : require
+
+layout(local_size_x_id = 0) in;
+layout(constant_id = 1) const uint KEY_WORDS = 1;
+
+const uint SLOTS = 32;
+const uint TAG_EMPTY = 0;
+const uint TAG_WRITING = 1;
+const uint TAG_READY = 2;
+const uint VALUES_OFFSET = SLOTS;
+const uint KEYS_OFFSET = 2 * SLOTS;
+const uint NEXT_OFFSET = KEYS_OFFSET + SLOTS * KEY_WORDS;
+const uint SLAB_WORDS = NEXT_OFFSET + 1;
+const uint NO_SLAB = 0;
+
+// counters[] of the push constants.
+const uint COUNTER_POOL_USED = 0;
+const uint COUNTER_ENTRIES = 1;
+const uint COUNTER_OVERFLOW = 2;
+
+layout(buffer_reference, std430, buffer_reference_align = 4) coherent buffer Words {
+    uint w[];
+};
+
+// Mirror of `DedupPush` in engine/hash/dedup.rs (64 bytes).
+layout(push_constant, std430) uniform Push {
+    uint64_t keys;      // count * KEY_WORDS words
+    uint64_t values;    // count words
+    uint64_t table;     // (buckets + pool_slabs) * SLAB_WORDS words, zeroed
+    uint64_t canon;     // count words: slab * 32 + slot of the key's first entry
+    uint64_t reps;      // count words: the representative value per input
+    uint64_t counters;  // 3 words, zeroed
+    uint count;
+    uint buckets;
+    uint pool_slabs;
+    uint slab_words;    // SLAB_WORDS, as a plain value for 64-bit address arithmetic
+} push;
+
+Words slab_at(uint slab) {
+    return Words(push.table + uint64_t(slab) * uint64_t(push.slab_words) * 4ul);
+}
+
+uint rotl(uint x, uint r) {
+    return (x << r) | (x >> (32 - r));
+}
+
+// Murmur3-style hash of the key words of input `i` (the same function as `dedup::hash_key`).
+uint hash_key(Words keys, uint i) {
+    uint h = 0x9e3779b9u ^ KEY_WORDS;
+    for (uint j = 0; j < KEY_WORDS; ++j) {
+        uint k = keys.w[i * KEY_WORDS + j] * 0xcc9e2d51u;
+        k = rotl(k, 15) * 0x1b873593u;
+        h = rotl(h ^ k, 13) * 5u + 0xe6546b64u;
+    }
+    h ^= h >> 16;
+    h *= 0x85ebca6bu;
+    h ^= h >> 13;
+    h *= 0xc2b2ae35u;
+    h ^= h >> 16;
+    return h;
+}
+
+// One input per subgroup at a time: every lane runs the same control flow (atomics are issued by
+// one elected lane and their results broadcast), as in the hash table passes. Divergent
+// per-invocation atomics on the same slabs gave wrong results on lavapipe (Mesa 22.3).
+// (gl_NumSubgroups is derived from the workgroup size: lavapipe's own value was unreliable.)
+uint subgroup_index() {
+    return gl_WorkGroupID.x * (gl_WorkGroupSize.x / gl_SubgroupSize) + gl_SubgroupID;
+}
+
+uint subgroup_count() {
+    return gl_NumWorkGroups.x * (gl_WorkGroupSize.x / gl_SubgroupSize);
+}
+
+// Whether slot `s` of `slab` is ready and holds the key of input `i` (false for s >= 32).
+bool slot_has_key(Words slab, uint s, Words keys, uint i) {
+    if (s >= SLOTS || slab.w[s] != TAG_READY) {
+        return false;
+    }
+    memoryBarrierBuffer(); // the key words were published before the tag
+    bool equal = true;
+    for (uint j = 0; j < KEY_WORDS; ++j) {
+        equal = equal && slab.w[KEYS_OFFSET + s * KEY_WORDS + j] == keys.w[i * KEY_WORDS + j];
+    }
+    return equal;
+}
+
+// The lowest slot of `slab` holding the key of input `i` (scanned by the whole subgroup in chunks
+// of gl_SubgroupSize lanes), or SLOTS when there is none.
+uint find_key(Words slab, Words keys, uint i) {
+    for (uint chunk = 0; chunk < SLOTS; chunk += gl_SubgroupSize) {
+        uvec4 hits = subgroupBallot(slot_has_key(slab, chunk + gl_SubgroupInvocationID, keys, i));
+        if (subgroupBallotBitCount(hits) != 0) {
+            return chunk + subgroupBallotFindLSB(hits);
+        }
+    }
+    return SLOTS;
+}

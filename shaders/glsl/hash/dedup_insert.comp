@@ -1,0 +1,98 @@
+#version 460
+// Duplicate-detection table, pass 1 of 3 (see dedup_common.glsl): one subgroup per input.
+// The cheap duplicate check scans the bucket's first slab for a ready slot with an equal key; when
+// there is none the key is inserted into the first empty slot of the bucket's chain (claim the
+// tag, write the key, publish the tag). Keys whose duplicate sits in an overflow slab, or is being
+// written at the same time, are inserted again: pass 2 makes all copies agree.
+#include "hash/dedup_common.glsl"
+
+// Claims an empty slot of `slab` for the subgroup: SLOTS when the slab is full.
+uint claim_slot(Words slab) {
+    for (uint chunk = 0; chunk < SLOTS; chunk += gl_SubgroupSize) {
+        uint s = chunk + gl_SubgroupInvocationID;
+        uvec4 empty = subgroupBallot(s < SLOTS && slab.w[min(s, SLOTS - 1)] == TAG_EMPTY);
+        while (subgroupBallotBitCount(empty) != 0) {
+            uint candidate = chunk + subgroupBallotFindLSB(empty);
+            uint old = 0;
+            if (subgroupElect()) {
+                old = atomicCompSwap(slab.w[candidate], TAG_EMPTY, TAG_WRITING);
+            }
+            if (subgroupBroadcastFirst(old) == TAG_EMPTY) {
+                return candidate;
+            }
+            // Taken meanwhile: forget that slot, try the chunk's next empty one.
+            uint bit = candidate - chunk;
+            empty[bit / 32] &= ~(1u << (bit % 32));
+        }
+    }
+    return SLOTS;
+}
+
+// The next slab of `slab_index`'s chain, linking a pool slab at the end of the chain; NO_SLAB when
+// the pool is exhausted. `spare` is a pool slab taken earlier but not linked (another subgroup
+// linked its own first), kept for the next time.
+uint next_slab(Words slab, inout uint spare) {
+    uint next = 0;
+    if (subgroupElect()) {
+        next = atomicAdd(slab.w[NEXT_OFFSET], 0);
+        if (next == NO_SLAB) {
+            if (spare == NO_SLAB) {
+                uint taken = atomicAdd(Words(push.counters).w[COUNTER_POOL_USED], 1);
+                if (taken < push.pool_slabs) {
+                    spare = push.buckets + taken;
+                } else {
+                    // The host grows the pool and runs the batch again.
+                    atomicOr(Words(push.counters).w[COUNTER_OVERFLOW], 1);
+                }
+            }
+            if (spare != NO_SLAB) {
+                uint linked = atomicCompSwap(slab.w[NEXT_OFFSET], NO_SLAB, spare);
+                if (linked == NO_SLAB) {
+                    next = spare;
+                    spare = NO_SLAB;
+                } else {
+                    next = linked;
+                }
+            }
+        }
+    }
+    spare = subgroupBroadcastFirst(spare);
+    return subgroupBroadcastFirst(next);
+}
+
+void insert(uint i) {
+    Words keys = Words(push.keys);
+    uint slab_index = hash_key(keys, i) % push.buckets;
+    Words slab = slab_at(slab_index);
+    if (find_key(slab, keys, i) != SLOTS) {
+        return;
+    }
+    uint spare = NO_SLAB;
+    while (true) {
+        uint s = claim_slot(slab);
+        if (s != SLOTS) {
+            // One lane writes the key and publishes it: no ordering between lanes needed (and
+            // subgroupBarrier() acts on the whole workgroup on lavapipe).
+            if (subgroupElect()) {
+                for (uint j = 0; j < KEY_WORDS; ++j) {
+                    slab.w[KEYS_OFFSET + s * KEY_WORDS + j] = keys.w[i * KEY_WORDS + j];
+                }
+                memoryBarrierBuffer();
+                atomicExchange(slab.w[s], TAG_READY);
+                atomicAdd(Words(push.counters).w[COUNTER_ENTRIES], 1);
+            }
+            return;
+        }
+        slab_index = next_slab(slab, spare);
+        if (slab_index == NO_SLAB) {
+            return;
+        }
+        slab = slab_at(slab_index);
+    }
+}
+
+void main() {
+    for (uint i = subgroup_index(); i < push.count; i += subgroup_count()) {
+        insert(i);
+    }
+}

@@ -1,0 +1,37 @@
+#version 460
+// Duplicate-detection table, pass 2 of 3 (see dedup_common.glsl): one subgroup per input finds
+// the first entry with its key along its bucket's chain (the table no longer changes, so all
+// inputs with equal keys find the same entry), records it in canon[i] and folds its value into
+// the entry's minimum (stored inverted: atomicMax on a zeroed word).
+#include "hash/dedup_common.glsl"
+
+void representative(uint i) {
+    Words keys = Words(push.keys);
+    uint slab_index = hash_key(keys, i) % push.buckets;
+    while (true) {
+        Words slab = slab_at(slab_index);
+        uint s = find_key(slab, keys, i);
+        if (s != SLOTS) {
+            if (subgroupElect()) {
+                Words(push.canon).w[i] = slab_index * SLOTS + s;
+                atomicMax(slab.w[VALUES_OFFSET + s], ~Words(push.values).w[i]);
+            }
+            return;
+        }
+        slab_index = slab.w[NEXT_OFFSET];
+        if (slab_index == NO_SLAB) {
+            // Unreachable after a successful pass 1: every key has an entry. Flag it, never guess.
+            if (subgroupElect()) {
+                atomicOr(Words(push.counters).w[COUNTER_OVERFLOW], 2);
+                Words(push.canon).w[i] = ~0u;
+            }
+            return;
+        }
+    }
+}
+
+void main() {
+    for (uint i = subgroup_index(); i < push.count; i += subgroup_count()) {
+        representative(i);
+    }
+}

@@ -1,0 +1,19 @@
+// Shared by the garbage-collection passes gc_mark.comp and gc_sweep.comp (dissertation §4.4.3),
+// driven by engine/hash/gc.rs. They reuse the tables' push constants and specialization
+// constants (hash/common.glsl), with `push.items` naming the GC counters and `push.handles` the
+// live handles. Workgroups are one subgroup each (see engine/hash/gc.rs).
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
+#extension GL_KHR_shader_subgroup_basic : require
+#extension GL_KHR_shader_subgroup_arithmetic : require
+
+#include "shared/hash_layout.h"
+#include "hash/common.glsl"
+#include "hash/alloc.glsl"
+
+layout(push_constant, std430) uniform Push { HASH_PUSH_MEMBERS } push;
+
+// GC counters (`push.items`), mirror of `GcCounters` in engine/hash/gc.rs.
+#define GC_BAD_HANDLES 0u   // live handles naming no slab of the pool (ignored)
+#define GC_FREED_ITEMS 1u   // occupied slots cleared by the sweep
+#define GC_FREED_SLABS 2u   // slabs unlinked and returned to the allocator

@@ -1,0 +1,33 @@
+#version 460
+// Garbage collection, mark: every live handle sets its slot's bit in its slab's active word
+// (atomicOr). Sentinels (HASH_MISS, HASH_INVALID) are skipped; handles beyond the pool or in a
+// free slab (stale) are counted in GC_BAD_HANDLES and ignored: a bit in a free slab would break
+// the allocator's all-zero invariant. Loop bounds are uniform in the subgroup (no early exit).
+#include "hash/gc_common.glsl"
+
+void main() {
+    HashWords handles = HashWords(push.handles);
+    uint pool_slabs = push.blocks * HASH_SLABS_PER_BLOCK;
+    uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
+    for (uint base = gl_WorkGroupID.x * gl_WorkGroupSize.x; base < push.count; base += stride) {
+        uint i = base + gl_LocalInvocationID.x;
+        uint handle = i < push.count ? handles.w[i] : HASH_MISS;
+        bool sentinel = handle == HASH_MISS || handle == HASH_INVALID;
+        uint slab_index = handle >> 5u;
+        bool valid = !sentinel && slab_index < pool_slabs;
+        if (valid) {
+            uint local = slab_index % HASH_SLABS_PER_SUPER_BLOCK;
+            HashWords bitmasks = HashWords(hash_super_block(push.super_blocks,
+                                                            slab_index / HASH_SLABS_PER_SUPER_BLOCK));
+            valid = ((bitmasks.w[local / 32u] >> (local % 32u)) & 1u) != 0u;
+        }
+        if (valid) {
+            HashWords slab = HashWords(hash_slab_address(push.super_blocks, slab_index));
+            atomicOr(slab.w[HASH_SLAB_ACTIVE], 1u << (handle & 31u));
+        }
+        uint bad = subgroupAdd(!sentinel && !valid ? 1u : 0u);
+        if (bad != 0u && subgroupElect()) {
+            atomicAdd(HashWords(push.items).w[GC_BAD_HANDLES], bad);
+        }
+    }
+}
