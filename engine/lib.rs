@@ -8,6 +8,7 @@
 
 pub mod atomic_file;
 pub mod attr;
+pub mod attr_gpu;
 pub mod color;
 pub mod dag;
 pub mod gpu;

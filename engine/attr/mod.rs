@@ -18,6 +18,7 @@
 //! and decoding never panics on corrupt words: it returns `AttrError::Corrupt`.
 
 pub mod chunks;
+pub mod lossless;
 pub mod raw;
 
 use serde::{Deserialize, Serialize};

@@ -1,0 +1,4 @@
+//! The GPU room of the colour codecs: host drivers of the compute passes in
+//! `shaders/glsl/attr/`, each bit-identical to its CPU reference in [`crate::attr`].
+
+pub mod lossless;

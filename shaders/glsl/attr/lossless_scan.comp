@@ -1,0 +1,53 @@
+#version 460
+// Lossless colour encoder, pass 2 of 3: one workgroup computes every block's word offset in the
+// chunk, an exclusive prefix sum of the block sizes (`plans[4 * b + 2]`) starting after the chunk
+// header and the offset table, into `offsets[b]`; `offsets[blocks]` receives the chunk's total
+// words. Each invocation sums a contiguous range of blocks, the range sums are scanned in shared
+// memory (Hillis-Steele), then each invocation writes its range. No subgroup operations, so any
+// subgroup size works. Driven by engine/attr_gpu/lossless.rs.
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
+
+layout(local_size_x_id = 0) in;
+
+#include "attr/lossless_encode.glsl"
+
+// Mirror of `ScanPush` in engine/attr_gpu/lossless.rs (24 bytes).
+layout(push_constant, std430) uniform Push {
+    uint64_t plans;   // 4 words per block
+    uint64_t offsets; // blocks + 1 uint64
+    uint blocks;
+    uint pad;
+} push;
+
+shared uint64_t range_sums[gl_WorkGroupSize.x];
+
+void main() {
+    uint t = gl_LocalInvocationID.x;
+    uint per = (push.blocks + gl_WorkGroupSize.x - 1u) / gl_WorkGroupSize.x;
+    uint first = min(t * per, push.blocks);
+    uint end = min(first + per, push.blocks);
+    LosslessEncWords plans = LosslessEncWords(push.plans);
+    uint64_t sum = 0ul;
+    for (uint b = first; b < end; b++) {
+        sum += uint64_t(plans.w[4u * b + 2u]);
+    }
+    range_sums[t] = sum;
+    barrier();
+    for (uint step = 1u; step < gl_WorkGroupSize.x; step <<= 1u) {
+        uint64_t add = t >= step ? range_sums[t - step] : 0ul;
+        barrier();
+        range_sums[t] += add;
+        barrier();
+    }
+    // Exclusive prefix of this range, after the chunk header word and the offset table.
+    uint64_t offset = uint64_t(1u) + 2ul * uint64_t(push.blocks) + range_sums[t] - sum;
+    LosslessEncOffsets offsets = LosslessEncOffsets(push.offsets);
+    for (uint b = first; b < end; b++) {
+        offsets.o[b] = offset;
+        offset += uint64_t(plans.w[4u * b + 2u]);
+    }
+    if (t == gl_WorkGroupSize.x - 1u) {
+        offsets.o[push.blocks] = uint64_t(1u) + 2ul * uint64_t(push.blocks) + range_sums[t];
+    }
+}
