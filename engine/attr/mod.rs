@@ -20,6 +20,7 @@
 pub mod chunks;
 pub mod lossless;
 pub mod raw;
+pub mod varbit;
 
 use serde::{Deserialize, Serialize};
 

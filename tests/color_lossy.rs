@@ -1,0 +1,201 @@
+//! The variable-bitrate (Dolonius et al.) and palette (Dado et al.) colour formats, the Hough
+//! and offline lossy encoders: round trips, random access, GPU decoders against the CPU ones,
+//! the lossy threshold promise and corrupt input.
+
+mod common;
+
+use std::sync::Arc;
+
+use proptest::prelude::*;
+use voxdag::attr::varbit::{self, BlockColors, VarbitBlock, MACRO_BLOCK_COLORS};
+use voxdag::attr::AttrError;
+use voxdag::gpu::{shaders, ComputePipelineDesc, GpuContext, MemLocation};
+
+/// Small deterministic generator for test data (xorshift64*).
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u32 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 32) as u32
+    }
+
+    fn below(&mut self, n: u32) -> u32 {
+        self.next() % n
+    }
+}
+
+/// A random valid block list over `count` colours: runs of up to `max_run` colours, cut at the
+/// macro block boundaries, mixing single-colour and 1-4 bit endpoint blocks.
+fn random_blocks(count: usize, max_run: u32, seed: u64) -> Vec<VarbitBlock> {
+    let mut rng = Rng(seed | 1);
+    let mut blocks = Vec::new();
+    let mut start = 0;
+    while start < count {
+        let macro_end = (start / MACRO_BLOCK_COLORS + 1) * MACRO_BLOCK_COLORS;
+        let len = (1 + rng.below(max_run) as usize)
+            .min(count - start)
+            .min(macro_end - start);
+        let bits = rng.below(5) as u8;
+        let block = if bits == 0 {
+            VarbitBlock {
+                start,
+                bits,
+                kind: BlockColors::Single(rng.next()),
+                weights: vec![],
+            }
+        } else {
+            VarbitBlock {
+                start,
+                bits,
+                kind: BlockColors::Endpoints {
+                    a565: rng.next() as u16,
+                    b565: rng.next() as u16,
+                },
+                weights: (0..len).map(|_| rng.below(1 << bits) as u8).collect(),
+            }
+        };
+        blocks.push(block);
+        start += len;
+    }
+    blocks
+}
+
+/// What a block list decodes to, computed from the blocks directly.
+fn expected_colors(blocks: &[VarbitBlock], count: usize) -> Vec<u32> {
+    let mut out = Vec::with_capacity(count);
+    for (j, block) in blocks.iter().enumerate() {
+        let end = blocks.get(j + 1).map_or(count, |b| b.start);
+        for i in 0..end - block.start {
+            let rgb = match block.kind {
+                BlockColors::Single(c) => varbit::expand101210(c),
+                BlockColors::Endpoints { a565, b565 } => varbit::blend(
+                    varbit::expand565(a565),
+                    varbit::expand565(b565),
+                    u32::from(block.weights[i]),
+                    u32::from(block.bits),
+                ),
+            };
+            out.push(voxdag::attr::pack_rgb(rgb));
+        }
+    }
+    out
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    #[test]
+    fn varbit_write_decode_round_trip(count in 0usize..40_000, max_run in 1u32..400, seed in any::<u64>()) {
+        let blocks = random_blocks(count, max_run, seed);
+        let words = varbit::write(&blocks, count).unwrap();
+        let want = expected_colors(&blocks, count);
+        prop_assert_eq!(&varbit::decode_all(&words, count).unwrap(), &want);
+        let mut rng = Rng(seed ^ 0x9e37_79b9);
+        for _ in 0..200.min(count) {
+            let i = rng.below(count as u32) as usize;
+            prop_assert_eq!(varbit::decode(&words, count, i).unwrap(), want[i]);
+        }
+        let past_end = varbit::decode(&words, count, count);
+        prop_assert!(matches!(past_end, Err(AttrError::IndexOutOfRange { .. })), "{:?}", past_end);
+    }
+
+    /// Any flipped or truncated words give colours or errors, never a panic.
+    #[test]
+    fn varbit_corrupt_words_never_panic(count in 1usize..20_000, seed in any::<u64>(), flips in 1usize..6, cut in 0usize..8) {
+        let blocks = random_blocks(count, 64, seed);
+        let mut words = varbit::write(&blocks, count).unwrap();
+        let mut rng = Rng(seed.rotate_left(17));
+        for _ in 0..flips {
+            let at = rng.below(words.len() as u32) as usize;
+            words[at] ^= 1 << rng.below(32);
+        }
+        words.truncate(words.len().saturating_sub(cut));
+        let all = varbit::decode_all(&words, count);
+        for _ in 0..64 {
+            let i = rng.below(count as u32) as usize;
+            let one = varbit::decode(&words, count, i);
+            if let Ok(all) = &all {
+                // Words that validate decode the same both ways.
+                prop_assert_eq!(one.unwrap(), all[i]);
+            }
+        }
+    }
+}
+
+#[test]
+fn varbit_corrupt_headers_are_errors() {
+    let count = 20_000;
+    let words = varbit::write(&random_blocks(count, 50, 7), count).unwrap();
+    let corrupt = |edit: &dyn Fn(&mut Vec<u32>)| {
+        let mut w = words.clone();
+        edit(&mut w);
+        assert!(matches!(
+            varbit::decode_all(&w, count),
+            Err(AttrError::Corrupt { .. })
+        ));
+    };
+    corrupt(&|w| w.truncate(1));
+    corrupt(&|w| w[0] = u32::MAX);
+    corrupt(&|w| w[1] = 5);
+    corrupt(&|w| w[2] = 1); // macro block 0 starts at its second block: colour 0 is missing
+    corrupt(&|w| w[4] = 0); // macro block 1 starts at block 0
+    corrupt(&|w| w[5] = 1 << 30); // weights far past the end
+    corrupt(&|w| w.truncate(w.len() - 1));
+    assert!(varbit::decode_all(&words, count + MACRO_BLOCK_COLORS).is_err());
+}
+
+fn decode_on_gpu(ctx: &Arc<GpuContext>, spirv: &[u32], words: &[u32], count: usize) -> Vec<u32> {
+    let pipeline = ctx
+        .create_compute_pipeline(&ComputePipelineDesc {
+            name: "test colour decode",
+            spirv,
+            spec_constants: &[],
+            push_constant_size: 20,
+            storage_image: false,
+        })
+        .unwrap();
+    let chunk = ctx.upload("colour chunk", words).unwrap();
+    let out = ctx
+        .create_buffer(
+            "decoded colours",
+            count.max(1) as u64 * 4,
+            MemLocation::GpuOnly,
+        )
+        .unwrap();
+    let mut push = Vec::with_capacity(20);
+    push.extend_from_slice(&chunk.address().to_le_bytes());
+    push.extend_from_slice(&out.address().to_le_bytes());
+    push.extend_from_slice(&(count as u32).to_le_bytes());
+    let mut cmd = ctx.begin_commands("colour decode").unwrap();
+    cmd.dispatch(
+        &pipeline,
+        [(count as u32).div_ceil(64).max(1), 1, 1],
+        &push,
+        None,
+    )
+    .unwrap();
+    cmd.submit().unwrap();
+    let mut got = ctx.download::<u32>(&out).unwrap();
+    got.truncate(count);
+    got
+}
+
+fn assert_clean(ctx: &Arc<GpuContext>) {
+    assert_eq!(ctx.live_allocations(), 0, "leaked GPU allocations");
+    assert_eq!(ctx.validation_errors(), 0, "validation messages (see log)");
+}
+
+#[test]
+fn varbit_gpu_decode_equals_cpu() {
+    let ctx = common::gpu();
+    for (count, max_run, seed) in [(1usize, 1u32, 1u64), (50_001, 300, 2), (40_000, 3, 3)] {
+        let words = varbit::write(&random_blocks(count, max_run, seed), count).unwrap();
+        let cpu = varbit::decode_all(&words, count).unwrap();
+        let gpu = decode_on_gpu(&ctx, shaders::TEST_VARBIT_DECODE, &words, count);
+        assert_eq!(gpu, cpu, "count {count}, runs up to {max_run}");
+    }
+    assert_clean(&ctx);
+}
