@@ -12,7 +12,7 @@ use voxdag::dag::{Svdag, VoxelIndex};
 use voxdag::scene::{morton, Voxels};
 
 /// Every `--colors` spelling the tests cover.
-const CODECS: &[&str] = &["raw"];
+const CODECS: &[&str] = &["raw", "lossless", "lossless565"];
 
 /// A 64^3 scene: a wavy surface with smooth colour gradients plus a few noisy speckles, so the
 /// codecs see both easy and hard runs.

@@ -25,6 +25,7 @@ pub mod varbit;
 use serde::{Deserialize, Serialize};
 
 pub use chunks::{ChunkOp, ChunkedColors, StoredColors};
+pub use lossless::LosslessVariant;
 
 /// Stored format of an encoded colour chunk; the ids are part of the `.vdag` format.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -109,10 +110,12 @@ pub fn pack_rgb([r, g, b]: [u8; 3]) -> u32 {
 pub const DEFAULT_THRESHOLD: f32 = 0.06;
 
 /// Run-time choice of colour encoder (the CLI's `--colors` values).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum ColorCodec {
     /// Uncompressed RGBA8 words.
     Raw,
+    /// The real-time lossless block codec (§5.2.1).
+    Lossless(LosslessVariant),
 }
 
 impl ColorCodec {
@@ -142,6 +145,8 @@ impl ColorCodec {
         };
         match name {
             "raw" => no_value(ColorCodec::Raw),
+            "lossless" => no_value(ColorCodec::Lossless(LosslessVariant::Rgb888)),
+            "lossless565" => no_value(ColorCodec::Lossless(LosslessVariant::Rgb565)),
             _ => Err(format!(
                 "unknown colour codec {text:?}: expected raw, lossless, lossless565, \
                  lossy[=T], dolonius[=T] or dado"
@@ -153,6 +158,8 @@ impl ColorCodec {
     pub fn name(&self) -> String {
         match self {
             ColorCodec::Raw => "raw".into(),
+            ColorCodec::Lossless(LosslessVariant::Rgb888) => "lossless".into(),
+            ColorCodec::Lossless(LosslessVariant::Rgb565) => "lossless565".into(),
         }
     }
 
@@ -161,13 +168,18 @@ impl ColorCodec {
     pub fn id(&self) -> u32 {
         match self {
             ColorCodec::Raw => 0,
+            ColorCodec::Lossless(LosslessVariant::Rgb888) => 1,
+            ColorCodec::Lossless(LosslessVariant::Rgb565) => 2,
         }
     }
 
-    /// The per-channel error threshold of the lossy encoders (0 for the lossless ones).
+    /// The largest per-channel error the codec promises, colours in [0, 1]: 0 for the exact
+    /// codecs, 4/255 for RGB565 (round to nearest, expand by bit replication), the threshold for
+    /// the lossy encoders.
     pub fn threshold(&self) -> f32 {
         match self {
-            ColorCodec::Raw => 0.0,
+            ColorCodec::Raw | ColorCodec::Lossless(LosslessVariant::Rgb888) => 0.0,
+            ColorCodec::Lossless(LosslessVariant::Rgb565) => 4.0 / 255.0,
         }
     }
 
@@ -176,6 +188,8 @@ impl ColorCodec {
         let _ = threshold;
         match id {
             0 => Some(ColorCodec::Raw),
+            1 => Some(ColorCodec::Lossless(LosslessVariant::Rgb888)),
+            2 => Some(ColorCodec::Lossless(LosslessVariant::Rgb565)),
             _ => None,
         }
     }
@@ -184,12 +198,17 @@ impl ColorCodec {
     pub fn format(&self) -> ColorFormat {
         match self {
             ColorCodec::Raw => ColorFormat::Raw,
+            ColorCodec::Lossless(LosslessVariant::Rgb888) => ColorFormat::Lossless888,
+            ColorCodec::Lossless(LosslessVariant::Rgb565) => ColorFormat::Lossless565,
         }
     }
 
     /// True when decoding returns the input colours exactly (alpha aside).
     pub fn is_exact(&self) -> bool {
-        matches!(self, ColorCodec::Raw)
+        matches!(
+            self,
+            ColorCodec::Raw | ColorCodec::Lossless(LosslessVariant::Rgb888)
+        )
     }
 
     /// Default chunk depth below the root (§5.1): 7 for the lossless formats, 8 for the lossy.
@@ -205,6 +224,7 @@ impl ColorCodec {
     pub fn encode(&self, colors: &[u32]) -> Vec<u32> {
         match self {
             ColorCodec::Raw => raw::encode(colors),
+            ColorCodec::Lossless(variant) => lossless::encode(colors, *variant),
         }
     }
 }
@@ -213,6 +233,8 @@ impl ColorCodec {
 pub fn decode_all(format: ColorFormat, words: &[u32], count: usize) -> Result<Vec<u32>, AttrError> {
     match format {
         ColorFormat::Raw => raw::decode_all(words, count),
+        ColorFormat::Lossless888 | ColorFormat::Lossless565 => lossless::decode_all(words, count),
+        ColorFormat::Varbit => varbit::decode_all(words, count),
         other => Err(unsupported(other)),
     }
 }
@@ -226,6 +248,10 @@ pub fn decode(
 ) -> Result<u32, AttrError> {
     match format {
         ColorFormat::Raw => raw::decode(words, count, index),
+        ColorFormat::Lossless888 | ColorFormat::Lossless565 => {
+            lossless::decode(words, count, index)
+        }
+        ColorFormat::Varbit => varbit::decode(words, count, index),
         other => Err(unsupported(other)),
     }
 }

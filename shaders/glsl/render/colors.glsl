@@ -21,6 +21,9 @@
 #define COLOR_FORMAT_VARBIT 3u
 #define COLOR_FORMAT_PALETTE 4u
 
+#include "attr/lossless.glsl"
+#include "attr/varbit.glsl"
+
 layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer ColorTableRef {
     uint64_t v[];
 };
@@ -43,8 +46,14 @@ uint chunk_color(uint i) {
     }
     uint local = i - uint(starts.v[lo]);
     uint64_t chunk = push.color_words + 4ul * ColorTableRef(push.chunk_offsets).v[lo];
-    if (push.color_format == COLOR_FORMAT_RAW) {
+    switch (push.color_format) {
+    case COLOR_FORMAT_RAW:
         return ColorWordsRef(chunk).w[local] | 0xff000000u;
+    case COLOR_FORMAT_LOSSLESS888:
+    case COLOR_FORMAT_LOSSLESS565:
+        return lossless_color(chunk, local);
+    case COLOR_FORMAT_VARBIT:
+        return varbit_color(chunk, local);
     }
     // A format this shader does not decode shades white (the CPU reference does the same for
     // colours it cannot decode).
