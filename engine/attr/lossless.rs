@@ -345,11 +345,10 @@ struct Chunk<'a> {
     count: usize,
 }
 
-/// A validated block header with its word range inside the chunk.
+/// A validated block header and the block's first word inside the chunk.
 struct Block {
     plan: BlockPlan,
     start: usize,
-    colors: usize,
 }
 
 impl<'a> Chunk<'a> {
@@ -441,11 +440,10 @@ impl<'a> Chunk<'a> {
         Ok(Block {
             plan,
             start,
-            colors,
         })
     }
 
-    /// Colour `i` (0..block.colors) of a validated block.
+    /// Colour `i` (below the block's colour count) of a validated block.
     fn color(&self, block: &Block, i: usize) -> Result<u32, AttrError> {
         let p = &block.plan;
         let mask_words = p.mask_words();
@@ -568,14 +566,18 @@ pub fn validate(words: &[u32], count: usize) -> Result<(), AttrError> {
 /// Decodes every colour of a chunk of `count` colours (opaque RGBA8).
 pub fn decode_all(words: &[u32], count: usize) -> Result<Vec<u32>, AttrError> {
     let chunk = Chunk::open(words, count)?;
-    let blocks: Vec<Vec<u32>> = (0..chunk.blocks)
-        .into_par_iter()
-        .map(|b| {
+    let mut colors = vec![0u32; count];
+    colors
+        .par_chunks_mut(BLOCK_COLORS)
+        .enumerate()
+        .try_for_each(|(b, out)| {
             let block = chunk.block(b)?;
-            (0..block.colors).map(|i| chunk.color(&block, i)).collect()
-        })
-        .collect::<Result<_, AttrError>>()?;
-    Ok(blocks.concat())
+            for (i, c) in out.iter_mut().enumerate() {
+                *c = chunk.color(&block, i)?;
+            }
+            Ok(())
+        })?;
+    Ok(colors)
 }
 
 /// Decodes colour `index` of a chunk of `count` colours in O(1).
