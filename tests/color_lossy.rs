@@ -8,7 +8,7 @@ use std::sync::Arc;
 
 use proptest::prelude::*;
 use voxdag::attr::varbit::{self, BlockColors, VarbitBlock, MACRO_BLOCK_COLORS};
-use voxdag::attr::AttrError;
+use voxdag::attr::{dado, AttrError};
 use voxdag::gpu::{shaders, ComputePipelineDesc, GpuContext, MemLocation};
 
 /// Small deterministic generator for test data (xorshift64*).
@@ -198,4 +198,210 @@ fn varbit_gpu_decode_equals_cpu() {
         assert_eq!(gpu, cpu, "count {count}, runs up to {max_run}");
     }
     assert_clean(&ctx);
+}
+
+/// Colours in runs: smooth gradients, flat runs and noise, like textured surfaces in Morton order.
+fn textured_colors(count: usize, seed: u64) -> Vec<u32> {
+    let mut rng = Rng(seed | 1);
+    let mut colors = Vec::with_capacity(count);
+    while colors.len() < count {
+        let run = 1 + rng.below(300) as usize;
+        let a = [rng.next() as u8, rng.next() as u8, rng.next() as u8];
+        let b = [rng.next() as u8, rng.next() as u8, rng.next() as u8];
+        let noise = [0, 4, 40, 255][rng.below(4) as usize];
+        for i in 0..run.min(count - colors.len()) {
+            let t = i as f32 / run as f32;
+            let c = [0, 1, 2].map(|k| {
+                let v = f32::from(a[k]) + (f32::from(b[k]) - f32::from(a[k])) * t;
+                let jitter = if noise == 0 {
+                    0
+                } else {
+                    rng.below(2 * noise + 1) as i32 - noise as i32
+                };
+                (v as i32 + jitter).clamp(0, 255) as u8
+            });
+            colors.push(voxdag::attr::pack_rgb(c));
+        }
+    }
+    colors
+}
+
+/// Largest channel difference of decoded against input colours, and the RMSE (colours in [0, 1]).
+fn lossy_error(input: &[u32], decoded: &[u32]) -> (u8, f64) {
+    assert_eq!(input.len(), decoded.len());
+    let mut worst = 0;
+    let mut sum = 0.0f64;
+    for (&a, &b) in input.iter().zip(decoded) {
+        let (a, b) = (voxdag::attr::rgb(a), voxdag::attr::rgb(b));
+        worst = worst.max(varbit::channel_error(a, b));
+        for k in 0..3 {
+            sum += ((f64::from(a[k]) - f64::from(b[k])) / 255.0).powi(2);
+        }
+    }
+    (worst, (sum / (3 * input.len().max(1)) as f64).sqrt())
+}
+
+type Encoder = fn(&[u32], f32) -> Vec<u32>;
+
+const LOSSY: [(&str, Encoder); 2] = [
+    ("hough", voxdag::attr::lossy::encode),
+    ("dolonius", voxdag::attr::dolonius::encode),
+];
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// The format's promise: no decoded channel further than the threshold from its input.
+    #[test]
+    fn lossy_encoders_keep_the_threshold(count in 1usize..20_000, seed in any::<u64>(), threshold in 0.0f32..0.2) {
+        let colors = textured_colors(count, seed);
+        let allowed = varbit::max_delta(threshold);
+        prop_assert!(f32::from(allowed) / 255.0 <= threshold);
+        for (name, encode) in LOSSY {
+            let words = encode(&colors, threshold);
+            let decoded = varbit::decode_all(&words, count).unwrap();
+            let (worst, _) = lossy_error(&colors, &decoded);
+            prop_assert!(worst <= allowed, "{}: channel error {} > {}", name, worst, allowed);
+            for i in [0, count / 2, count - 1] {
+                prop_assert_eq!(varbit::decode(&words, count, i).unwrap(), decoded[i]);
+            }
+        }
+    }
+
+    #[test]
+    fn dado_round_trip_is_exact(count in 0usize..5_000, seed in any::<u64>(), alphabet in 1u32..3000) {
+        let mut rng = Rng(seed | 1);
+        let colors: Vec<u32> = (0..count).map(|_| rng.below(alphabet).wrapping_mul(0x9e3779) | 0xff00_0000).collect();
+        let words = dado::encode(&colors);
+        prop_assert_eq!(&dado::decode_all(&words, count).unwrap(), &colors);
+        for i in (0..count).step_by(97) {
+            prop_assert_eq!(dado::decode(&words, count, i).unwrap(), colors[i]);
+        }
+    }
+
+    #[test]
+    fn dado_corrupt_words_never_panic(count in 1usize..5_000, seed in any::<u64>(), flips in 1usize..6, cut in 0usize..8) {
+        let mut rng = Rng(seed | 1);
+        let colors: Vec<u32> = (0..count).map(|_| (rng.below(40) * 0x010203) | 0xff00_0000).collect();
+        let mut words = dado::encode(&colors);
+        for _ in 0..flips {
+            let at = rng.below(words.len() as u32) as usize;
+            words[at] ^= 1 << rng.below(32);
+        }
+        words.truncate(words.len().saturating_sub(cut));
+        let all = dado::decode_all(&words, count);
+        for _ in 0..64 {
+            let i = rng.below(count as u32) as usize;
+            let one = dado::decode(&words, count, i);
+            if let Ok(all) = &all {
+                prop_assert_eq!(one.unwrap(), all[i]);
+            }
+        }
+    }
+}
+
+#[test]
+fn lossy_encoders_are_deterministic_and_hough_uses_fewer_bits_on_smooth_runs() {
+    let colors = textured_colors(70_000, 11);
+    for (name, encode) in LOSSY {
+        assert_eq!(encode(&colors, 0.06), encode(&colors, 0.06), "{name}");
+    }
+    // A zero threshold still round-trips exactly.
+    let words = voxdag::attr::lossy::encode(&colors[..5000], 0.0);
+    assert_eq!(varbit::decode_all(&words, 5000).unwrap(), colors[..5000]);
+}
+
+#[test]
+fn dado_corrupt_headers_are_errors() {
+    let colors: Vec<u32> = (0..3000u32)
+        .map(|i| ((i % 7) * 0x30201) | 0xff00_0000)
+        .collect();
+    let words = dado::encode(&colors);
+    let corrupt = |edit: &dyn Fn(&mut Vec<u32>)| {
+        let mut w = words.clone();
+        edit(&mut w);
+        assert!(matches!(
+            dado::decode_all(&w, colors.len()),
+            Err(AttrError::Corrupt { .. })
+        ));
+    };
+    corrupt(&|w| w.truncate(2));
+    corrupt(&|w| w[0] = 1); // block 0 on top of the offsets
+    corrupt(&|w| w[1] = u32::MAX);
+    corrupt(&|w| {
+        let at = w[0] as usize;
+        w[at] = 0;
+    });
+    corrupt(&|w| {
+        let at = w[2] as usize;
+        w[at] = 5000;
+    });
+    corrupt(&|w| w.truncate(w.len() - 1));
+    // Palette of 7 uses 3-bit indices; index 7 is past the palette.
+    corrupt(&|w| {
+        let at = w[0] as usize + 1 + (7 * 24) / 32;
+        w[at] |= 0x7 << ((7 * 24) % 32);
+    });
+}
+
+#[test]
+fn palette_gpu_decode_equals_cpu() {
+    let ctx = common::gpu();
+    for (count, alphabet) in [(1usize, 1u32), (10_000, 2), (33_333, 300), (5000, 100_000)] {
+        let mut rng = Rng(count as u64);
+        let colors: Vec<u32> = (0..count)
+            .map(|_| rng.below(alphabet).wrapping_mul(0x00c0_ffee) | 0xff00_0000)
+            .collect();
+        let words = dado::encode(&colors);
+        let gpu = decode_on_gpu(&ctx, shaders::TEST_PALETTE_DECODE, &words, count);
+        assert_eq!(gpu, colors, "count {count}, alphabet {alphabet}");
+    }
+    assert_clean(&ctx);
+}
+
+#[test]
+fn lossy_gpu_decode_equals_cpu() {
+    let ctx = common::gpu();
+    let count = 40_000;
+    let colors = textured_colors(count, 5);
+    for (name, encode) in LOSSY {
+        let words = encode(&colors, 0.06);
+        let cpu = varbit::decode_all(&words, count).unwrap();
+        let gpu = decode_on_gpu(&ctx, shaders::TEST_VARBIT_DECODE, &words, count);
+        assert_eq!(gpu, cpu, "{name}");
+    }
+    assert_clean(&ctx);
+}
+
+/// Real textured scenes at 256^3: the threshold promise, Dado's exactness, and the sizes and
+/// errors printed for the record (size as % of raw RGB888 = 3 bytes per colour).
+#[test]
+fn textured_scenes_keep_the_threshold() {
+    let Some(data) = common::shared_data() else {
+        return;
+    };
+    for scene in ["spot/spot_triangulated.obj", "Avocado/Avocado.gltf"] {
+        let dag = common::build_scene(&data.join("textured").join(scene), Some(256));
+        let colors = &dag.colors;
+        let count = colors.len();
+        let raw = 3.0 * count as f64;
+        let words = dado::encode(colors);
+        assert_eq!(&dado::decode_all(&words, count).unwrap(), colors);
+        println!(
+            "{scene}: {count} colours; dado {:.1}%",
+            400.0 * words.len() as f64 / raw
+        );
+        for (name, encode) in LOSSY {
+            let start = std::time::Instant::now();
+            let words = encode(colors, 0.06);
+            let seconds = start.elapsed().as_secs_f64();
+            let decoded = varbit::decode_all(&words, count).unwrap();
+            let (worst, rmse) = lossy_error(colors, &decoded);
+            println!(
+                "{scene}: {name} {:.1}% of raw, RMSE {rmse:.4}, max error {worst}/255, {seconds:.3} s",
+                400.0 * words.len() as f64 / raw
+            );
+            assert!(worst <= varbit::max_delta(0.06), "{name}: {worst}");
+        }
+    }
 }

@@ -18,7 +18,10 @@
 //! and decoding never panics on corrupt words: it returns `AttrError::Corrupt`.
 
 pub mod chunks;
+pub mod dado;
+pub mod dolonius;
 pub mod lossless;
+pub mod lossy;
 pub mod raw;
 pub mod varbit;
 

@@ -254,6 +254,101 @@ pub fn expand101210(c: u32) -> [u8; 3] {
     ]
 }
 
+/// The largest per-channel difference, in 8-bit steps, that a threshold in [0, 1] allows:
+/// `floor(threshold * 255)` (NaN and negative thresholds allow none).
+pub fn max_delta(threshold: f32) -> u8 {
+    // The epsilon keeps thresholds given as k / 255 at k despite float rounding.
+    (threshold.clamp(0.0, 1.0) * 255.0 + 1e-3).floor() as u8
+}
+
+/// Largest channel difference between two colours.
+pub fn channel_error(a: [u8; 3], b: [u8; 3]) -> u8 {
+    (0..3).map(|c| a[c].abs_diff(b[c])).max().unwrap_or(0)
+}
+
+/// A single-colour block for `colors` (starting at chunk index `start`) if one colour is within
+/// `max_delta` of all of them: the centre of their per-channel range, in RGB 10-12-10.
+pub fn single_block(colors: &[[u8; 3]], start: usize, max_delta: u8) -> Option<VarbitBlock> {
+    let (mut lo, mut hi) = ([255u8; 3], [0u8; 3]);
+    for c in colors {
+        for k in 0..3 {
+            lo[k] = lo[k].min(c[k]);
+            hi[k] = hi[k].max(c[k]);
+        }
+    }
+    if (0..3).any(|k| hi[k] - lo[k] > max_delta.saturating_mul(2)) {
+        return None;
+    }
+    let centre = |k: usize| (f32::from(lo[k]) + f32::from(hi[k])) / 510.0;
+    let word = rgb101210([centre(0), centre(1), centre(2)]);
+    let decoded = expand101210(word);
+    colors
+        .iter()
+        .all(|c| channel_error(*c, decoded) <= max_delta)
+        .then(|| VarbitBlock {
+            start,
+            bits: 0,
+            kind: BlockColors::Single(word),
+            weights: Vec::new(),
+        })
+}
+
+/// An endpoint block for `colors` (starting at chunk index `start`) on the line from `a` to `b`
+/// (channels in [0, 255]), quantized to RGB565, with the fewest bits per weight in `bits` whose
+/// decoded colours are all within `max_delta`. Each colour gets the weight nearest its projection
+/// on the quantized line, or a neighbour of it when that one decodes closer.
+///
+/// `Err(i)`: with the most bits tried, colour `i` of `colors` is the first that fails.
+pub fn endpoint_block(
+    colors: &[[u8; 3]],
+    start: usize,
+    [a, b]: [[f32; 3]; 2],
+    bits: std::ops::RangeInclusive<u8>,
+    max_delta: u8,
+) -> Result<VarbitBlock, usize> {
+    let quantize = |p: [f32; 3]| rgb565(p.map(|v| v.clamp(0.0, 255.0).round() as u8));
+    let (a565, b565) = (quantize(a), quantize(b));
+    let (a8, b8) = (expand565(a565), expand565(b565));
+    let dir = [0, 1, 2].map(|k| f32::from(b8[k]) - f32::from(a8[k]));
+    let len2 = dir.iter().map(|d| d * d).sum::<f32>();
+    let mut first_fail = 0;
+    let mut weights = Vec::with_capacity(colors.len());
+    for bits in bits {
+        let n = (1u32 << bits) - 1;
+        weights.clear();
+        let fail = colors.iter().position(|c| {
+            let t = if len2 > 0.0 {
+                (0..3)
+                    .map(|k| (f32::from(c[k]) - f32::from(a8[k])) * dir[k])
+                    .sum::<f32>()
+                    / len2
+            } else {
+                0.0
+            };
+            let nearest = (t.clamp(0.0, 1.0) * n as f32).round() as u32;
+            let (w, err) = [nearest.saturating_sub(1), nearest, (nearest + 1).min(n)]
+                .into_iter()
+                .map(|w| (w, channel_error(*c, blend(a8, b8, w, u32::from(bits)))))
+                .min_by_key(|&(_, err)| err)
+                .unwrap_or((nearest, u8::MAX));
+            weights.push(w as u8);
+            err > max_delta
+        });
+        match fail {
+            None => {
+                return Ok(VarbitBlock {
+                    start,
+                    bits,
+                    kind: BlockColors::Endpoints { a565, b565 },
+                    weights,
+                })
+            }
+            Some(i) => first_fail = i,
+        }
+    }
+    Err(first_fail)
+}
+
 fn corrupt(word: usize, reason: String) -> AttrError {
     AttrError::Corrupt {
         format: FORMAT,

@@ -1,0 +1,25 @@
+#version 460
+// Test pass of shaders/glsl/attr/palette.glsl: out[i] = palette_color(chunk, i) for i < count.
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
+
+#include "attr/palette.glsl"
+
+layout(local_size_x = 64) in;
+
+layout(buffer_reference, std430, buffer_reference_align = 4) writeonly buffer OutWords {
+    uint w[];
+};
+
+layout(push_constant, std430) uniform Push {
+    uint64_t chunk_addr;
+    uint64_t out_addr;
+    uint count;
+} push;
+
+void main() {
+    uint i = gl_GlobalInvocationID.x;
+    if (i < push.count) {
+        OutWords(push.out_addr).w[i] = palette_color(push.chunk_addr, i);
+    }
+}
