@@ -12,7 +12,14 @@ use voxdag::dag::{Svdag, VoxelIndex};
 use voxdag::scene::{morton, Voxels};
 
 /// Every `--colors` spelling the tests cover.
-const CODECS: &[&str] = &["raw", "lossless", "lossless565"];
+const CODECS: &[&str] = &[
+    "raw",
+    "lossless",
+    "lossless565",
+    "lossy",
+    "dolonius",
+    "dado",
+];
 
 /// A 64^3 scene: a wavy surface with smooth colour gradients plus a few noisy speckles, so the
 /// codecs see both easy and hard runs.
@@ -271,8 +278,17 @@ fn corrupt_tables_are_errors() {
 #[test]
 fn codec_spellings() {
     for name in CODECS {
-        assert_eq!(codec(name).name(), *name);
+        let c = codec(name);
+        assert_eq!(ColorCodec::parse(&c.name()).unwrap(), c, "{name}");
+        assert_eq!(
+            ColorCodec::from_id(c.id(), c.threshold()),
+            Some(c),
+            "{name}"
+        );
     }
+    assert_eq!(codec("lossy=0.1"), ColorCodec::Lossy { threshold: 0.1 });
+    assert_eq!(codec("dolonius").threshold(), 0.06);
+    assert_eq!(codec("lossy").default_chunk_depth(), 8);
     for bad in [
         "",
         "rgb",

@@ -14,7 +14,14 @@ use voxdag::render::{render_cpu, Camera, RenderOutput, RenderSettings};
 use voxdag::scene::{self, morton, ImportOptions, Voxels};
 
 /// Every `--colors` codec the renderer must display.
-const CODECS: &[&str] = &["raw", "lossless", "lossless565"];
+const CODECS: &[&str] = &[
+    "raw",
+    "lossless",
+    "lossless565",
+    "lossy",
+    "dolonius",
+    "dado",
+];
 
 fn encode(dag: &Svdag, codec: &str, depth: Option<u32>) -> StoredColors {
     let codec = ColorCodec::parse(codec).unwrap();
@@ -47,7 +54,10 @@ fn render_both(
 /// by at most 4 units on at most 0.4%.
 fn assert_gpu_matches_cpu(name: &str, gpu_image: &RenderOutput, cpu_image: &RenderOutput) {
     let pixels = gpu_image.hits.len();
-    assert!(cpu_image.hit_count() > pixels / 20, "{name}: scene not in view");
+    assert!(
+        cpu_image.hit_count() > pixels / 20,
+        "{name}: scene not in view"
+    );
     let mismatched = gpu_image
         .hits
         .iter()
@@ -55,7 +65,10 @@ fn assert_gpu_matches_cpu(name: &str, gpu_image: &RenderOutput, cpu_image: &Rend
         .filter(|(g, c)| g != c)
         .count();
     let allowed = pixels / 1000;
-    assert!(mismatched <= allowed, "{name}: {mismatched} hit pixels differ");
+    assert!(
+        mismatched <= allowed,
+        "{name}: {mismatched} hit pixels differ"
+    );
     let diff = compare(&cpu_image.rgba, &gpu_image.rgba, 4);
     assert!(
         diff.differing <= allowed * 4,

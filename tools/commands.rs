@@ -8,15 +8,15 @@ use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
 use voxdag::atomic_file::write_atomic;
-use voxdag::attr::{ColorCodec, StoredColors};
+use voxdag::attr::{ColorCodec, LosslessVariant, StoredColors};
 use voxdag::dag::encode::{EncodedDag, SsvdagEncoding, TsvdagEncoding, TsvdagOptions, VoxelDigest};
 use voxdag::dag::{
     analyze_symmetry, export_vox, export_xyz_u32_file, DagStats, Svdag, SymmetryAnalysis,
     TransformSet, VdagFile, VoxelIndex,
 };
 use voxdag::gpu::{GpuContext, GpuOptions, Profiler};
-use voxdag::render::gpu::GpuRenderer;
 use voxdag::render::cpu::{render_cpu_with, ColorSource};
+use voxdag::render::gpu::GpuRenderer;
 use voxdag::render::{Camera, RenderSettings};
 use voxdag::scene::{self, ImportOptions};
 
@@ -651,7 +651,7 @@ pub fn demo(args: &DemoArgs, quiet: bool) -> Result<()> {
         vox_scale: 1,
         texture: None,
         no_colors: false,
-        colors: Some(ColorCodec::Raw),
+        colors: Some(ColorCodec::Lossless(LosslessVariant::Rgb888)),
         chunk_depth: None,
         output: vdag.clone(),
         report: Some(args.out_dir.join("avocado-build.json")),

@@ -110,7 +110,7 @@ pub fn pack_rgb([r, g, b]: [u8; 3]) -> u32 {
 }
 
 /// Default per-channel error threshold of the lossy encoders (colours in [0, 1]).
-pub const DEFAULT_THRESHOLD: f32 = 0.06;
+pub const DEFAULT_THRESHOLD: f32 = lossy::DEFAULT_THRESHOLD;
 
 /// Run-time choice of colour encoder (the CLI's `--colors` values).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -119,6 +119,18 @@ pub enum ColorCodec {
     Raw,
     /// The real-time lossless block codec (§5.2.1).
     Lossless(LosslessVariant),
+    /// The real-time Hough lossy encoder (§5.2.2), Dolonius et al. format.
+    Lossy {
+        /// Per-channel error bound, colours in [0, 1].
+        threshold: f32,
+    },
+    /// The offline Dolonius et al. encoder (baseline), same format.
+    Dolonius {
+        /// Per-channel error bound, colours in [0, 1].
+        threshold: f32,
+    },
+    /// Dado et al. per-block palettes (lossless baseline).
+    Dado,
 }
 
 impl ColorCodec {
@@ -150,6 +162,13 @@ impl ColorCodec {
             "raw" => no_value(ColorCodec::Raw),
             "lossless" => no_value(ColorCodec::Lossless(LosslessVariant::Rgb888)),
             "lossless565" => no_value(ColorCodec::Lossless(LosslessVariant::Rgb565)),
+            "lossy" => Ok(ColorCodec::Lossy {
+                threshold: threshold(value)?,
+            }),
+            "dolonius" => Ok(ColorCodec::Dolonius {
+                threshold: threshold(value)?,
+            }),
+            "dado" => no_value(ColorCodec::Dado),
             _ => Err(format!(
                 "unknown colour codec {text:?}: expected raw, lossless, lossless565, \
                  lossy[=T], dolonius[=T] or dado"
@@ -163,6 +182,9 @@ impl ColorCodec {
             ColorCodec::Raw => "raw".into(),
             ColorCodec::Lossless(LosslessVariant::Rgb888) => "lossless".into(),
             ColorCodec::Lossless(LosslessVariant::Rgb565) => "lossless565".into(),
+            ColorCodec::Lossy { threshold } => format!("lossy={threshold}"),
+            ColorCodec::Dolonius { threshold } => format!("dolonius={threshold}"),
+            ColorCodec::Dado => "dado".into(),
         }
     }
 
@@ -173,6 +195,9 @@ impl ColorCodec {
             ColorCodec::Raw => 0,
             ColorCodec::Lossless(LosslessVariant::Rgb888) => 1,
             ColorCodec::Lossless(LosslessVariant::Rgb565) => 2,
+            ColorCodec::Lossy { .. } => 3,
+            ColorCodec::Dolonius { .. } => 4,
+            ColorCodec::Dado => 5,
         }
     }
 
@@ -183,16 +208,21 @@ impl ColorCodec {
         match self {
             ColorCodec::Raw | ColorCodec::Lossless(LosslessVariant::Rgb888) => 0.0,
             ColorCodec::Lossless(LosslessVariant::Rgb565) => 4.0 / 255.0,
+            ColorCodec::Lossy { threshold } | ColorCodec::Dolonius { threshold } => *threshold,
+            ColorCodec::Dado => 0.0,
         }
     }
 
     /// The encoder with stored `id` and `threshold`, if valid.
     pub fn from_id(id: u32, threshold: f32) -> Option<ColorCodec> {
-        let _ = threshold;
+        let valid = threshold > 0.0 && threshold <= 1.0;
         match id {
             0 => Some(ColorCodec::Raw),
             1 => Some(ColorCodec::Lossless(LosslessVariant::Rgb888)),
             2 => Some(ColorCodec::Lossless(LosslessVariant::Rgb565)),
+            3 if valid => Some(ColorCodec::Lossy { threshold }),
+            4 if valid => Some(ColorCodec::Dolonius { threshold }),
+            5 => Some(ColorCodec::Dado),
             _ => None,
         }
     }
@@ -203,6 +233,8 @@ impl ColorCodec {
             ColorCodec::Raw => ColorFormat::Raw,
             ColorCodec::Lossless(LosslessVariant::Rgb888) => ColorFormat::Lossless888,
             ColorCodec::Lossless(LosslessVariant::Rgb565) => ColorFormat::Lossless565,
+            ColorCodec::Lossy { .. } | ColorCodec::Dolonius { .. } => ColorFormat::Varbit,
+            ColorCodec::Dado => ColorFormat::Palette,
         }
     }
 
@@ -210,7 +242,7 @@ impl ColorCodec {
     pub fn is_exact(&self) -> bool {
         matches!(
             self,
-            ColorCodec::Raw | ColorCodec::Lossless(LosslessVariant::Rgb888)
+            ColorCodec::Raw | ColorCodec::Lossless(LosslessVariant::Rgb888) | ColorCodec::Dado
         )
     }
 
@@ -228,6 +260,9 @@ impl ColorCodec {
         match self {
             ColorCodec::Raw => raw::encode(colors),
             ColorCodec::Lossless(variant) => lossless::encode(colors, *variant),
+            ColorCodec::Lossy { threshold } => lossy::encode(colors, *threshold),
+            ColorCodec::Dolonius { threshold } => dolonius::encode(colors, *threshold),
+            ColorCodec::Dado => dado::encode(colors),
         }
     }
 }
@@ -238,7 +273,7 @@ pub fn decode_all(format: ColorFormat, words: &[u32], count: usize) -> Result<Ve
         ColorFormat::Raw => raw::decode_all(words, count),
         ColorFormat::Lossless888 | ColorFormat::Lossless565 => lossless::decode_all(words, count),
         ColorFormat::Varbit => varbit::decode_all(words, count),
-        other => Err(unsupported(other)),
+        ColorFormat::Palette => dado::decode_all(words, count),
     }
 }
 
@@ -255,7 +290,7 @@ pub fn decode(
             lossless::decode(words, count, index)
         }
         ColorFormat::Varbit => varbit::decode(words, count, index),
-        other => Err(unsupported(other)),
+        ColorFormat::Palette => dado::decode(words, count, index),
     }
 }
 
@@ -293,13 +328,4 @@ pub fn max_channel_error(reference: &[u32], decoded: &[u32]) -> f32 {
         .max()
         .unwrap_or(0) as f32
         / 255.0
-}
-
-/// The error for a stored format this build has no decoder for.
-fn unsupported(format: ColorFormat) -> AttrError {
-    AttrError::Corrupt {
-        format: format.name(),
-        word: 0,
-        reason: "no decoder for this format in this build".into(),
-    }
 }

@@ -22,6 +22,7 @@
 #define COLOR_FORMAT_PALETTE 4u
 
 #include "attr/lossless.glsl"
+#include "attr/palette.glsl"
 #include "attr/varbit.glsl"
 
 layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer ColorTableRef {
@@ -54,9 +55,11 @@ uint chunk_color(uint i) {
         return lossless_color(chunk, local);
     case COLOR_FORMAT_VARBIT:
         return varbit_color(chunk, local);
+    case COLOR_FORMAT_PALETTE:
+        return palette_color(chunk, local);
     }
-    // A format this shader does not decode shades white (the CPU reference does the same for
-    // colours it cannot decode).
+    // Unknown format ids never reach the GPU (ColorFormat::from_id); white like the CPU's
+    // undecodable colours.
     return 0xffffffffu;
 }
 
