@@ -21,7 +21,7 @@ use voxdag::render::{Camera, RenderSettings};
 use voxdag::scene::{self, ImportOptions};
 
 use crate::{
-    BuildArgs, DemoArgs, EncodingArg, ExportArgs, ExportFormat, RenderArgs, StatsArgs,
+    BuildArgs, ColorsArg, DemoArgs, EncodingArg, ExportArgs, ExportFormat, RenderArgs, StatsArgs,
     TransformsArg, VerifyArgs,
 };
 
@@ -91,11 +91,11 @@ pub fn parse_size(text: &str) -> Result<(u32, u32), String> {
 }
 
 /// Parses a `--colors` value: `none` (no colours) or a [`ColorCodec`] spelling.
-pub fn parse_colors(text: &str) -> Result<Option<ColorCodec>, String> {
+pub fn parse_colors(text: &str) -> Result<ColorsArg, String> {
     if text == "none" {
-        return Ok(None);
+        return Ok(ColorsArg(None));
     }
-    ColorCodec::parse(text).map(Some)
+    ColorCodec::parse(text).map(|c| ColorsArg(Some(c)))
 }
 
 /// Parses "x,y,z".
@@ -132,7 +132,7 @@ pub fn build_scene_digest(
     let start = Instant::now();
     let mut voxels = scene::import(&args.input, &options, &bar)?;
     bar.finish_and_clear();
-    if args.no_colors || args.colors.is_none() {
+    if args.no_colors || args.colors.0.is_none() {
         voxels.colors = Vec::new();
     }
     let voxelize_time = start.elapsed();
@@ -260,7 +260,7 @@ fn encode_colors(
     args: &BuildArgs,
     quiet: bool,
 ) -> Result<(Vec<u32>, Option<StoredColors>)> {
-    let Some(codec) = args.colors.filter(|_| !dag.colors.is_empty()) else {
+    let Some(codec) = args.colors.0.filter(|_| !dag.colors.is_empty()) else {
         return Ok((Vec::new(), None));
     };
     let bar = progress_bar(quiet);
@@ -481,8 +481,18 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
             }
         }
     }
+    // Loading already decoded every colour chunk; say what was checked.
+    let colors = match &file.stored_colors {
+        Some(s) => format!(
+            ", {} colours in {} {} chunks decoded",
+            file.colors.len(),
+            s.chunks.chunk_count(),
+            s.chunks.codec.name()
+        ),
+        None => String::new(),
+    };
     println!(
-        "ok: {} ({kind}, {} voxels, checksum {:#010x})",
+        "ok: {} ({kind}, {} voxels, checksum {:#010x}{colors})",
         args.file.display(),
         digest.voxels,
         digest.crc32
@@ -651,7 +661,7 @@ pub fn demo(args: &DemoArgs, quiet: bool) -> Result<()> {
         vox_scale: 1,
         texture: None,
         no_colors: false,
-        colors: Some(ColorCodec::Lossless(LosslessVariant::Rgb888)),
+        colors: ColorsArg(Some(ColorCodec::Lossless(LosslessVariant::Rgb888))),
         chunk_depth: None,
         output: vdag.clone(),
         report: Some(args.out_dir.join("avocado-build.json")),

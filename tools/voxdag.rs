@@ -58,7 +58,7 @@ pub struct BuildArgs {
     /// How colours are stored: none, raw, lossless, lossless565, lossy[=T], dolonius[=T] or dado
     /// (T: per-channel error threshold in (0, 1], default 0.06). See docs/colors.md.
     #[arg(long, default_value = "lossless", value_parser = commands::parse_colors)]
-    colors: Option<ColorCodec>,
+    colors: ColorsArg,
     /// Depth below the root of the SVO nodes that own one colour chunk each (default: 7 for the
     /// lossless codecs, 8 for the lossy ones).
     #[arg(long)]
@@ -82,6 +82,10 @@ pub struct BuildArgs {
     #[arg(long)]
     no_huffman: bool,
 }
+
+/// A `--colors` value: a codec, or `None` for `none`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ColorsArg(pub Option<ColorCodec>);
 
 /// Node encodings of `voxdag build --encoding`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
