@@ -1,5 +1,6 @@
 //! `voxdag bench ...`: benchmarks writing JSON plus a Markdown table (never timed unit tests).
 
+mod colors;
 mod compress;
 
 use std::io::Write;
@@ -28,6 +29,8 @@ pub enum BenchCommand {
     Render(BenchRenderArgs),
     /// Tables 3.2-3.4: unique elements per transform set, encoded bytes, stage times, peak RSS.
     Compress(compress::BenchCompressArgs),
+    /// Table 5.1 / Figure 5.6: colour codecs' size, RMSE and encode time; GPU lossless throughput.
+    Colors(colors::BenchColorsArgs),
 }
 
 /// Arguments of `voxdag bench build`.
@@ -83,6 +86,7 @@ pub fn run(command: BenchCommand, quiet: bool) -> Result<()> {
         BenchCommand::Build(args) => bench_build(&args),
         BenchCommand::Render(args) => bench_render(&args, quiet),
         BenchCommand::Compress(args) => compress::bench_compress(&args),
+        BenchCommand::Colors(args) => colors::bench_colors(&args),
     }
 }
 
