@@ -22,7 +22,7 @@ use super::varbit::{self, VarbitBlock, MACRO_BLOCK_COLORS};
 
 /// Longest block considered, in colours; bounds the quadratic cost on flat colour runs (a longer
 /// run saves at most one 64-bit header per `MAX_BLOCK` colours).
-pub const MAX_BLOCK: usize = 1024;
+pub const MAX_BLOCK: usize = 256;
 /// Bits of a block header in the size the cut minimizes.
 const HEADER_BITS: usize = 64;
 /// Bit widths tried; 0 is a single-colour block.

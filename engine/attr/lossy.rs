@@ -2,16 +2,21 @@
 //! stream that fits line segments with the continuous Hough transform, written in the Dolonius et
 //! al. variable-bitrate format (`varbit`).
 //!
-//! A segment grows one colour at a time. Each of the three planes RG, GB and RB keeps, for
-//! [`THETA_STEPS`] line angles θ, the range [ρmin, ρmax] of `ρ = x cos θ + y sin θ` over the
-//! segment's colours (channels in [0, 1]); an angle is dropped once ρmax - ρmin exceeds twice the
-//! Hough band (a line at that angle can no longer pass within the band of every colour). The
-//! segment ends before the colour that would leave some plane without angles. The 3D line is then
-//! rebuilt from the two planes whose colours spread widest, the colours are projected on it, and
-//! `varbit::endpoint_block` picks the fewest bits (1-4) whose decoded colours, after RGB565
+//! A segment grows one colour at a time, up to [`MAX_SEGMENT`] colours. Each of the three planes
+//! RG, GB and RB keeps, for [`THETA_STEPS`] line angles θ, the range [ρmin, ρmax] of
+//! `ρ = x cos θ + y sin θ` over the segment's colours (channels in [0, 1]); an angle is dropped
+//! once ρmax - ρmin exceeds twice the Hough band (no line at that angle passes within the band of
+//! every colour). The segment ends before the colour that would leave some plane without angles.
+//! The 3D line is rebuilt from the two planes whose colours spread widest (the intersection of
+//! their best lines, each a plane in RGB space), and clipped to the colours' projections.
+//! `varbit::endpoint_block` then picks the fewest bits (1-4) whose decoded colours, after RGB565
 //! endpoint quantization, all stay within the threshold; a segment that fails even with 4 bits is
-//! cut before its first failing colour and refitted. Segments within the threshold of one colour
-//! become single-colour blocks. Macro blocks are encoded in parallel.
+//! cut before its first failing colour (or halved) and refitted.
+//!
+//! The block emitted is the cheapest in stored bits per colour (64 header bits + weights) of: the
+//! longest run one single colour holds, the Hough segment, and the segment's prefixes that its
+//! line (clipped to the prefix) holds with fewer bits; a single run that no endpoint block could
+//! beat skips the Hough pass. Macro blocks are encoded in parallel.
 
 use rayon::prelude::*;
 
@@ -22,6 +27,9 @@ use super::varbit::{self, VarbitBlock, MACRO_BLOCK_COLORS};
 pub const DEFAULT_THRESHOLD: f32 = 0.06;
 /// Number of line angles θ per plane, evenly spaced over [0, π).
 pub const THETA_STEPS: usize = 64;
+/// Longest segment, in colours: the greedy choice of a block is revisited at least this often,
+/// so that a long line segment does not swallow runs that cheaper blocks would hold.
+pub const MAX_SEGMENT: usize = 256;
 /// Half-width of the Hough band as a fraction of the threshold: the rest of the threshold is left
 /// to the weight quantization along the line.
 const BAND_FRACTION: f32 = 0.5;
@@ -60,29 +68,100 @@ fn encode_macro_block(
     let mut hough = Hough::new(angles, band);
     let mut i = 0;
     while i < colors.len() {
-        let mut limit = colors.len();
-        loop {
-            let end = hough.segment(&colors[i..limit]) + i;
-            let segment = &colors[i..end];
-            if let Some(block) = varbit::single_block(segment, offset + i, max_delta) {
-                blocks.push(block);
-                i = end;
-                break;
-            }
-            let line = hough.line(segment);
-            match varbit::endpoint_block(segment, offset + i, line, 1..=4, max_delta) {
-                Ok(block) => {
-                    blocks.push(block);
-                    i = end;
-                    break;
-                }
-                // A one-colour segment always fits a single block, so `end - i >= 2` here.
-                Err(0) => limit = i + (end - i) / 2,
-                Err(fail) => limit = i + fail,
+        let end = colors.len().min(i + MAX_SEGMENT);
+        let (len, block) = next_block(&colors[i..end], offset + i, &mut hough, max_delta);
+        blocks.push(block);
+        i += len;
+    }
+    blocks
+}
+
+/// The block at the start of `colors` and its length: of the longest single-colour run, the
+/// Hough segment, and the segment's prefixes that its line holds with fewer bits, the one with
+/// the fewest stored bits per colour.
+fn next_block(
+    colors: &[[u8; 3]],
+    start: usize,
+    hough: &mut Hough,
+    max_delta: u8,
+) -> (usize, VarbitBlock) {
+    let run = single_run(colors, max_delta);
+    let single = varbit::single_block(&colors[..run], start, max_delta)
+        .expect("single_run checked the block");
+    let cost = |len: usize, bits: u8| (64 + usize::from(bits) * len) as f64 / len as f64;
+    // No endpoint block (1 bit per weight at least) can beat a long enough single run.
+    if cost(run, 0) <= cost(colors.len(), 1) {
+        return (run, single);
+    }
+    let mut best = (run, single);
+    let mut limit = colors.len();
+    let (len, line, block) = loop {
+        let end = hough.segment(&colors[..limit]);
+        let line = hough.line(&colors[..end]);
+        match varbit::endpoint_block(&colors[..end], start, line, 1..=4, max_delta) {
+            Ok(block) => break (end, line, block),
+            // A segment no line holds ends before its first failing colour; the first colour
+            // failing means the line is poor: halve the segment.
+            Err(0) if end <= 1 => return best,
+            Err(0) => limit = end / 2,
+            Err(fail) => limit = fail,
+        }
+    };
+    if cost(len, block.bits) < cost(best.0, 0) {
+        best = (len, block);
+    }
+    // Shorter prefixes on the same line, clipped to their own colours, may need fewer bits.
+    for bits in 1..best.1.bits.max(1) {
+        let prefix = varbit::longest_prefix(len, |p| {
+            let clipped = clip(line, &colors[..p]);
+            varbit::endpoint_block(&colors[..p], start, clipped, bits..=bits, max_delta).ok()
+        });
+        if let Some((p, block)) = prefix {
+            if cost(p, bits) < cost(best.0, best.1.bits) {
+                best = (p, block);
             }
         }
     }
-    blocks
+    best
+}
+
+/// The part of `line` (endpoints, channels in [0, 255]) between the projections of `colors`.
+fn clip([a, b]: [[f32; 3]; 2], colors: &[[u8; 3]]) -> [[f32; 3]; 2] {
+    let dir = [0, 1, 2].map(|k| b[k] - a[k]);
+    let len2 = dot(dir, dir);
+    if len2 <= 0.0 {
+        return [a, b];
+    }
+    let (mut t_min, mut t_max) = (f32::INFINITY, f32::NEG_INFINITY);
+    for c in colors {
+        let t = dot([0, 1, 2].map(|k| f32::from(c[k]) - a[k]), dir) / len2;
+        t_min = t_min.min(t);
+        t_max = t_max.max(t);
+    }
+    let at = |t: f32| [0, 1, 2].map(|k| a[k] + t * dir[k]);
+    [at(t_min), at(t_max)]
+}
+
+/// Length of the longest prefix of `colors` (at least 1) that one single-colour block holds.
+fn single_run(colors: &[[u8; 3]], max_delta: u8) -> usize {
+    let (mut lo, mut hi) = (colors[0], colors[0]);
+    let mut run = colors.len();
+    for (n, c) in colors.iter().enumerate() {
+        for k in 0..3 {
+            lo[k] = lo[k].min(c[k]);
+            hi[k] = hi[k].max(c[k]);
+        }
+        if (0..3).any(|k| hi[k] - lo[k] > max_delta.saturating_mul(2)) {
+            run = n;
+            break;
+        }
+    }
+    // The block's colour is the range's centre rounded to 10-12-10: shrink in the rare case the
+    // rounding breaks the bound.
+    while run > 1 && varbit::single_block(&colors[..run], 0, max_delta).is_none() {
+        run -= 1;
+    }
+    run
 }
 
 /// cos θ and sin θ of the angle steps.
@@ -267,20 +346,35 @@ mod tests {
     use crate::attr::pack_rgb;
 
     #[test]
-    fn a_gradient_becomes_one_block_and_noise_stays_within_threshold() {
+    fn a_flat_run_is_one_single_block_and_a_ramp_few_blocks() {
+        let flat: Vec<u32> = (0..200u32)
+            .map(|i| pack_rgb([100 + (i % 7) as u8, 50, 20]))
+            .collect();
+        let blocks = encode_blocks(&flat, DEFAULT_THRESHOLD);
+        assert_eq!(blocks.len(), 1);
+        assert_eq!(blocks[0].bits, 0);
+        // A straight ramp: each block covers many colours.
         let gradient: Vec<u32> = (0..200u32)
             .map(|i| pack_rgb([i as u8, (255 - i) as u8, (i / 2) as u8]))
             .collect();
         let blocks = encode_blocks(&gradient, DEFAULT_THRESHOLD);
-        assert!(
-            blocks.len() <= 2,
-            "{} blocks for a straight gradient",
-            blocks.len()
-        );
+        assert!(blocks.len() <= 8, "{} blocks for a ramp", blocks.len());
         let words = encode(&gradient, DEFAULT_THRESHOLD);
         let decoded = varbit::decode_all(&words, gradient.len()).unwrap();
         for (a, b) in gradient.iter().zip(&decoded) {
             assert!(varbit::channel_error(rgb(*a), rgb(*b)) <= 15);
+        }
+    }
+
+    #[test]
+    fn segments_never_exceed_max_segment() {
+        let grey: Vec<u32> = (0..5000u32)
+            .map(|i| pack_rgb([(i * 37 % 256) as u8; 3]))
+            .collect();
+        let blocks = encode_blocks(&grey, DEFAULT_THRESHOLD);
+        for (j, b) in blocks.iter().enumerate() {
+            let end = blocks.get(j + 1).map_or(grey.len(), |n| n.start);
+            assert!(end - b.start <= MAX_SEGMENT);
         }
     }
 }

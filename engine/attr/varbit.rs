@@ -67,7 +67,7 @@ pub struct VarbitBlock {
     pub weights: Vec<u8>,
 }
 
-/// Words of an empty chunk, and the size of the layout's fixed header.
+/// Words before the macro block headers (block count, macro block count).
 const FIXED_WORDS: usize = 2;
 
 /// Writes a block list covering colours `0..count` in the word layout of the module docs.
@@ -326,11 +326,18 @@ pub fn endpoint_block(
                 0.0
             };
             let nearest = (t.clamp(0.0, 1.0) * n as f32).round() as u32;
-            let (w, err) = [nearest.saturating_sub(1), nearest, (nearest + 1).min(n)]
+            // Of the weights within the threshold, the one with the least squared error.
+            let (w, err, _) = [nearest.saturating_sub(1), nearest, (nearest + 1).min(n)]
                 .into_iter()
-                .map(|w| (w, channel_error(*c, blend(a8, b8, w, u32::from(bits)))))
-                .min_by_key(|&(_, err)| err)
-                .unwrap_or((nearest, u8::MAX));
+                .map(|w| {
+                    let decoded = blend(a8, b8, w, u32::from(bits));
+                    let squared: u32 = (0..3)
+                        .map(|k| u32::from(c[k].abs_diff(decoded[k])).pow(2))
+                        .sum();
+                    (w, channel_error(*c, decoded), squared)
+                })
+                .min_by_key(|&(_, err, squared)| (err > max_delta, squared))
+                .unwrap_or((nearest, u8::MAX, 0));
             weights.push(w as u8);
             err > max_delta
         });
@@ -347,6 +354,37 @@ pub fn endpoint_block(
         }
     }
     Err(first_fail)
+}
+
+/// The longest prefix length in `1..=max_len` that `fit` accepts, with `fit`'s block: lengths
+/// double while `fit` accepts them, then a binary search between the last accepted and the first
+/// refused length (a search that assumes shorter prefixes fit when longer ones do; every
+/// returned block was accepted by `fit`).
+pub fn longest_prefix(
+    max_len: usize,
+    mut fit: impl FnMut(usize) -> Option<VarbitBlock>,
+) -> Option<(usize, VarbitBlock)> {
+    let mut best = None;
+    let (mut fits, mut fails) = (0, max_len + 1);
+    let mut len = 1.min(max_len);
+    while len > fits {
+        match fit(len) {
+            Some(block) => {
+                best = Some((len, block));
+                fits = len;
+                len = if fails > max_len {
+                    (2 * len).min(max_len)
+                } else {
+                    (len + fails) / 2
+                };
+            }
+            None => {
+                fails = len;
+                len = (fits + fails) / 2;
+            }
+        }
+    }
+    best
 }
 
 fn corrupt(word: usize, reason: String) -> AttrError {
