@@ -10,8 +10,8 @@ use rayon::prelude::*;
 
 use super::params::RenderParams;
 use super::{RenderError, RenderOutput, RenderSettings};
-use crate::dag::raycast::{Ray, T_UNBOUNDED};
 use crate::attr::ChunkedColors;
+use crate::dag::raycast::{Ray, T_UNBOUNDED};
 use crate::dag::{Svdag, VoxelIndex};
 
 // The sRGB curve lives in `crate::color` (shared with import); re-exported for callers here.

@@ -9,9 +9,9 @@
 use std::sync::Arc;
 use std::time::Instant;
 
+use super::cpu::ColorSource;
 use super::params::{RenderParams, FLAG_HAS_COLORS};
 use super::{RenderOutput, RenderSettings};
-use super::cpu::ColorSource;
 use crate::attr::ColorFormat;
 use crate::dag::{Svdag, VoxelIndex};
 use crate::gpu::{

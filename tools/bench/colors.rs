@@ -34,6 +34,9 @@ pub struct BenchColorsArgs {
     /// Per-channel error threshold of the lossy codecs (colours in [0, 1]).
     #[arg(long, default_value_t = voxdag::attr::DEFAULT_THRESHOLD)]
     threshold: f32,
+    /// Chunk depth below the root for every codec (default: each codec's own, 7 lossless / 8 lossy).
+    #[arg(long)]
+    chunk_depth: Option<u32>,
     /// Leave out the Perlin-noise-painted terrain.
     #[arg(long)]
     no_perlin: bool,
@@ -260,8 +263,16 @@ fn perlin_terrain(resolution: u32) -> Voxels {
 }
 
 /// Encodes, decodes and verifies one codec on one scene.
-fn measure(scene: &str, dag: &Svdag, index: &VoxelIndex, codec: ColorCodec) -> Result<CodecRow> {
-    let depth = codec.default_chunk_depth().min(dag.root_level());
+fn measure(
+    scene: &str,
+    dag: &Svdag,
+    index: &VoxelIndex,
+    codec: ColorCodec,
+    chunk_depth: Option<u32>,
+) -> Result<CodecRow> {
+    let depth = chunk_depth
+        .unwrap_or_else(|| codec.default_chunk_depth())
+        .min(dag.root_level());
     let sizes = chunk_sizes(dag, index, depth);
     let start = Instant::now();
     let chunks = ChunkedColors::encode(&dag.colors, &sizes, codec, depth, &ProgressBar::hidden())?;
@@ -380,7 +391,7 @@ pub fn bench_colors(args: &BenchColorsArgs) -> Result<()> {
                 dag.colors.len()
             );
             for codec in codecs(args.threshold, !args.no_dolonius) {
-                let row = measure(name, &dag, &index, codec)?;
+                let row = measure(name, &dag, &index, codec, args.chunk_depth)?;
                 eprintln!(
                     "  {:<14} {:>8.3} s {:>6.1}% RMSE {:.4}{}",
                     row.codec,
@@ -425,17 +436,18 @@ pub fn bench_colors(args: &BenchColorsArgs) -> Result<()> {
 fn markdown(report: &ColorsReport) -> String {
     let mut md = format!(
         "### Colour compression (Table 5.1), threshold {}\n\n\
-         | scene | res | colours | codec | chunks | encode s | % of RGB888 | RMSE | max err | ok |\n\
-         |---|---|---|---|---|---|---|---|---|---|\n",
+         | scene | res | colours | codec | depth | chunks | encode s | % of RGB888 | RMSE | max err | ok |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|\n",
         report.threshold
     );
     for r in &report.rows {
         md += &format!(
-            "| {} | {} | {} | {} | {} | {:.3} | {:.1} | {:.4} | {:.4} | {} |\n",
+            "| {} | {} | {} | {} | {} | {} | {:.3} | {:.1} | {:.4} | {:.4} | {} |\n",
             r.scene,
             r.resolution,
             r.voxels,
             r.codec,
+            r.chunk_depth,
             r.chunks,
             r.encode_s,
             r.percent_of_rgb888,
