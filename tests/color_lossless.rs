@@ -212,7 +212,8 @@ fn textured_scenes_round_trip_and_report_ratio() {
                 colors.len(),
                 100.0 * ratio
             );
-            assert!(ratio < 1.0, "{name} {v:?}: {ratio}");
+            // The target for RGB888 on textured scenes; RGB565 is always smaller.
+            assert!(ratio <= 0.70, "{name} {v:?}: {ratio}");
         }
     }
 }
@@ -305,4 +306,75 @@ fn gpu_round_trip_on_a_textured_scene() {
 fn assert_clean(ctx: &std::sync::Arc<voxdag::gpu::GpuContext>) {
     assert_eq!(ctx.live_allocations(), 0, "leaked GPU allocations");
     assert_eq!(ctx.validation_errors(), 0, "validation messages (see log)");
+}
+
+/// Asserts decoding `words` fails with `Corrupt` in validate, decode_all and decode of `index`.
+fn assert_corrupt(words: &[u32], count: usize, index: usize, what: &str) {
+    let is_corrupt = |r: Result<(), AttrError>| matches!(r, Err(AttrError::Corrupt { .. }));
+    assert!(
+        is_corrupt(lossless::validate(words, count)),
+        "{what}: validate"
+    );
+    assert!(
+        is_corrupt(lossless::decode_all(words, count).map(|_| ())),
+        "{what}: decode_all"
+    );
+    assert!(
+        is_corrupt(lossless::decode(words, count, index).map(|_| ())),
+        "{what}: decode"
+    );
+}
+
+#[test]
+fn targeted_corruptions_are_reported() {
+    let colors = structured(300, 5);
+    let words = lossless::encode(&colors, LosslessVariant::Rgb888);
+    let head_b = words[1];
+    let runs = ((head_b >> 12) & 127) + 1;
+    let mask_words = if runs > 1 { 4 } else { 0 };
+    let palette = ((head_b >> 19) & 127) + 1;
+    let indexed = (head_b >> 26) & 1 == 1;
+    let stream_bits = palette * 9
+        + if indexed {
+            runs * (32 - (palette - 1).leading_zeros())
+        } else {
+            0
+        }
+        + 128 * ((head_b & 15) + ((head_b >> 4) & 15) + ((head_b >> 8) & 15));
+    let table = 2 + mask_words + stream_bits.div_ceil(32) as usize;
+
+    let mut w = words.clone();
+    w[table] = 1; // block 1 pointing into block 0
+    assert_corrupt(&w, 300, 128, "offset into block 0");
+    let mut w = words.clone();
+    w[table + 3] = 1; // block 2 offset beyond 2^32 words
+    assert_corrupt(&w, 300, 299, "offset past the end");
+    let mut w = words.clone();
+    w[1] |= 1 << 31;
+    assert_corrupt(&w, 300, 5, "reserved header bit");
+    let mut w = words.clone();
+    w[0] |= 1 << 24;
+    assert_corrupt(&w, 300, 5, "reserved minimum bits");
+    assert!(runs > 1, "the test input needs a mask in block 0");
+    let mut w = words.clone();
+    w[2] ^= 1; // bit 0 of the mask must stay clear
+    assert_corrupt(&w, 300, 5, "mask bit 0");
+    let mut w = words.clone();
+    w[1] = (w[1] & !(127 << 12)) | ((runs % 127) << 12); // runs + 1 against the mask
+    assert_corrupt(&w, 300, 5, "mask popcount");
+    assert_corrupt(&words[..words.len() - 1], 300, 299, "truncated");
+    assert_corrupt(&words[..table + 3], 300, 0, "table cut short");
+
+    // A palette index past the palette, in an indexed block with a palette of 3 (2-bit indices).
+    let colors: Vec<u32> = [0u8, 40, 0, 80, 40, 0, 80]
+        .iter()
+        .flat_map(|&g| std::iter::repeat(pack_rgb([0, g, 0])).take(10))
+        .collect();
+    let mut w = lossless::encode(&colors, LosslessVariant::Rgb888);
+    let h = w[1];
+    assert_eq!((h >> 26) & 1, 1, "expected an indexed block: {h:#x}");
+    assert_eq!(((h >> 19) & 127) + 1, 3);
+    let stream = 2 + (((h >> 27) & 3) as usize + 1);
+    w[stream] |= 3 << 27; // the first run index (bits 27..28 after three 9-bit entries)
+    assert_corrupt(&w, colors.len(), 0, "palette index");
 }

@@ -11,7 +11,7 @@
 
 use std::sync::Arc;
 
-use crate::attr::lossless::{self, LosslessVariant, BLOCK_COLORS};
+use crate::attr::lossless::{self, LosslessVariant, BLOCK_COLORS, EXTRA_SHIFTS};
 use crate::gpu::{
     shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, MemLocation,
     Profiler,
@@ -105,11 +105,13 @@ impl LosslessGpu {
         let scan_size = SCAN_WORKGROUP
             .min(info.max_compute_workgroup_invocations)
             .min(info.max_compute_workgroup_size[0]);
+        // Specialization constants: 0 = workgroup size, 1 = the encoder's extra shifts (read by
+        // the plan pass only; the same value everywhere keeps one source of truth).
         let pipeline = |name: &str, spirv: &[u32], size: u32, push: usize| {
             ctx.create_compute_pipeline(&ComputePipelineDesc {
                 name,
                 spirv,
-                spec_constants: &[size],
+                spec_constants: &[size, EXTRA_SHIFTS],
                 push_constant_size: push as u32,
                 storage_image: false,
             })
@@ -143,8 +145,9 @@ impl LosslessGpu {
         })
     }
 
-    /// Encodes the first `count` RGBA8 words of `colors` into a new GPU buffer holding exactly
-    /// the words [`lossless::encode`] returns; also returns their number. Passes are profiled
+    /// Encodes the first `count` RGBA8 words of `colors` into a new GPU buffer holding the words
+    /// [`lossless::encode`] returns (exactly; one unused word when `count` is 0) and returns
+    /// their number. Passes are profiled
     /// as "lossless plan", "lossless scan" and "lossless write".
     pub fn encode(
         &self,
@@ -162,8 +165,9 @@ impl LosslessGpu {
             )));
         }
         if count == 0 {
-            let words = lossless::encode(&[], variant);
-            return Ok((ctx.upload("lossless chunk", &words)?, words.len()));
+            // No colours encode to no words; Vulkan has no empty buffers.
+            let out = ctx.create_buffer("lossless chunk (empty)", 4, MemLocation::GpuOnly)?;
+            return Ok((out, 0));
         }
         let blocks = count.div_ceil(BLOCK_COLORS as u32);
         let groups = [blocks.div_ceil(WORKGROUP), 1, 1];
@@ -268,14 +272,12 @@ impl LosslessGpu {
         profiler: Option<&mut Profiler>,
     ) -> Result<Vec<u32>, GpuError> {
         let count = gpu_count(colors.len())?;
-        // A zero-size buffer is invalid: an empty chunk still gets one (unread) word.
-        let input = if colors.is_empty() {
-            self.ctx.upload("lossless input colours", &[0u32])?
-        } else {
-            self.ctx.upload("lossless input colours", colors)?
-        };
-        let (out, _) = self.encode(&input, count, variant, profiler)?;
-        self.ctx.download(&out)
+        if count == 0 {
+            return Ok(Vec::new());
+        }
+        let input = self.ctx.upload("lossless input colours", colors)?;
+        let (out, words) = self.encode(&input, count, variant, profiler)?;
+        self.ctx.read_buffer(&out, 0, words)
     }
 
     /// Validates `words` on the CPU ([`lossless::validate`]), then decodes them with

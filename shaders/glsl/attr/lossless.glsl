@@ -5,17 +5,15 @@
 //
 // returns colour `index` of the encoded chunk at `chunk_words_address` as an opaque RGBA8 word
 // (r | g << 8 | b << 16 | 0xff << 24). No validation: the host validated the chunk
-// (`attr::lossless::decode_all`) before uploading it. The includer enables
-// GL_EXT_buffer_reference and GL_EXT_shader_explicit_arithmetic_types_int64.
+// (`attr::lossless::validate`) before uploading it, and `index` is below the chunk's colour
+// count. The includer enables GL_EXT_buffer_reference and
+// GL_EXT_shader_explicit_arithmetic_types_int64. No bindings, no `main`.
 #ifndef VOXDAG_ATTR_LOSSLESS_GLSL
 #define VOXDAG_ATTR_LOSSLESS_GLSL
 
 layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer LosslessWords {
     uint w[];
 };
-
-// `LosslessVariant::Rgb565` in the low byte of the chunk header.
-#define LOSSLESS_VARIANT_565 1u
 
 // `width` (<= 24) bits LSB-first at bit `pos` of the words at `words`.
 uint lossless_read_bits(LosslessWords words, uint pos, uint width) {
@@ -31,13 +29,28 @@ uint lossless_read_bits(LosslessWords words, uint pos, uint width) {
     return v & ((1u << width) - 1u);
 }
 
+// Mask words of a block from header word B: 0 with one run, else `((b >> 27) & 3) + 1`.
+uint lossless_mask_words(uint head_b) {
+    return ((head_b >> 12u) & 127u) == 0u ? 0u : ((head_b >> 27u) & 3u) + 1u;
+}
+
 uint lossless_color(uint64_t chunk_words_address, uint index) {
     LosslessWords chunk = LosslessWords(chunk_words_address);
-    uint variant = chunk.w[0] & 0xffu;
     uint block = index >> 7u;
     uint i = index & 127u;
-    uint64_t block_offset = uint64_t(chunk.w[1u + 2u * block])
-        | (uint64_t(chunk.w[2u + 2u * block]) << 32);
+    // Block 0 starts the chunk; the offset table of blocks 1.. follows it, so its position is
+    // block 0's size (block 0 holds 128 colours whenever there are more blocks).
+    uint64_t block_offset = 0ul;
+    if (block > 0u) {
+        uint h0 = chunk.w[1];
+        uint runs0 = ((h0 >> 12u) & 127u) + 1u;
+        uint palette0 = ((h0 >> 19u) & 127u) + 1u;
+        uint index_bits0 = ((h0 >> 26u) & 1u) != 0u ? uint(findMSB(palette0 - 1u) + 1) : 0u;
+        uint width0 = (h0 & 15u) + ((h0 >> 4u) & 15u) + ((h0 >> 8u) & 15u);
+        uint stream_bits0 = palette0 * 9u + runs0 * index_bits0 + 128u * width0;
+        uint at = 2u + lossless_mask_words(h0) + (stream_bits0 + 31u) / 32u + 2u * (block - 1u);
+        block_offset = uint64_t(chunk.w[at]) | (uint64_t(chunk.w[at + 1u]) << 32);
+    }
     uint64_t block_address = chunk_words_address + block_offset * 4ul;
     LosslessWords blk = LosslessWords(block_address);
 
@@ -48,11 +61,12 @@ uint lossless_color(uint64_t chunk_words_address, uint index) {
     uint runs = ((head_b >> 12u) & 127u) + 1u;
     uint palette = ((head_b >> 19u) & 127u) + 1u;
     bool indexed = ((head_b >> 26u) & 1u) != 0u;
+    bool rgb565 = ((head_b >> 29u) & 1u) != 0u;
 
     // Run of colour i: set mask bits at positions 0..=i (bit 0 is always clear).
     uint run = 0u;
-    uint stream_word = 2u;
-    if (runs > 1u) {
+    uint mask_words = lossless_mask_words(head_b);
+    if (mask_words > 0u) {
         uint mw = i >> 5u;
         for (uint k = 0u; k < mw; k++) {
             run += bitCount(blk.w[2u + k]);
@@ -60,9 +74,8 @@ uint lossless_color(uint64_t chunk_words_address, uint index) {
         uint bit = i & 31u;
         uint keep = bit == 31u ? 0xffffffffu : ((2u << bit) - 1u);
         run += bitCount(blk.w[2u + mw] & keep);
-        stream_word = 6u;
     }
-    LosslessWords stream = LosslessWords(block_address + uint64_t(stream_word) * 4ul);
+    LosslessWords stream = LosslessWords(block_address + uint64_t(2u + mask_words) * 4ul);
 
     uint palette_bits = palette * 9u;
     uint index_bits = indexed ? uint(findMSB(palette - 1u) + 1) : 0u;
@@ -76,7 +89,7 @@ uint lossless_color(uint64_t chunk_words_address, uint index) {
     uvec3 low = uvec3(offset, offset >> shift.x, offset >> (shift.x + shift.y))
         & ((uvec3(1u) << shift) - 1u);
     uvec3 c = minimum + (reference << shift) + low;
-    if (variant == LOSSLESS_VARIANT_565) {
+    if (rgb565) {
         // Bit replication to 8 bits (`attr::lossless::expand`).
         c = uvec3((c.x << 3u) | (c.x >> 2u), (c.y << 2u) | (c.y >> 4u), (c.z << 3u) | (c.z >> 2u));
     }

@@ -8,8 +8,8 @@
 #define VOXDAG_ATTR_LOSSLESS_ENCODE_GLSL
 
 #define LOSSLESS_BLOCK_COLORS 128u
-#define LOSSLESS_CHUNK_MAGIC 0x4C435300u
-#define LOSSLESS_EXTRA_SHIFTS 4u
+// Extra shifts tried per block: `attr::lossless::EXTRA_SHIFTS`, set by the host (constant 1).
+layout(constant_id = 1) const uint LOSSLESS_EXTRA_SHIFTS = 4u;
 
 layout(buffer_reference, std430, buffer_reference_align = 4) buffer LosslessEncWords {
     uint w[];
@@ -18,8 +18,10 @@ layout(buffer_reference, std430, buffer_reference_align = 8) buffer LosslessEncO
     uint64_t o[];
 };
 
-// A block's choices: the two header words and the block's size in words.
+// A block's choices (its two header words) and its colour count.
 struct LosslessPlan {
+    uint variant;
+    uint colors;
     uvec3 minimum;
     uvec3 shift;
     uint runs;
@@ -53,27 +55,31 @@ uint lossless_index_bits(LosslessPlan p) {
     return p.indexed ? lossless_bit_length(p.palette - 1u) : 0u;
 }
 
-uint lossless_stream_bits(LosslessPlan p, uint n) {
-    return p.palette * 9u + p.runs * lossless_index_bits(p) + n * (p.shift.x + p.shift.y + p.shift.z);
+uint lossless_stream_bits(LosslessPlan p) {
+    return p.palette * 9u + p.runs * lossless_index_bits(p)
+        + p.colors * (p.shift.x + p.shift.y + p.shift.z);
 }
 
-uint lossless_mask_words(LosslessPlan p) {
-    return p.runs > 1u ? 4u : 0u;
+uint lossless_plan_mask_words(LosslessPlan p) {
+    return p.runs > 1u ? (p.colors + 31u) / 32u : 0u;
 }
 
-uint lossless_block_words(LosslessPlan p, uint n) {
-    return 2u + lossless_mask_words(p) + (lossless_stream_bits(p, n) + 31u) / 32u;
+uint lossless_block_words(LosslessPlan p) {
+    return 2u + lossless_plan_mask_words(p) + (lossless_stream_bits(p) + 31u) / 32u;
 }
 
 uvec2 lossless_header(LosslessPlan p) {
     uint a = p.minimum.x | (p.minimum.y << 8u) | (p.minimum.z << 16u);
     uint b = p.shift.x | (p.shift.y << 4u) | (p.shift.z << 8u) | ((p.runs - 1u) << 12u)
-        | ((p.palette - 1u) << 19u) | ((p.indexed ? 1u : 0u) << 26u);
+        | ((p.palette - 1u) << 19u) | ((p.indexed ? 1u : 0u) << 26u)
+        | (uint(max(int(lossless_plan_mask_words(p)) - 1, 0)) << 27u) | (p.variant << 29u);
     return uvec2(a, b);
 }
 
-LosslessPlan lossless_plan_from_header(uvec2 h) {
+LosslessPlan lossless_plan_from_header(uvec2 h, uint n) {
     LosslessPlan p;
+    p.variant = (h.y >> 29u) & 1u;
+    p.colors = n;
     p.minimum = uvec3(h.x & 0xffu, (h.x >> 8u) & 0xffu, (h.x >> 16u) & 0xffu);
     p.shift = uvec3(h.y & 15u, (h.y >> 4u) & 15u, (h.y >> 8u) & 15u);
     p.runs = ((h.y >> 12u) & 127u) + 1u;
@@ -92,7 +98,7 @@ void lossless_load_block(uint64_t colors_address, uint first, uint n, uint varia
     }
 }
 
-LosslessPlan lossless_plan_with_shift(uint n, uvec3 minimum, uvec3 shift) {
+LosslessPlan lossless_plan_with_shift(uint n, uint variant, uvec3 minimum, uvec3 shift) {
     uint seen[16];
     for (uint k = 0u; k < 16u; k++) {
         seen[k] = 0u;
@@ -114,6 +120,8 @@ LosslessPlan lossless_plan_with_shift(uint n, uvec3 minimum, uvec3 shift) {
     uint direct_bits = runs * 9u;
     uint indexed_bits = palette * 9u + runs * lossless_bit_length(palette - 1u);
     LosslessPlan p;
+    p.variant = variant;
+    p.colors = n;
     p.minimum = minimum;
     p.shift = shift;
     p.runs = runs;
@@ -123,7 +131,7 @@ LosslessPlan lossless_plan_with_shift(uint n, uvec3 minimum, uvec3 shift) {
 }
 
 // `plan_block`: minimal 3-bit-reference shifts plus 0..LOSSLESS_EXTRA_SHIFTS, first fewest words.
-LosslessPlan lossless_plan_block(uint n) {
+LosslessPlan lossless_plan_block(uint n, uint variant) {
     uvec3 lo = uvec3(255u);
     uvec3 hi = uvec3(0u);
     for (uint i = 0u; i < n; i++) {
@@ -134,11 +142,11 @@ LosslessPlan lossless_plan_block(uint n) {
     uvec3 range_bits = uvec3(lossless_bit_length(hi.x - lo.x), lossless_bit_length(hi.y - lo.y),
                              lossless_bit_length(hi.z - lo.z));
     uvec3 base = uvec3(max(ivec3(range_bits) - 3, ivec3(0)));
-    LosslessPlan best = lossless_plan_with_shift(n, lo, base);
-    uint best_words = lossless_block_words(best, n);
+    LosslessPlan best = lossless_plan_with_shift(n, variant, lo, base);
+    uint best_words = lossless_block_words(best);
     for (uint extra = 1u; extra < LOSSLESS_EXTRA_SHIFTS; extra++) {
-        LosslessPlan p = lossless_plan_with_shift(n, lo, min(base + extra, range_bits));
-        uint words = lossless_block_words(p, n);
+        LosslessPlan p = lossless_plan_with_shift(n, variant, lo, min(base + extra, range_bits));
+        uint words = lossless_block_words(p);
         if (words < best_words) {
             best = p;
             best_words = words;

@@ -26,11 +26,11 @@ void main() {
     uint first = b * LOSSLESS_BLOCK_COLORS;
     uint n = min(push.count - first, LOSSLESS_BLOCK_COLORS);
     lossless_load_block(push.colors, first, n, push.variant);
-    LosslessPlan p = lossless_plan_block(n);
+    LosslessPlan p = lossless_plan_block(n, push.variant);
     uvec2 h = lossless_header(p);
     LosslessEncWords plans = LosslessEncWords(push.plans);
     plans.w[4u * b] = h.x;
     plans.w[4u * b + 1u] = h.y;
-    plans.w[4u * b + 2u] = lossless_block_words(p, n);
+    plans.w[4u * b + 2u] = lossless_block_words(p);
     plans.w[4u * b + 3u] = 0u;
 }

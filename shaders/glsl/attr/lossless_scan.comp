@@ -40,14 +40,15 @@ void main() {
         range_sums[t] += add;
         barrier();
     }
-    // Exclusive prefix of this range, after the chunk header word and the offset table.
-    uint64_t offset = uint64_t(1u) + 2ul * uint64_t(push.blocks) + range_sums[t] - sum;
+    // Blocks 1.. sit after the table of their 2-word offsets: exclusive prefix + table size.
+    uint64_t table = 2ul * uint64_t(push.blocks - 1u);
+    uint64_t offset = table + range_sums[t] - sum;
     LosslessEncOffsets offsets = LosslessEncOffsets(push.offsets);
     for (uint b = first; b < end; b++) {
-        offsets.o[b] = offset;
+        offsets.o[b] = b == 0u ? 0ul : offset;
         offset += uint64_t(plans.w[4u * b + 2u]);
     }
     if (t == gl_WorkGroupSize.x - 1u) {
-        offsets.o[push.blocks] = uint64_t(1u) + 2ul * uint64_t(push.blocks) + range_sums[t];
+        offsets.o[push.blocks] = table + range_sums[t];
     }
 }

@@ -1,7 +1,7 @@
 #version 460
 // Lossless colour encoder, pass 3 of 3: one invocation per block writes the block's words at its
-// offset (`write_block` in engine/attr/lossless.rs) and its entry of the offset table; invocation
-// 0 also writes the chunk header. Every word of the chunk is written exactly once (padding bits
+// offset (`write_block` in engine/attr/lossless.rs) and, for blocks 1.., its entry of the offset
+// table that follows block 0. Every word of the chunk is written exactly once (padding bits
 // zero), so the output needs no clearing. Driven by engine/attr_gpu/lossless.rs.
 #extension GL_EXT_buffer_reference : require
 #extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
@@ -51,17 +51,17 @@ void main() {
     out_words = LosslessEncWords(push.out_words);
     LosslessEncWords plans = LosslessEncWords(push.plans);
     uint64_t block_offset = LosslessEncOffsets(push.offsets).o[b];
-    if (b == 0u) {
-        out_words.w[0] = LOSSLESS_CHUNK_MAGIC | push.variant;
+    if (b > 0u) {
+        uint at = plans.w[2] + 2u * (b - 1u); // the table starts where block 0 ends
+        out_words.w[at] = uint(block_offset);
+        out_words.w[at + 1u] = uint(block_offset >> 32);
     }
-    out_words.w[1u + 2u * b] = uint(block_offset);
-    out_words.w[2u + 2u * b] = uint(block_offset >> 32);
 
     uint first = b * LOSSLESS_BLOCK_COLORS;
     uint n = min(push.count - first, LOSSLESS_BLOCK_COLORS);
     lossless_load_block(push.colors, first, n, push.variant);
     uvec2 h = uvec2(plans.w[4u * b], plans.w[4u * b + 1u]);
-    LosslessPlan p = lossless_plan_from_header(h);
+    LosslessPlan p = lossless_plan_from_header(h, n);
 
     out_word = uint(block_offset);
     out_words.w[out_word++] = h.x;
@@ -85,7 +85,7 @@ void main() {
         seen[r >> 5u] |= 1u << (r & 31u);
     }
     if (p.runs > 1u) {
-        for (uint k = 0u; k < 4u; k++) {
+        for (uint k = 0u; k < lossless_plan_mask_words(p); k++) {
             out_words.w[out_word++] = mask[k];
         }
     }
