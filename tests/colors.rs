@@ -163,10 +163,7 @@ fn rebuild_equals_encoding_from_scratch() {
             ChunkOp::Copy { from: 0, len: 3 },
         ];
         let mut new_chunk: Vec<u32> = reference[start as usize..(start + half) as usize].to_vec();
-        new_chunk.extend(std::iter::repeat_n(
-            0xff10_2030,
-            10.min(len - half) as usize,
-        ));
+        new_chunk.resize(new_chunk.len() + 10.min(len - half) as usize, 0xff10_2030);
         new_chunk.extend([
             0xff00_00ff,
             0xff00_ff00,
@@ -231,7 +228,8 @@ fn codec_roundtrip(codec: ColorCodec, colors: &[u32]) -> Vec<u32> {
 fn corrupt_tables_are_errors() {
     let dag = scene();
     let good = build(&dag, codec("raw"), Some(2));
-    let mutations: Vec<(&str, Box<dyn Fn(&mut ChunkedColors)>)> = vec![
+    type Mutation = (&'static str, Box<dyn Fn(&mut ChunkedColors)>);
+    let mutations: Vec<Mutation> = vec![
         (
             "short offsets",
             Box::new(|c| {

@@ -91,7 +91,7 @@ fn painted_sphere() -> Svdag {
                     let c = if speckle {
                         ux.wrapping_mul(2654435761) ^ uz.wrapping_mul(40503)
                     } else {
-                        ux * 4 | (uy * 4) << 8 | (uz * 4) << 16
+                        (ux * 4) | ((uy * 4) << 8) | ((uz * 4) << 16)
                     };
                     voxels.push((morton::encode(ux, uy, uz), c | 0xff00_0000));
                 }

@@ -580,7 +580,9 @@ fn corrupt_chunked_colour_sections_are_rejected() {
     let starts = at + 40;
     let offsets = starts + 8 * (chunks as usize + 1);
     let words = offsets + 8 * (chunks as usize + 1);
-    let cases: Vec<(&str, Box<dyn Fn(&mut Vec<u8>)>, Option<u64>)> = vec![
+    // (what, corruption, expected error offset)
+    type Case = (&'static str, Box<dyn Fn(&mut Vec<u8>)>, Option<u64>);
+    let cases: Vec<Case> = vec![
         (
             "codec id",
             Box::new(move |b| put_u32(b, at, 77)),

@@ -347,9 +347,7 @@ impl ChunkedColors {
                 ChunkOp::Copy { from, len } => {
                     colors.extend_from_slice(&self.decode_range(*from, *len)?)
                 }
-                ChunkOp::Fill { color, len } => {
-                    colors.extend(std::iter::repeat_n(*color, *len as usize))
-                }
+                ChunkOp::Fill { color, len } => colors.resize(colors.len() + *len as usize, *color),
                 ChunkOp::Write(c) => colors.extend_from_slice(c),
             }
         }

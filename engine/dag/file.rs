@@ -114,14 +114,15 @@ fn stored_colors_bytes(stored: &StoredColors) -> Vec<u8> {
 }
 
 /// Parses and validates the chunked colour section at `at` (`len` bytes, inside `bytes`) of a
-/// file with `color_count` colours and root level `root_level`; sizes are checked before allocating.
+/// file with `color_count` colours and root level `root_level`; sizes are checked before
+/// allocating. Returns the section and its decoded colours.
 fn parse_stored_colors(
     bytes: &[u8],
     (at, len): (u64, u64),
     color_count: u64,
     root_level: u32,
     name: &Path,
-) -> Result<StoredColors, DagError> {
+) -> Result<(StoredColors, Vec<u32>), DagError> {
     let err = |offset: u64, reason: String| DagError::Format {
         path: name.to_path_buf(),
         offset,
@@ -203,22 +204,30 @@ fn parse_stored_colors(
             ),
         ));
     }
-    // Every chunk must decode; report the first failure with its byte offset.
-    let failure = (0..chunks_parsed.chunk_count())
+    // Every chunk must decode (in parallel); report the first failure with its byte offset.
+    let decoded: Vec<Result<Vec<u32>, AttrError>> = (0..chunks_parsed.chunk_count())
         .into_par_iter()
-        .find_map_first(|c| chunks_parsed.decode_chunk(c).err().map(|e| (c, e)));
-    if let Some((c, e)) = failure {
-        let word = match &e {
-            AttrError::Corrupt { word, .. } => *word,
-            _ => 0,
-        };
-        let offset = words_at + 4 * (chunks_parsed.chunk_offsets[c] + word);
-        return Err(err(offset, format!("colour chunk {c}: {e}")));
+        .map(|c| chunks_parsed.decode_chunk(c))
+        .collect();
+    let mut colors = Vec::with_capacity(color_count as usize);
+    for (c, chunk) in decoded.into_iter().enumerate() {
+        match chunk {
+            Ok(chunk) => colors.extend_from_slice(&chunk),
+            Err(e) => {
+                let word = match &e {
+                    AttrError::Corrupt { word, .. } => *word,
+                    _ => 0,
+                };
+                let offset = words_at + 4 * (chunks_parsed.chunk_offsets[c] + word);
+                return Err(err(offset, format!("colour chunk {c}: {e}")));
+            }
+        }
     }
-    Ok(StoredColors {
+    let stored = StoredColors {
         chunks: chunks_parsed,
         rmse,
-    })
+    };
+    Ok((stored, colors))
 }
 
 /// A `Write` that counts bytes and feeds them to a CRC-32.
@@ -807,19 +816,18 @@ impl VdagFile {
                 ));
             }
         }
-        let stored_colors = match parsed.sections[SECTION_CHUNKED_COLORS as usize - 1] {
-            Some(section) => Some(parse_stored_colors(
-                bytes,
-                section,
-                parsed.color_count,
-                parsed.resolution.trailing_zeros() - 2,
-                name,
-            )?),
-            None => None,
-        };
-        let decoded = match &stored_colors {
-            Some(s) => Some(s.chunks.decode_all().map_err(|e| err(0, e.to_string()))?),
-            None => None,
+        let (stored_colors, decoded) = match parsed.sections[SECTION_CHUNKED_COLORS as usize - 1] {
+            Some(section) => {
+                let (stored, colors) = parse_stored_colors(
+                    bytes,
+                    section,
+                    parsed.color_count,
+                    parsed.resolution.trailing_zeros() - 2,
+                    name,
+                )?;
+                (Some(stored), Some(colors))
+            }
+            None => (None, None),
         };
         if parsed.encoding == Encoding::Svdag32 {
             let dag = Svdag::from_parsed(bytes, name, &parsed, decoded)?;
