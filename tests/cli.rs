@@ -368,3 +368,135 @@ fn bench_compress_writes_consistent_tables() {
         "one bar group"
     );
 }
+
+/// `build --colors`: every codec stores its colours, `stats --json` reports their size and error,
+/// `verify` decodes them, `render` shows them; bad values are refused by the argument parser.
+#[test]
+fn build_colors_flags() {
+    let dir = tempfile::tempdir().unwrap();
+    let avocado = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/avocado/Avocado.gltf");
+    let mut sizes = Vec::new();
+    for codec in [
+        None,
+        Some("none"),
+        Some("raw"),
+        Some("lossless"),
+        Some("lossless565"),
+        Some("lossy=0.1"),
+        Some("dolonius"),
+        Some("dado"),
+    ] {
+        let vdag = dir
+            .path()
+            .join(format!("avocado-{}.vdag", codec.unwrap_or("default")));
+        let mut args = vec!["build", s(&avocado), "-r", "64", "-o", s(&vdag), "-q"];
+        if let Some(c) = codec {
+            args.extend(["--colors", c]);
+        }
+        let out = voxdag(&args);
+        assert!(
+            out.status.success(),
+            "{codec:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let out = voxdag(&["stats", s(&vdag), "--json", "--quick"]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let voxels = json["voxels"].as_u64().unwrap();
+        let (bytes, raw) = (
+            json["color_bytes"].as_u64().unwrap(),
+            json["raw_color_bytes"].as_u64().unwrap(),
+        );
+        let rmse = json["color_rmse"].as_f64().unwrap();
+        let name = json["color_codec"].as_str().unwrap().to_string();
+        match codec {
+            Some("none") => assert_eq!((bytes, raw, name.as_str()), (0, 0, "none")),
+            _ => {
+                assert_eq!(raw, 3 * voxels, "{codec:?}");
+                assert!(bytes > 0);
+                // The default is the exact lossless codec.
+                let exact = matches!(codec, None | Some("raw" | "lossless" | "dado"));
+                assert_eq!(rmse == 0.0, exact, "{codec:?}: rmse {rmse}");
+                assert!(rmse < 0.05, "{codec:?}: rmse {rmse}");
+                assert_eq!(
+                    name,
+                    codec
+                        .unwrap_or("lossless")
+                        .replace("dolonius", "dolonius=0.06")
+                );
+            }
+        }
+        sizes.push((codec, bytes));
+        let out = voxdag(&["verify", s(&vdag)]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let png = dir.path().join("img.png");
+        let out = voxdag(&[
+            "render",
+            s(&vdag),
+            "--cpu",
+            "--size",
+            "32x32",
+            "--out",
+            s(&png),
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    // Lossy is smaller than lossless, which is smaller than raw RGBA8 words.
+    let size = |c: &str| sizes.iter().find(|(k, _)| *k == Some(c)).unwrap().1;
+    assert!(
+        size("lossy=0.1") < size("lossless") && size("lossless") < size("raw"),
+        "{sizes:?}"
+    );
+
+    let out_path = dir.path().join("bad.vdag");
+    for bad in [
+        "foo",
+        "lossy=0",
+        "lossy=abc",
+        "lossy=1.5",
+        "raw=0.1",
+        "lossless=1",
+    ] {
+        let out = voxdag(&[
+            "build",
+            s(&avocado),
+            "-r",
+            "64",
+            "-o",
+            s(&out_path),
+            "-q",
+            "--colors",
+            bad,
+        ]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && !stderr.contains("panicked"),
+            "{bad}: {stderr}"
+        );
+        assert!(stderr.contains("--colors"), "{bad}: {stderr}");
+        assert!(!out_path.exists());
+    }
+    // --no-colors and --colors exclude each other.
+    let out = voxdag(&[
+        "build",
+        s(&avocado),
+        "-o",
+        s(&out_path),
+        "--no-colors",
+        "--colors",
+        "raw",
+    ]);
+    assert!(!out.status.success());
+}

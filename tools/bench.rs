@@ -1,5 +1,6 @@
 //! `voxdag bench ...`: benchmarks writing JSON plus a Markdown table (never timed unit tests).
 
+mod colors;
 mod compress;
 mod hash;
 
@@ -31,6 +32,8 @@ pub enum BenchCommand {
     Compress(compress::BenchCompressArgs),
     /// Table 4.2: GPU slab hash tables (fill, search at 25/50/75% hits, insert) vs a CPU baseline.
     Hash(hash::BenchHashArgs),
+    /// Table 5.1 / Figure 5.6: colour codecs' size, RMSE and encode time; GPU lossless throughput.
+    Colors(colors::BenchColorsArgs),
 }
 
 /// Arguments of `voxdag bench build`.
@@ -87,6 +90,7 @@ pub fn run(command: BenchCommand, quiet: bool) -> Result<()> {
         BenchCommand::Render(args) => bench_render(&args, quiet),
         BenchCommand::Compress(args) => compress::bench_compress(&args),
         BenchCommand::Hash(args) => hash::bench_hash(&args, quiet),
+        BenchCommand::Colors(args) => colors::bench_colors(&args),
     }
 }
 

@@ -8,18 +8,20 @@ use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
 use voxdag::atomic_file::write_atomic;
+use voxdag::attr::{ColorCodec, LosslessVariant, StoredColors};
 use voxdag::dag::encode::{EncodedDag, SsvdagEncoding, TsvdagEncoding, TsvdagOptions, VoxelDigest};
 use voxdag::dag::{
     analyze_symmetry, export_vox, export_xyz_u32_file, DagStats, Svdag, SymmetryAnalysis,
     TransformSet, VdagFile, VoxelIndex,
 };
 use voxdag::gpu::{GpuContext, GpuOptions, Profiler};
+use voxdag::render::cpu::{render_cpu_with, ColorSource};
 use voxdag::render::gpu::GpuRenderer;
-use voxdag::render::{render_cpu, Camera, RenderSettings};
+use voxdag::render::{Camera, RenderSettings};
 use voxdag::scene::{self, ImportOptions};
 
 use crate::{
-    BuildArgs, DemoArgs, EncodingArg, ExportArgs, ExportFormat, RenderArgs, StatsArgs,
+    BuildArgs, ColorsArg, DemoArgs, EncodingArg, ExportArgs, ExportFormat, RenderArgs, StatsArgs,
     TransformsArg, VerifyArgs,
 };
 
@@ -88,6 +90,14 @@ pub fn parse_size(text: &str) -> Result<(u32, u32), String> {
     Ok((w, h))
 }
 
+/// Parses a `--colors` value: `none` (no colours) or a [`ColorCodec`] spelling.
+pub fn parse_colors(text: &str) -> Result<ColorsArg, String> {
+    if text == "none" {
+        return Ok(ColorsArg(None));
+    }
+    ColorCodec::parse(text).map(|c| ColorsArg(Some(c)))
+}
+
 /// Parses "x,y,z".
 pub fn parse_vec3(text: &str) -> Result<[f32; 3], String> {
     let parts: Vec<&str> = text.split(',').collect();
@@ -122,7 +132,7 @@ pub fn build_scene_digest(
     let start = Instant::now();
     let mut voxels = scene::import(&args.input, &options, &bar)?;
     bar.finish_and_clear();
-    if args.no_colors {
+    if args.no_colors || args.colors.0.is_none() {
         voxels.colors = Vec::new();
     }
     let voxelize_time = start.elapsed();
@@ -182,7 +192,12 @@ pub fn encode_dag(
 
 /// Loads a `.vdag` file of any encoding as an SVDAG, decoding compact encodings on the CPU.
 pub fn load_svdag(path: &Path) -> Result<Svdag> {
-    let file = VdagFile::load(path)?;
+    Ok(load_svdag_stored(path)?.0)
+}
+
+/// [`load_svdag`] with the file's encoded colours, if it stores them chunked.
+pub fn load_svdag_stored(path: &Path) -> Result<(Svdag, Option<StoredColors>)> {
+    let mut file = VdagFile::load(path)?;
     let kind = file.encoded.kind();
     if kind != voxdag::dag::encode::EncodingKind::Svdag32 {
         log::info!(
@@ -192,7 +207,8 @@ pub fn load_svdag(path: &Path) -> Result<Svdag> {
             kind.name()
         );
     }
-    Ok(file.into_svdag(path)?)
+    let stored_colors = file.stored_colors.take();
+    Ok((file.into_svdag(path)?, stored_colors))
 }
 
 /// `voxdag build`.
@@ -210,11 +226,12 @@ pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
     let encoded = encode_dag(&dag, args.encoding, args.transforms, options)?;
     let encode_time = start.elapsed();
     let bytes = encoded.byte_size();
-    let colors = dag.colors.clone();
+    let (colors, stored_colors) = encode_colors(&dag, args, quiet)?;
     let file = VdagFile {
         encoded,
         colors,
         digest: Some(digest),
+        stored_colors,
     };
     file.save(&args.output)?;
     println!(
@@ -236,18 +253,95 @@ pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
     Ok(())
 }
 
+/// Encodes the DAG's colours as `--colors` asks; returns the colours a reader will decode and
+/// their stored form (`None`: no colours, or none asked for).
+fn encode_colors(
+    dag: &Svdag,
+    args: &BuildArgs,
+    quiet: bool,
+) -> Result<(Vec<u32>, Option<StoredColors>)> {
+    let Some(codec) = args.colors.0.filter(|_| !dag.colors.is_empty()) else {
+        return Ok((Vec::new(), None));
+    };
+    let bar = progress_bar(quiet);
+    let start = Instant::now();
+    let stored = StoredColors::encode(dag, codec, args.chunk_depth, &bar)
+        .with_context(|| format!("encoding colours with {}", codec.name()))?;
+    bar.finish_and_clear();
+    let decoded = stored.chunks.decode_all()?;
+    println!(
+        "colours: {} {} -> {} bytes ({:.1}% of RGB888) in {} chunks at depth {}, RMSE {:.4}, encoded in {}",
+        dag.colors.len(),
+        codec.name(),
+        stored.chunks.byte_size(),
+        100.0 * stored.chunks.byte_size() as f64 / (3.0 * dag.colors.len() as f64),
+        stored.chunks.chunk_count(),
+        stored.chunks.chunk_depth,
+        stored.rmse,
+        seconds(start.elapsed())
+    );
+    Ok((decoded, Some(stored)))
+}
+
+/// Colour storage of a file: stored bytes, raw RGB888 bytes (3 per colour) and the RMSE measured
+/// at encode time (0 for uncompressed colours).
+#[derive(Clone, Debug, Serialize)]
+pub struct ColorStats {
+    /// Encoder name (`raw` for a file with uncompressed RGBA8 colours, `none` without colours).
+    pub codec: String,
+    /// Colours stored.
+    pub colors: u64,
+    /// Bytes of the stored colours (words and chunk tables; 4 per colour for RGBA8 files).
+    pub color_bytes: u64,
+    /// 3 bytes per colour (RGB888).
+    pub raw_color_bytes: u64,
+    /// RMSE of the stored colours against the voxelizer's, RGB in [0, 1].
+    pub color_rmse: f64,
+    /// Chunks (0 for RGBA8 files).
+    pub chunks: u64,
+}
+
+impl ColorStats {
+    /// The statistics of `colors` colours, stored as `stored` or as RGBA8 words when `None`.
+    pub fn new(colors: u64, stored: Option<&StoredColors>) -> ColorStats {
+        match stored {
+            Some(s) => ColorStats {
+                codec: s.chunks.codec.name(),
+                colors,
+                color_bytes: s.chunks.byte_size(),
+                raw_color_bytes: 3 * colors,
+                color_rmse: s.rmse,
+                chunks: s.chunks.chunk_count() as u64,
+            },
+            None => ColorStats {
+                codec: if colors == 0 { "none" } else { "raw" }.into(),
+                colors,
+                color_bytes: 4 * colors,
+                raw_color_bytes: 3 * colors,
+                color_rmse: 0.0,
+                chunks: 0,
+            },
+        }
+    }
+}
+
 /// `voxdag stats`.
 pub fn stats(args: &StatsArgs, quiet: bool) -> Result<()> {
-    let dag = load_svdag(&args.file)?;
+    let (dag, stored) = load_svdag_stored(&args.file)?;
+    let colors = ColorStats::new(dag.colors.len() as u64, stored.as_ref());
     let (stats, bytes) = if args.quick {
         (dag.stats(), Vec::new())
     } else {
         describe(&dag, quiet)?
     };
     if args.json {
-        println!("{}", serde_json::to_string(&stats_json(&stats, &bytes)?)?);
+        println!(
+            "{}",
+            serde_json::to_string(&stats_json(&stats, &bytes, &colors)?)?
+        );
     } else {
         print!("{}", stats_table(&args.file, &stats, &bytes));
+        print!("{}", color_line(&colors));
     }
     Ok(())
 }
@@ -262,9 +356,40 @@ fn describe(dag: &Svdag, quiet: bool) -> Result<(DagStats, Vec<(String, u64)>)> 
     Ok((dag.stats().with_symmetry(&analysis.counts), bytes))
 }
 
-/// The `stats --json` document: [`DagStats`] with the encoded sizes added under `bytes`.
-fn stats_json(stats: &DagStats, bytes: &[(String, u64)]) -> Result<serde_json::Value> {
+/// The colour line of the stats table.
+fn color_line(c: &ColorStats) -> String {
+    if c.colors == 0 {
+        return "  colours     none\n".into();
+    }
+    format!(
+        "  colours     {} {}: {} bytes ({:.1}% of RGB888 {}), {} chunks, RMSE {:.4}\n",
+        c.colors,
+        c.codec,
+        c.color_bytes,
+        100.0 * c.color_bytes as f64 / c.raw_color_bytes as f64,
+        c.raw_color_bytes,
+        c.chunks,
+        c.color_rmse
+    )
+}
+
+/// The `stats --json` document: [`DagStats`] with the encoded sizes added under `bytes` and the
+/// colour fields of [`ColorStats`] at the top level.
+fn stats_json(
+    stats: &DagStats,
+    bytes: &[(String, u64)],
+    colors: &ColorStats,
+) -> Result<serde_json::Value> {
     let mut value = serde_json::to_value(stats)?;
+    if let (Some(obj), serde_json::Value::Object(c)) =
+        (value.as_object_mut(), serde_json::to_value(colors)?)
+    {
+        obj.insert("color_codec".into(), c["codec"].clone());
+        for key in ["color_bytes", "raw_color_bytes", "color_rmse"] {
+            obj.insert(key.into(), c[key].clone());
+        }
+        obj.insert("color_chunks".into(), c["chunks"].clone());
+    }
     if let Some(b) = value.get_mut("bytes").and_then(|b| b.as_object_mut()) {
         for (name, v) in bytes {
             b.insert(name.clone(), serde_json::Value::from(*v));
@@ -356,8 +481,18 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
             }
         }
     }
+    // Loading already decoded every colour chunk; say what was checked.
+    let colors = match &file.stored_colors {
+        Some(s) => format!(
+            ", {} colours in {} {} chunks decoded",
+            file.colors.len(),
+            s.chunks.chunk_count(),
+            s.chunks.codec.name()
+        ),
+        None => String::new(),
+    };
     println!(
-        "ok: {} ({kind}, {} voxels, checksum {:#010x})",
+        "ok: {} ({kind}, {} voxels, checksum {:#010x}{colors})",
         args.file.display(),
         digest.voxels,
         digest.crc32
@@ -453,17 +588,23 @@ pub fn render(args: &RenderArgs) -> Result<()> {
     if let Some(trace) = &args.trace {
         check_output_dir(trace)?;
     }
-    let dag = load_svdag(&args.file)?;
+    let (dag, stored) = load_svdag_stored(&args.file)?;
+    // Encoded colours are decoded per hit from their chunks, as an engine would keep them.
+    let colors = match &stored {
+        Some(s) => ColorSource::Chunked(&s.chunks),
+        None => ColorSource::Raw(&dag.colors),
+    };
     let settings = render_settings(args, &dag);
     let start = Instant::now();
     let image = if args.cpu {
         let index = VoxelIndex::new(&dag);
-        render_cpu(&dag, &index, &settings)?
+        render_cpu_with(&dag, &index, colors, &settings)?
     } else {
         let context = GpuContext::new(&GpuOptions::default())?;
         let image = render_gpu(
             &context,
             &dag,
+            colors,
             &settings,
             args.profile,
             args.trace.as_deref(),
@@ -486,13 +627,14 @@ pub fn render(args: &RenderArgs) -> Result<()> {
 fn render_gpu(
     context: &Arc<GpuContext>,
     dag: &Svdag,
+    colors: ColorSource,
     settings: &RenderSettings,
     print_profile: bool,
     trace: Option<&Path>,
 ) -> Result<voxdag::render::RenderOutput> {
     let renderer = GpuRenderer::new(context)?;
     let mut profiler = Profiler::new(context)?;
-    let scene = profiler.cpu_span("upload", || renderer.upload(dag))?;
+    let scene = profiler.cpu_span("upload", || renderer.upload_with(dag, colors))?;
     let image = renderer.render(&scene, settings, Some(&mut profiler))?;
     if print_profile {
         print!("{}", profiler.table());
@@ -519,6 +661,8 @@ pub fn demo(args: &DemoArgs, quiet: bool) -> Result<()> {
         vox_scale: 1,
         texture: None,
         no_colors: false,
+        colors: ColorsArg(Some(ColorCodec::Lossless(LosslessVariant::Rgb888))),
+        chunk_depth: None,
         output: vdag.clone(),
         report: Some(args.out_dir.join("avocado-build.json")),
         encoding: EncodingArg::Svdag32,
@@ -540,11 +684,14 @@ pub fn demo(args: &DemoArgs, quiet: bool) -> Result<()> {
         trace: Some(args.out_dir.join("avocado-trace.json")),
     };
     render(&render_args)?;
-    let (stats, bytes) = describe(&Svdag::load(&vdag)?, quiet)?;
+    let (dag, stored) = load_svdag_stored(&vdag)?;
+    let colors = ColorStats::new(dag.colors.len() as u64, stored.as_ref());
+    let (stats, bytes) = describe(&dag, quiet)?;
     print!("{}", stats_table(&vdag, &stats, &bytes));
+    print!("{}", color_line(&colors));
     write_json(
         &args.out_dir.join("avocado-stats.json"),
-        &stats_json(&stats, &bytes)?,
+        &stats_json(&stats, &bytes, &colors)?,
     )?;
     Ok(())
 }

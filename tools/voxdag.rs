@@ -6,6 +6,7 @@ mod commands;
 use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
+use voxdag::attr::ColorCodec;
 
 /// Sparse voxel DAGs on Vulkan: import meshes and .vox files, build SVDAGs, render them on the GPU.
 #[derive(Parser)]
@@ -51,9 +52,17 @@ pub struct BuildArgs {
     /// Base-colour texture for OBJ files that have no material library.
     #[arg(long)]
     texture: Option<PathBuf>,
-    /// Drop voxel colours.
-    #[arg(long)]
+    /// Drop voxel colours (same as `--colors none`).
+    #[arg(long, conflicts_with = "colors")]
     no_colors: bool,
+    /// How colours are stored: none, raw, lossless, lossless565, lossy[=T], dolonius[=T] or dado
+    /// (T: per-channel error threshold in (0, 1], default 0.06). See docs/colors.md.
+    #[arg(long, default_value = "lossless", value_parser = commands::parse_colors)]
+    colors: ColorsArg,
+    /// Depth below the root of the SVO nodes that own one colour chunk each (default: 7 for the
+    /// lossless codecs, 8 for the lossy ones).
+    #[arg(long)]
+    chunk_depth: Option<u32>,
     /// Output .vdag file.
     #[arg(long, short)]
     output: PathBuf,
@@ -73,6 +82,10 @@ pub struct BuildArgs {
     #[arg(long)]
     no_huffman: bool,
 }
+
+/// A `--colors` value: a codec, or `None` for `none`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ColorsArg(pub Option<ColorCodec>);
 
 /// Node encodings of `voxdag build --encoding`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]

@@ -17,9 +17,18 @@
 //!
 //! and decoding never panics on corrupt words: it returns `AttrError::Corrupt`.
 
+pub mod chunks;
+pub mod dado;
+pub mod dolonius;
 pub mod lossless;
+pub mod lossy;
+pub mod raw;
+pub mod varbit;
 
 use serde::{Deserialize, Serialize};
+
+pub use chunks::{ChunkOp, ChunkedColors, StoredColors};
+pub use lossless::LosslessVariant;
 
 /// Stored format of an encoded colour chunk; the ids are part of the `.vdag` format.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -77,6 +86,9 @@ pub enum AttrError {
         /// What is wrong.
         reason: String,
     },
+    /// Chunk tables that break their invariants, or colours that do not fit the DAG.
+    #[error("invalid colour chunks: {0}")]
+    Invalid(String),
     /// A colour index past the end of the chunk.
     #[error("colour index {index} out of range (chunk holds {count} colours)")]
     IndexOutOfRange {
@@ -97,7 +109,223 @@ pub fn pack_rgb([r, g, b]: [u8; 3]) -> u32 {
     r as u32 | (g as u32) << 8 | (b as u32) << 16 | 0xff00_0000
 }
 
-pub mod dado;
-pub mod dolonius;
-pub mod lossy;
-pub mod varbit;
+/// Default per-channel error threshold of the lossy encoders (colours in [0, 1]).
+pub const DEFAULT_THRESHOLD: f32 = lossy::DEFAULT_THRESHOLD;
+
+/// Run-time choice of colour encoder (the CLI's `--colors` values).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ColorCodec {
+    /// Uncompressed RGBA8 words.
+    Raw,
+    /// The real-time lossless block codec (§5.2.1).
+    Lossless(LosslessVariant),
+    /// The real-time Hough lossy encoder (§5.2.2), Dolonius et al. format.
+    Lossy {
+        /// Per-channel error bound, colours in [0, 1].
+        threshold: f32,
+    },
+    /// The offline Dolonius et al. encoder (baseline), same format.
+    Dolonius {
+        /// Per-channel error bound, colours in [0, 1].
+        threshold: f32,
+    },
+    /// Dado et al. per-block palettes (lossless baseline).
+    Dado,
+}
+
+impl ColorCodec {
+    /// Parses the CLI spelling: `raw|lossless|lossless565|lossy[=T]|dolonius[=T]|dado`
+    /// (T: per-channel error threshold in (0, 1], default [`DEFAULT_THRESHOLD`]).
+    pub fn parse(text: &str) -> Result<ColorCodec, String> {
+        let (name, value) = match text.split_once('=') {
+            Some((n, v)) => (n, Some(v)),
+            None => (text, None),
+        };
+        let threshold = |value: Option<&str>| -> Result<f32, String> {
+            let Some(v) = value else {
+                return Ok(DEFAULT_THRESHOLD);
+            };
+            let t: f32 = v
+                .trim()
+                .parse()
+                .map_err(|e| format!("bad threshold {v:?}: {e}"))?;
+            if !(t > 0.0 && t <= 1.0) {
+                return Err(format!("threshold {t} not in (0, 1]"));
+            }
+            Ok(t)
+        };
+        let no_value = |codec: ColorCodec| match value {
+            None => Ok(codec),
+            Some(_) => Err(format!("colour codec {name:?} takes no threshold")),
+        };
+        match name {
+            "raw" => no_value(ColorCodec::Raw),
+            "lossless" => no_value(ColorCodec::Lossless(LosslessVariant::Rgb888)),
+            "lossless565" => no_value(ColorCodec::Lossless(LosslessVariant::Rgb565)),
+            "lossy" => Ok(ColorCodec::Lossy {
+                threshold: threshold(value)?,
+            }),
+            "dolonius" => Ok(ColorCodec::Dolonius {
+                threshold: threshold(value)?,
+            }),
+            "dado" => no_value(ColorCodec::Dado),
+            _ => Err(format!(
+                "unknown colour codec {text:?}: expected raw, lossless, lossless565, \
+                 lossy[=T], dolonius[=T] or dado"
+            )),
+        }
+    }
+
+    /// The CLI spelling (with the threshold of the lossy encoders).
+    pub fn name(&self) -> String {
+        match self {
+            ColorCodec::Raw => "raw".into(),
+            ColorCodec::Lossless(LosslessVariant::Rgb888) => "lossless".into(),
+            ColorCodec::Lossless(LosslessVariant::Rgb565) => "lossless565".into(),
+            ColorCodec::Lossy { threshold } => format!("lossy={threshold}"),
+            ColorCodec::Dolonius { threshold } => format!("dolonius={threshold}"),
+            ColorCodec::Dado => "dado".into(),
+        }
+    }
+
+    /// Stable numeric id of the encoder, stored in `.vdag` files so a chunk can be re-encoded
+    /// the same way after an edit.
+    pub fn id(&self) -> u32 {
+        match self {
+            ColorCodec::Raw => 0,
+            ColorCodec::Lossless(LosslessVariant::Rgb888) => 1,
+            ColorCodec::Lossless(LosslessVariant::Rgb565) => 2,
+            ColorCodec::Lossy { .. } => 3,
+            ColorCodec::Dolonius { .. } => 4,
+            ColorCodec::Dado => 5,
+        }
+    }
+
+    /// The largest per-channel error the codec promises, colours in [0, 1]: 0 for the exact
+    /// codecs, 4/255 for RGB565 (round to nearest, expand by bit replication), the threshold for
+    /// the lossy encoders.
+    pub fn threshold(&self) -> f32 {
+        match self {
+            ColorCodec::Raw | ColorCodec::Lossless(LosslessVariant::Rgb888) => 0.0,
+            ColorCodec::Lossless(LosslessVariant::Rgb565) => 4.0 / 255.0,
+            ColorCodec::Lossy { threshold } | ColorCodec::Dolonius { threshold } => *threshold,
+            ColorCodec::Dado => 0.0,
+        }
+    }
+
+    /// The encoder with stored `id` and `threshold`, if valid.
+    pub fn from_id(id: u32, threshold: f32) -> Option<ColorCodec> {
+        let valid = threshold > 0.0 && threshold <= 1.0;
+        match id {
+            0 => Some(ColorCodec::Raw),
+            1 => Some(ColorCodec::Lossless(LosslessVariant::Rgb888)),
+            2 => Some(ColorCodec::Lossless(LosslessVariant::Rgb565)),
+            3 if valid => Some(ColorCodec::Lossy { threshold }),
+            4 if valid => Some(ColorCodec::Dolonius { threshold }),
+            5 => Some(ColorCodec::Dado),
+            _ => None,
+        }
+    }
+
+    /// Stored format of what this encoder writes.
+    pub fn format(&self) -> ColorFormat {
+        match self {
+            ColorCodec::Raw => ColorFormat::Raw,
+            ColorCodec::Lossless(LosslessVariant::Rgb888) => ColorFormat::Lossless888,
+            ColorCodec::Lossless(LosslessVariant::Rgb565) => ColorFormat::Lossless565,
+            ColorCodec::Lossy { .. } | ColorCodec::Dolonius { .. } => ColorFormat::Varbit,
+            ColorCodec::Dado => ColorFormat::Palette,
+        }
+    }
+
+    /// True when decoding returns the input colours exactly (alpha aside).
+    pub fn is_exact(&self) -> bool {
+        matches!(
+            self,
+            ColorCodec::Raw | ColorCodec::Lossless(LosslessVariant::Rgb888) | ColorCodec::Dado
+        )
+    }
+
+    /// Default chunk depth below the root (§5.1): 7 for the lossless formats, 8 for the lossy.
+    pub fn default_chunk_depth(&self) -> u32 {
+        if self.format() == ColorFormat::Varbit {
+            8
+        } else {
+            7
+        }
+    }
+
+    /// Encodes one chunk of colours.
+    pub fn encode(&self, colors: &[u32]) -> Vec<u32> {
+        match self {
+            ColorCodec::Raw => raw::encode(colors),
+            ColorCodec::Lossless(variant) => lossless::encode(colors, *variant),
+            ColorCodec::Lossy { threshold } => lossy::encode(colors, *threshold),
+            ColorCodec::Dolonius { threshold } => dolonius::encode(colors, *threshold),
+            ColorCodec::Dado => dado::encode(colors),
+        }
+    }
+}
+
+/// Every colour of a chunk of `count` colours stored in `format`.
+pub fn decode_all(format: ColorFormat, words: &[u32], count: usize) -> Result<Vec<u32>, AttrError> {
+    match format {
+        ColorFormat::Raw => raw::decode_all(words, count),
+        ColorFormat::Lossless888 | ColorFormat::Lossless565 => lossless::decode_all(words, count),
+        ColorFormat::Varbit => varbit::decode_all(words, count),
+        ColorFormat::Palette => dado::decode_all(words, count),
+    }
+}
+
+/// Colour `index` of a chunk of `count` colours stored in `format` (random access).
+pub fn decode(
+    format: ColorFormat,
+    words: &[u32],
+    count: usize,
+    index: usize,
+) -> Result<u32, AttrError> {
+    match format {
+        ColorFormat::Raw => raw::decode(words, count, index),
+        ColorFormat::Lossless888 | ColorFormat::Lossless565 => {
+            lossless::decode(words, count, index)
+        }
+        ColorFormat::Varbit => varbit::decode(words, count, index),
+        ColorFormat::Palette => dado::decode(words, count, index),
+    }
+}
+
+/// RMSE of `decoded` against `reference`, RGB channels in [0, 1] (0 for two empty slices).
+pub fn rmse(reference: &[u32], decoded: &[u32]) -> f64 {
+    let n = reference.len().min(decoded.len());
+    if n == 0 {
+        return 0.0;
+    }
+    let sum: f64 = reference
+        .iter()
+        .zip(decoded)
+        .map(|(&a, &b)| {
+            let (a, b) = (rgb(a), rgb(b));
+            (0..3)
+                .map(|k| {
+                    let d = (a[k] as f64 - b[k] as f64) / 255.0;
+                    d * d
+                })
+                .sum::<f64>()
+        })
+        .sum();
+    (sum / (3 * n) as f64).sqrt()
+}
+
+/// Largest per-channel difference between `reference` and `decoded`, in [0, 1].
+pub fn max_channel_error(reference: &[u32], decoded: &[u32]) -> f32 {
+    reference
+        .iter()
+        .zip(decoded)
+        .flat_map(|(&a, &b)| {
+            let (a, b) = (rgb(a), rgb(b));
+            (0..3).map(move |k| a[k].abs_diff(b[k]))
+        })
+        .max()
+        .unwrap_or(0) as f32
+        / 255.0
+}

@@ -14,6 +14,8 @@ use super::encode::{
 };
 use super::validate::Place;
 use super::{DagError, Svdag, MAX_RESOLUTION};
+use crate::attr::{AttrError, ChunkedColors, ColorCodec, StoredColors};
+use rayon::prelude::*;
 
 /// The 8 bytes every `.vdag` file starts with.
 pub const MAGIC: [u8; 8] = *b"VOXDAG\0\x01";
@@ -35,6 +37,10 @@ const SECTION_COLORS: u32 = 3;
 const SECTION_DIGEST: u32 = 4;
 /// Section id: the encoded node payload of an ssvdag/tsvdag file.
 const SECTION_PAYLOAD: u32 = 5;
+/// Section id: chunked encoded colours (colour format 2; layout in `docs/vdag-format.md`).
+const SECTION_CHUNKED_COLORS: u32 = 6;
+/// Bytes of the fixed fields at the start of the chunked colour section.
+const CHUNKED_HEADER_LEN: u64 = 40;
 
 /// Node encoding of the words section.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -83,6 +89,145 @@ pub enum ColorFormat {
     None = 0,
     /// One RGBA8 u32 per voxel, depth-first Morton order.
     Rgba8 = 1,
+    /// Encoded colour chunks in the chunked colour section (`attr::ChunkedColors`).
+    Chunked = 2,
+}
+
+/// The chunked colour section's bytes (layout in `docs/vdag-format.md`).
+fn stored_colors_bytes(stored: &StoredColors) -> Vec<u8> {
+    let c = &stored.chunks;
+    let mut b = Vec::with_capacity(c.byte_size() as usize + CHUNKED_HEADER_LEN as usize);
+    b.extend_from_slice(&c.codec.id().to_le_bytes());
+    b.extend_from_slice(&(c.format as u32).to_le_bytes());
+    b.extend_from_slice(&c.chunk_depth.to_le_bytes());
+    b.extend_from_slice(&c.codec.threshold().to_le_bytes());
+    b.extend_from_slice(&stored.rmse.to_le_bytes());
+    b.extend_from_slice(&(c.chunk_count() as u64).to_le_bytes());
+    b.extend_from_slice(&(c.words.len() as u64).to_le_bytes());
+    for v in c.chunk_starts.iter().chain(&c.chunk_offsets) {
+        b.extend_from_slice(&v.to_le_bytes());
+    }
+    for w in &c.words {
+        b.extend_from_slice(&w.to_le_bytes());
+    }
+    b
+}
+
+/// Parses and validates the chunked colour section at `at` (`len` bytes, inside `bytes`) of a
+/// file with `color_count` colours and root level `root_level`; sizes are checked before
+/// allocating. Returns the section and its decoded colours.
+fn parse_stored_colors(
+    bytes: &[u8],
+    (at, len): (u64, u64),
+    color_count: u64,
+    root_level: u32,
+    name: &Path,
+) -> Result<(StoredColors, Vec<u32>), DagError> {
+    let err = |offset: u64, reason: String| DagError::Format {
+        path: name.to_path_buf(),
+        offset,
+        reason,
+    };
+    if len < CHUNKED_HEADER_LEN {
+        return Err(err(at, format!("chunked colour section of {len} bytes")));
+    }
+    let (codec_id, format_id) = (u32_at(bytes, at), u32_at(bytes, at + 4));
+    let chunk_depth = u32_at(bytes, at + 8);
+    let threshold = f32::from_le_bytes(
+        bytes[at as usize + 12..at as usize + 16]
+            .try_into()
+            .expect("4 bytes"),
+    );
+    let rmse = f64::from_bits(u64_at(bytes, at + 16));
+    let (chunks, words) = (u64_at(bytes, at + 24), u64_at(bytes, at + 32));
+    let codec = ColorCodec::from_id(codec_id, threshold).ok_or_else(|| {
+        err(
+            at,
+            format!("unknown colour codec id {codec_id} (threshold {threshold})"),
+        )
+    })?;
+    if format_id != codec.format() as u32 {
+        return Err(err(
+            at + 4,
+            format!(
+                "colour format id {format_id} is not what {} writes",
+                codec.name()
+            ),
+        ));
+    }
+    if chunk_depth > root_level {
+        return Err(err(
+            at + 8,
+            format!("chunk depth {chunk_depth} below the leaves (root level {root_level})"),
+        ));
+    }
+    if !(rmse.is_finite() && rmse >= 0.0) {
+        return Err(err(
+            at + 16,
+            format!("colour RMSE {rmse} is not a non-negative number"),
+        ));
+    }
+    let expected = chunks
+        .checked_add(1)
+        .and_then(|n| n.checked_mul(16))
+        .and_then(|t| words.checked_mul(4).and_then(|w| w.checked_add(t)))
+        .and_then(|n| n.checked_add(CHUNKED_HEADER_LEN));
+    if expected != Some(len) {
+        return Err(err(
+            at + 24,
+            format!("{chunks} chunks and {words} words do not fill {len} bytes"),
+        ));
+    }
+    // Sizes are now bounded by the section length: allocate.
+    let table =
+        |from: u64| -> Vec<u64> { (0..=chunks).map(|i| u64_at(bytes, from + 8 * i)).collect() };
+    let starts_at = at + CHUNKED_HEADER_LEN;
+    let offsets_at = starts_at + 8 * (chunks + 1);
+    let words_at = offsets_at + 8 * (chunks + 1);
+    let chunks_parsed = ChunkedColors {
+        codec,
+        format: codec.format(),
+        chunk_depth,
+        chunk_starts: table(starts_at),
+        chunk_offsets: table(offsets_at),
+        words: u32s(bytes, (words_at, words * 4)),
+    };
+    chunks_parsed
+        .validate_tables()
+        .map_err(|e| err(starts_at, e.to_string()))?;
+    if chunks_parsed.color_count() != color_count {
+        return Err(err(
+            starts_at + 8 * chunks,
+            format!(
+                "chunks hold {} colours, header says {color_count}",
+                chunks_parsed.color_count()
+            ),
+        ));
+    }
+    // Every chunk must decode (in parallel); report the first failure with its byte offset.
+    let decoded: Vec<Result<Vec<u32>, AttrError>> = (0..chunks_parsed.chunk_count())
+        .into_par_iter()
+        .map(|c| chunks_parsed.decode_chunk(c))
+        .collect();
+    let mut colors = Vec::with_capacity(color_count as usize);
+    for (c, chunk) in decoded.into_iter().enumerate() {
+        match chunk {
+            Ok(chunk) => colors.extend_from_slice(&chunk),
+            Err(e) => {
+                let word = match &e {
+                    AttrError::Corrupt { word, .. } => *word,
+                    _ => 0,
+                };
+                let offset = words_at + 4 * (chunks_parsed.chunk_offsets[c] + word);
+                return Err(err(offset, format!("colour chunk {c}: {e}")));
+            }
+        }
+    }
+    let stored = StoredColors {
+        chunks: chunks_parsed,
+        rmse,
+    };
+    Ok((stored, colors))
 }
 
 /// A `Write` that counts bytes and feeds them to a CRC-32.
@@ -129,6 +274,7 @@ enum Data<'a> {
     U32(&'a [u32]),
     U64(&'a [u64]),
     Bytes(&'a [u8]),
+    Owned(Vec<u8>),
 }
 
 impl Data<'_> {
@@ -137,6 +283,7 @@ impl Data<'_> {
             Data::U32(v) => v.len() as u64 * 4,
             Data::U64(v) => v.len() as u64 * 8,
             Data::Bytes(v) => v.len() as u64,
+            Data::Owned(v) => v.len() as u64,
         }
     }
 }
@@ -204,6 +351,7 @@ fn write_file(w: &mut impl Write, h: &HeaderFields, sections: &[(u32, Data)]) ->
                 }
             }
             Data::Bytes(v) => out.put(v)?,
+            Data::Owned(v) => out.put(v)?,
         }
     }
     let crc = out.crc.clone().finalize();
@@ -248,8 +396,8 @@ struct Parsed {
     level_count: u32,
     color_format: ColorFormat,
     color_count: u64,
-    /// `(offset, length)` of sections 1..=5.
-    sections: [Option<(u64, u64)>; 5],
+    /// `(offset, length)` of sections 1..=6.
+    sections: [Option<(u64, u64)>; 6],
 }
 
 /// Checks everything up to and including the section table (reading rules 1-3 of
@@ -313,6 +461,7 @@ fn parse_header(bytes: &[u8], name: &Path) -> Result<Parsed, DagError> {
     let color_format = match u32_at(bytes, 24) {
         0 => ColorFormat::None,
         1 => ColorFormat::Rgba8,
+        2 => ColorFormat::Chunked,
         other => return Err(err(24, format!("unknown colour format id {other}"))),
     };
     let section_count = u32_at(bytes, 28);
@@ -352,7 +501,7 @@ fn parse_header(bytes: &[u8], name: &Path) -> Result<Parsed, DagError> {
     }
 
     // Section table: known ids at most once, inside the file, expected lengths, no overlap.
-    let mut sections: [Option<(u64, u64)>; 5] = [None; 5];
+    let mut sections: [Option<(u64, u64)>; 6] = [None; 6];
     let mut ranges: Vec<(u64, u64, u64)> = Vec::new(); // (start, end, table entry offset)
     for i in 0..section_count as u64 {
         let at = HEADER_LEN + i * ENTRY_LEN;
@@ -372,7 +521,14 @@ fn parse_header(bytes: &[u8], name: &Path) -> Result<Parsed, DagError> {
         let expected = match id {
             SECTION_LEVELS if svdag32 => Some(level_count as u64 * 8),
             SECTION_WORDS if svdag32 => Some(count * 4),
-            SECTION_COLORS => color_count.checked_mul(4),
+            SECTION_COLORS if color_format == ColorFormat::Rgba8 => color_count.checked_mul(4),
+            SECTION_COLORS => Some(0),
+            SECTION_CHUNKED_COLORS if color_format != ColorFormat::Chunked => {
+                return Err(err(
+                    at,
+                    format!("section {id} in a file whose colour format is not chunked"),
+                ))
+            }
             SECTION_DIGEST => Some(16),
             SECTION_PAYLOAD if !svdag32 => Some(count),
             SECTION_LEVELS | SECTION_WORDS | SECTION_PAYLOAD => {
@@ -389,7 +545,7 @@ fn parse_header(bytes: &[u8], name: &Path) -> Result<Parsed, DagError> {
                 format!("section {id} is {length} bytes, expected {expected:?}"),
             ));
         }
-        if (1..=5).contains(&id) {
+        if (1..=6).contains(&id) {
             let slot = &mut sections[id as usize - 1];
             if slot.is_some() {
                 return Err(err(at, format!("section {id} listed twice")));
@@ -409,7 +565,12 @@ fn parse_header(bytes: &[u8], name: &Path) -> Result<Parsed, DagError> {
     } else {
         &[SECTION_COLORS, SECTION_DIGEST, SECTION_PAYLOAD]
     };
-    for &id in required {
+    let chunked: &[u32] = if color_format == ColorFormat::Chunked {
+        &[SECTION_CHUNKED_COLORS]
+    } else {
+        &[]
+    };
+    for &id in required.iter().chain(chunked) {
         if sections[id as usize - 1].is_none() {
             return Err(err(28, format!("section {id} missing")));
         }
@@ -435,16 +596,18 @@ fn u32s(bytes: &[u8], (at, n): (u64, u64)) -> Vec<u32> {
 impl Svdag {
     /// Serialises the DAG in `.vdag` v1 format (encoding `svdag32`) to a writer.
     pub fn write_to(&self, w: &mut impl Write) -> io::Result<()> {
-        self.write_with(w, None)
+        self.write_with(w, None, None)
     }
 
-    /// `write_to`, with an optional digest section.
-    fn write_with(&self, w: &mut impl Write, digest: Option<&VoxelDigest>) -> io::Result<()> {
-        let color_format = if self.colors.is_empty() {
-            ColorFormat::None
-        } else {
-            ColorFormat::Rgba8
-        };
+    /// `write_to`, with an optional digest section and optional encoded colours (which replace
+    /// `self.colors` in the file).
+    fn write_with(
+        &self,
+        w: &mut impl Write,
+        digest: Option<&VoxelDigest>,
+        stored: Option<&StoredColors>,
+    ) -> io::Result<()> {
+        let (color_format, raw_colors, chunked) = color_sections(&self.colors, stored);
         let h = HeaderFields {
             encoding: Encoding::Svdag32 as u32,
             resolution: self.resolution,
@@ -456,10 +619,13 @@ impl Svdag {
         let mut sections = vec![
             (SECTION_LEVELS, Data::U64(&self.level_starts)),
             (SECTION_WORDS, Data::U32(&self.words)),
-            (SECTION_COLORS, Data::U32(&self.colors)),
+            (SECTION_COLORS, Data::U32(raw_colors)),
         ];
         if let Some(d) = &digest {
             sections.push((SECTION_DIGEST, Data::Bytes(d)));
+        }
+        if let Some(c) = chunked {
+            sections.push((SECTION_CHUNKED_COLORS, c));
         }
         write_file(w, &h, &sections)
     }
@@ -500,10 +666,22 @@ impl Svdag {
                 ),
             });
         }
-        Self::from_parsed(bytes, name.as_ref(), &parsed)
+        if parsed.color_format == ColorFormat::Chunked {
+            // Decoding needs the chunked section: VdagFile parses it.
+            let file = VdagFile::from_bytes(bytes, name.as_ref())?;
+            return file.into_svdag(name.as_ref());
+        }
+        Self::from_parsed(bytes, name.as_ref(), &parsed, None)
     }
 
-    fn from_parsed(bytes: &[u8], name: &Path, parsed: &Parsed) -> Result<Svdag, DagError> {
+    /// Builds and validates the DAG of a parsed svdag32 file; `decoded` replaces the raw colour
+    /// section (the decoded chunked colours).
+    fn from_parsed(
+        bytes: &[u8],
+        name: &Path,
+        parsed: &Parsed,
+        decoded: Option<Vec<u32>>,
+    ) -> Result<Svdag, DagError> {
         let get = |id: u32| parsed.sections[id as usize - 1].expect("required section checked");
         let (levels_at, levels_len) = get(SECTION_LEVELS);
         let (words_at, _) = get(SECTION_WORDS);
@@ -516,7 +694,7 @@ impl Svdag {
             resolution: parsed.resolution,
             words: u32s(bytes, get(SECTION_WORDS)),
             level_starts,
-            colors: u32s(bytes, get(SECTION_COLORS)),
+            colors: decoded.unwrap_or_else(|| u32s(bytes, get(SECTION_COLORS))),
         };
         dag.check().map_err(|(place, reason)| {
             let offset = match place {
@@ -537,7 +715,7 @@ impl Svdag {
 
 /// A `.vdag` file in any encoding: the nodes, the colours, and the digest of the voxel set
 /// computed when it was built (required for ssvdag/tsvdag, optional for svdag32).
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct VdagFile {
     /// The stored nodes.
     pub encoded: EncodedDag,
@@ -545,6 +723,9 @@ pub struct VdagFile {
     pub colors: Vec<u32>,
     /// Voxel count and checksum of the source voxels.
     pub digest: Option<VoxelDigest>,
+    /// The colours as an encoder stored them; when present they are written instead of the
+    /// raw colours, and `colors` holds their decoded values.
+    pub stored_colors: Option<StoredColors>,
 }
 
 impl VdagFile {
@@ -552,12 +733,13 @@ impl VdagFile {
     pub fn write_to(&self, w: &mut impl Write) -> io::Result<()> {
         let payload = match &self.encoded {
             EncodedDag::Svdag32(dag) => {
+                let stored = self.stored_colors.as_ref();
                 if dag.colors == self.colors {
-                    return dag.write_with(w, self.digest.as_ref());
+                    return dag.write_with(w, self.digest.as_ref(), stored);
                 }
                 let mut dag = dag.clone();
                 dag.colors = self.colors.clone();
-                return dag.write_with(w, self.digest.as_ref());
+                return dag.write_with(w, self.digest.as_ref(), stored);
             }
             other => other.payload(),
         };
@@ -565,26 +747,24 @@ impl VdagFile {
             .digest
             .ok_or_else(|| io::Error::other("ssvdag/tsvdag files need the voxel digest"))?;
         let digest = digest_bytes(&digest);
+        let (color_format, raw_colors, chunked) =
+            color_sections(&self.colors, self.stored_colors.as_ref());
         let h = HeaderFields {
             encoding: Encoding::from(self.encoded.kind()) as u32,
             resolution: self.encoded.resolution(),
-            color_format: if self.colors.is_empty() {
-                ColorFormat::None
-            } else {
-                ColorFormat::Rgba8
-            },
+            color_format,
             count: payload.len() as u64,
             color_count: self.colors.len() as u64,
         };
-        write_file(
-            w,
-            &h,
-            &[
-                (SECTION_COLORS, Data::U32(&self.colors)),
-                (SECTION_DIGEST, Data::Bytes(&digest)),
-                (SECTION_PAYLOAD, Data::Bytes(&payload)),
-            ],
-        )
+        let mut sections = vec![
+            (SECTION_COLORS, Data::U32(raw_colors)),
+            (SECTION_DIGEST, Data::Bytes(&digest)),
+            (SECTION_PAYLOAD, Data::Bytes(&payload)),
+        ];
+        if let Some(c) = chunked {
+            sections.push((SECTION_CHUNKED_COLORS, c));
+        }
+        write_file(w, &h, &sections)
     }
 
     /// The file's bytes.
@@ -636,13 +816,27 @@ impl VdagFile {
                 ));
             }
         }
+        let (stored_colors, decoded) = match parsed.sections[SECTION_CHUNKED_COLORS as usize - 1] {
+            Some(section) => {
+                let (stored, colors) = parse_stored_colors(
+                    bytes,
+                    section,
+                    parsed.color_count,
+                    parsed.resolution.trailing_zeros() - 2,
+                    name,
+                )?;
+                (Some(stored), Some(colors))
+            }
+            None => (None, None),
+        };
         if parsed.encoding == Encoding::Svdag32 {
-            let dag = Svdag::from_parsed(bytes, name, &parsed)?;
+            let dag = Svdag::from_parsed(bytes, name, &parsed, decoded)?;
             let colors = dag.colors.clone();
             return Ok(VdagFile {
                 encoded: EncodedDag::Svdag32(dag),
                 colors,
                 digest,
+                stored_colors,
             });
         }
         let (at, n) = parsed.sections[SECTION_PAYLOAD as usize - 1].expect("required");
@@ -660,13 +854,18 @@ impl VdagFile {
             ),
         };
         debug_assert_eq!(parsed.level_count, parsed.resolution.trailing_zeros() - 1);
-        Ok(VdagFile {
-            encoded,
-            colors: u32s(
+        let colors = match decoded {
+            Some(colors) => colors,
+            None => u32s(
                 bytes,
                 parsed.sections[SECTION_COLORS as usize - 1].expect("required"),
             ),
+        };
+        Ok(VdagFile {
+            encoded,
+            colors,
             digest,
+            stored_colors,
         })
     }
 
@@ -683,5 +882,22 @@ impl VdagFile {
                 offset: 0,
                 reason: format!("decoding {}: {e}", self.encoded.kind().name()),
             })
+    }
+}
+
+/// Colour format, raw colour section and chunked colour section of a file with `colors` and
+/// optionally their encoded form.
+fn color_sections<'a>(
+    colors: &'a [u32],
+    stored: Option<&StoredColors>,
+) -> (ColorFormat, &'a [u32], Option<Data<'a>>) {
+    match stored {
+        Some(s) => (
+            ColorFormat::Chunked,
+            &[],
+            Some(Data::Owned(stored_colors_bytes(s))),
+        ),
+        None if colors.is_empty() => (ColorFormat::None, colors, None),
+        None => (ColorFormat::Rgba8, colors, None),
     }
 }

@@ -10,6 +10,7 @@ use rayon::prelude::*;
 
 use super::params::RenderParams;
 use super::{RenderError, RenderOutput, RenderSettings};
+use crate::attr::ChunkedColors;
 use crate::dag::raycast::{Ray, T_UNBOUNDED};
 use crate::dag::{Svdag, VoxelIndex};
 
@@ -47,10 +48,53 @@ pub fn sky(dir: [f32; 3]) -> [f32; 3] {
     c
 }
 
-/// Shades one pixel: `(sRGB-encoded RGBA in [0, 1], primary ray hit)`.
+/// Where the renderers read the colour of a hit voxel.
+#[derive(Clone, Copy, Debug)]
+pub enum ColorSource<'a> {
+    /// One RGBA8 word per voxel (`Svdag::colors`).
+    Raw(&'a [u32]),
+    /// Encoded colour chunks, decoded per hit (binary search of the chunk + random access).
+    Chunked(&'a ChunkedColors),
+}
+
+impl ColorSource<'_> {
+    /// Number of colours.
+    pub fn len(&self) -> u64 {
+        match self {
+            ColorSource::Raw(c) => c.len() as u64,
+            ColorSource::Chunked(c) => c.color_count(),
+        }
+    }
+
+    /// True when there are no colours.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Colour `index`, or `None` when out of range or undecodable.
+    pub fn color(&self, index: u64) -> Option<u32> {
+        match self {
+            ColorSource::Raw(c) => c.get(index as usize).copied(),
+            ColorSource::Chunked(c) => c.color(index).ok(),
+        }
+    }
+}
+
+/// Shades one pixel with the DAG's own colours: `(sRGB-encoded RGBA in [0, 1], primary ray hit)`.
 pub fn shade_pixel(
     dag: &Svdag,
     index: &VoxelIndex,
+    p: &RenderParams,
+    pixel: [u32; 2],
+) -> ([f32; 4], bool) {
+    shade_pixel_with(dag, index, ColorSource::Raw(&dag.colors), p, pixel)
+}
+
+/// Shades one pixel with colours from `colors`.
+pub fn shade_pixel_with(
+    dag: &Svdag,
+    index: &VoxelIndex,
+    colors: ColorSource,
     p: &RenderParams,
     pixel: [u32; 2],
 ) -> ([f32; 4], bool) {
@@ -69,8 +113,8 @@ pub fn shade_pixel(
     };
     let albedo = if p.has_colors() {
         // Out-of-range indices shade white, like the GPU (which checks `color_count`).
-        let rgba = match dag.colors.get(hit.color_index as usize) {
-            Some(&c) if hit.color_index < p.color_count as u64 => c,
+        let rgba = match colors.color(hit.color_index) {
+            Some(c) if hit.color_index < p.color_count as u64 => c,
             _ => 0xffff_ffff,
         };
         [0, 8, 16].map(|s| srgb_to_linear(((rgba >> s) & 0xff) as f32 / 255.0))
@@ -116,10 +160,21 @@ pub fn quantize(c: f32) -> u8 {
     (c.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
 }
 
-/// Renders the scene on the CPU (rayon over rows), rays built from [`RenderParams`].
+/// Renders the scene with its own colours on the CPU (rayon over rows), rays built from
+/// [`RenderParams`].
 pub fn render_cpu(
     dag: &Svdag,
     index: &VoxelIndex,
+    settings: &RenderSettings,
+) -> Result<RenderOutput, RenderError> {
+    render_cpu_with(dag, index, ColorSource::Raw(&dag.colors), settings)
+}
+
+/// [`render_cpu`] with colours from `colors` (e.g. decoded from encoded chunks per hit).
+pub fn render_cpu_with(
+    dag: &Svdag,
+    index: &VoxelIndex,
+    colors: ColorSource,
     settings: &RenderSettings,
 ) -> Result<RenderOutput, RenderError> {
     if index.node_voxels.len() != dag.words.len() {
@@ -128,7 +183,7 @@ pub fn render_cpu(
             words: dag.words.len(),
         });
     }
-    let p = RenderParams::new(settings, dag)?;
+    let p = RenderParams::with_colors(settings, dag, colors.len())?;
     let (w, h) = (settings.width as usize, settings.height as usize);
     let mut rgba = vec![0u8; w * h * 4];
     let mut hits = vec![0u32; w * h];
@@ -137,7 +192,7 @@ pub fn render_cpu(
         .enumerate()
         .for_each(|(y, (row, row_hits))| {
             for x in 0..w {
-                let (c, hit) = shade_pixel(dag, index, &p, [x as u32, y as u32]);
+                let (c, hit) = shade_pixel_with(dag, index, colors, &p, [x as u32, y as u32]);
                 for k in 0..4 {
                     row[4 * x + k] = quantize(c[k]);
                 }

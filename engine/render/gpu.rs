@@ -9,8 +9,10 @@
 use std::sync::Arc;
 use std::time::Instant;
 
+use super::cpu::ColorSource;
 use super::params::{RenderParams, FLAG_HAS_COLORS};
 use super::{RenderOutput, RenderSettings};
+use crate::attr::ColorFormat;
 use crate::dag::{Svdag, VoxelIndex};
 use crate::gpu::{
     shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, MemLocation,
@@ -20,24 +22,32 @@ use crate::gpu::{
 /// Workgroup size of `primary.comp` (specialization constants 0 and 1).
 const WORKGROUP: [u32; 2] = [8, 8];
 
-/// Push constants of `primary.comp`: device addresses of its buffers.
+/// Push constants of `primary.comp`: device addresses of its buffers, then the colour format.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
 struct PrimaryPush {
     params: u64,
     words: u64,
     node_voxels: u64,
-    colors: u64,
+    color_words: u64,
+    chunk_starts: u64,
+    chunk_offsets: u64,
     hits: u64,
+    color_format: u32,
+    chunk_count: u32,
 }
 
 const _: () = {
-    assert!(std::mem::size_of::<PrimaryPush>() == 40);
+    assert!(std::mem::size_of::<PrimaryPush>() == 64);
     assert!(std::mem::offset_of!(PrimaryPush, params) == 0);
     assert!(std::mem::offset_of!(PrimaryPush, words) == 8);
     assert!(std::mem::offset_of!(PrimaryPush, node_voxels) == 16);
-    assert!(std::mem::offset_of!(PrimaryPush, colors) == 24);
-    assert!(std::mem::offset_of!(PrimaryPush, hits) == 32);
+    assert!(std::mem::offset_of!(PrimaryPush, color_words) == 24);
+    assert!(std::mem::offset_of!(PrimaryPush, chunk_starts) == 32);
+    assert!(std::mem::offset_of!(PrimaryPush, chunk_offsets) == 40);
+    assert!(std::mem::offset_of!(PrimaryPush, hits) == 48);
+    assert!(std::mem::offset_of!(PrimaryPush, color_format) == 56);
+    assert!(std::mem::offset_of!(PrimaryPush, chunk_count) == 60);
 };
 
 /// Renders SVDAGs on the GPU; holds the compiled pipeline.
@@ -46,11 +56,16 @@ pub struct GpuRenderer {
     primary: ComputePipeline,
 }
 
-/// An SVDAG uploaded to the GPU: its words, colours and per-node voxel counts.
+/// An SVDAG uploaded to the GPU: its words, per-node voxel counts and colour chunks (encoded
+/// words and both chunk tables, `attr::ChunkedColors`).
 pub struct GpuScene {
     words: Buffer,
     node_voxels: Buffer,
-    colors: Buffer,
+    color_words: Buffer,
+    chunk_starts: Buffer,
+    chunk_offsets: Buffer,
+    color_format: ColorFormat,
+    chunk_count: u32,
     resolution: u32,
     color_count: u32,
 }
@@ -68,7 +83,16 @@ impl GpuScene {
 
     /// Device memory held by the scene's buffers, in bytes.
     pub fn gpu_bytes(&self) -> u64 {
-        self.words.size() + self.node_voxels.size() + self.colors.size()
+        self.words.size()
+            + self.node_voxels.size()
+            + self.color_words.size()
+            + self.chunk_starts.size()
+            + self.chunk_offsets.size()
+    }
+
+    /// Stored format of the uploaded colours.
+    pub fn color_format(&self) -> ColorFormat {
+        self.color_format
     }
 }
 
@@ -88,10 +112,17 @@ impl GpuRenderer {
         })
     }
 
-    /// Uploads `dag.words`, its colours and the per-node voxel counts of [`VoxelIndex`] (as
-    /// `u32`). Errors when a count or the colour count exceeds `u32`, when the DAG has 2^32 or
-    /// more words (GPU indices are `uint`), or when a buffer exceeds the device's allocation limit.
+    /// Uploads `dag.words`, its colours (as one raw chunk) and the per-node voxel counts of
+    /// [`VoxelIndex`] (as `u32`). Errors when a count or the colour count exceeds `u32`, when the
+    /// DAG has 2^32 or more words (GPU indices are `uint`), or when a buffer exceeds the device's
+    /// allocation limit.
     pub fn upload(&self, dag: &Svdag) -> Result<GpuScene, GpuError> {
+        self.upload_with(dag, ColorSource::Raw(&dag.colors))
+    }
+
+    /// [`GpuRenderer::upload`] with colours from `colors`: encoded chunks are uploaded as they
+    /// are and decoded by the shader per hit.
+    pub fn upload_with(&self, dag: &Svdag, colors: ColorSource) -> Result<GpuScene, GpuError> {
         let invalid = |m: String| GpuError::InvalidArgument(m);
         if dag.words.is_empty() || dag.words.len() as u64 > u32::MAX as u64 {
             return Err(invalid(format!(
@@ -117,18 +148,43 @@ impl GpuRenderer {
         }
         let words = self.ctx.upload("dag words", &dag.words)?;
         let node_voxels = self.ctx.upload("dag node voxel counts", &counts)?;
-        // A scene without colours still gets a one-word buffer (never read: the flag is off).
-        let colors = if dag.colors.is_empty() {
-            self.ctx.upload("dag colors (none)", &[0u32])?
-        } else {
-            self.ctx.upload("dag colors", &dag.colors)?
+        // Raw colours are one chunk of the raw format: the shader has a single colour path.
+        let (format, words_of_colors, starts, offsets) = match colors {
+            ColorSource::Chunked(c) => {
+                c.validate_tables().map_err(|e| invalid(e.to_string()))?;
+                let tables = (c.chunk_starts.clone(), c.chunk_offsets.clone());
+                (c.format, c.words.as_slice(), tables.0, tables.1)
+            }
+            ColorSource::Raw(raw) => {
+                let n = raw.len() as u64;
+                (ColorFormat::Raw, raw, vec![0, n], vec![0, n])
+            }
         };
+        let (color_count, chunk_count) = (*starts.last().expect("validated"), starts.len() - 1);
+        if color_count > u32::MAX as u64 || chunk_count as u64 >= u32::MAX as u64 {
+            return Err(invalid(format!(
+                "{color_count} colours in {chunk_count} chunks: the GPU needs fewer than 2^32"
+            )));
+        }
+        // Empty buffers are not allowed: scenes without colours get one word (never read: the
+        // colour flag is off).
+        let color_words = if words_of_colors.is_empty() {
+            self.ctx.upload("dag colour words (none)", &[0u32])?
+        } else {
+            self.ctx.upload("dag colour words", words_of_colors)?
+        };
+        let chunk_starts = self.ctx.upload("dag colour chunk starts", &starts)?;
+        let chunk_offsets = self.ctx.upload("dag colour chunk offsets", &offsets)?;
         Ok(GpuScene {
             words,
             node_voxels,
-            colors,
+            color_words,
+            chunk_starts,
+            chunk_offsets,
+            color_format: format,
+            chunk_count: chunk_count as u32,
             resolution: dag.resolution,
-            color_count: dag.colors.len() as u32,
+            color_count: color_count as u32,
         })
     }
 
@@ -185,8 +241,12 @@ impl GpuRenderer {
             params: params_buf.address(),
             words: scene.words.address(),
             node_voxels: scene.node_voxels.address(),
-            colors: scene.colors.address(),
+            color_words: scene.color_words.address(),
+            chunk_starts: scene.chunk_starts.address(),
+            chunk_offsets: scene.chunk_offsets.address(),
             hits: hits.address(),
+            color_format: scene.color_format as u32,
+            chunk_count: scene.chunk_count,
         };
         let mut cmd = ctx.begin_commands("render")?;
         if let Some(p) = profiler.as_deref_mut() {

@@ -75,6 +75,16 @@ impl RenderParams {
     /// stack cannot hold, more than 2^32 colours (the GPU uses `uint` colour indices) or a zero
     /// light direction.
     pub fn new(settings: &RenderSettings, dag: &Svdag) -> Result<RenderParams, RenderError> {
+        Self::with_colors(settings, dag, dag.colors.len() as u64)
+    }
+
+    /// [`RenderParams::new`] for a scene with `color_count` colours stored apart from the DAG
+    /// (only the resolution of `dag` is read).
+    pub fn with_colors(
+        settings: &RenderSettings,
+        dag: &Svdag,
+        color_count: u64,
+    ) -> Result<RenderParams, RenderError> {
         if settings.width == 0 || settings.height == 0 {
             return Err(RenderError::EmptyImage {
                 width: settings.width,
@@ -87,8 +97,8 @@ impl RenderParams {
         {
             return Err(RenderError::Resolution(dag.resolution));
         }
-        if dag.colors.len() as u64 > u32::MAX as u64 {
-            return Err(RenderError::TooManyColors(dag.colors.len() as u64));
+        if color_count > u32::MAX as u64 {
+            return Err(RenderError::TooManyColors(color_count));
         }
         let light =
             normalize(settings.light_dir).ok_or(RenderError::LightDir(settings.light_dir))?;
@@ -97,7 +107,7 @@ impl RenderParams {
         let tan = cam.tan_half_fov();
         let v4 = |v: [f32; 3], w: f32| [v[0], v[1], v[2], w];
         let mut flags = 0;
-        if !dag.colors.is_empty() {
+        if color_count > 0 {
             flags |= FLAG_HAS_COLORS;
         }
         if settings.shadows {
@@ -114,7 +124,7 @@ impl RenderParams {
             resolution: dag.resolution,
             root_level: dag.root_level(),
             flags,
-            color_count: dag.colors.len() as u32,
+            color_count: color_count as u32,
             _pad: [0; 2],
         })
     }
