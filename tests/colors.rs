@@ -123,8 +123,10 @@ fn chunks_are_the_svo_nodes_at_the_chosen_depth() {
     let chunks = build(&dag, codec("raw"), Some(99));
     assert_eq!(chunks.chunk_depth, dag.root_level());
     assert_eq!(chunks.chunk_count(), leaves.len());
-    // Defaults: 7 for the exact codecs (clamped to the leaves here).
-    assert_eq!(codec("raw").default_chunk_depth(), 7);
+    // Defaults: nodes of 256^3 (exact codecs) and 128^3 (lossy); 7 and 8 at 32K^3.
+    assert_eq!(codec("raw").default_chunk_depth(1 << 15), 7);
+    assert_eq!(codec("lossless").default_chunk_depth(1024), 2);
+    assert_eq!(codec("dado").default_chunk_depth(64), 0);
 }
 
 #[test]
@@ -286,7 +288,8 @@ fn codec_spellings() {
     }
     assert_eq!(codec("lossy=0.1"), ColorCodec::Lossy { threshold: 0.1 });
     assert_eq!(codec("dolonius").threshold(), 0.06);
-    assert_eq!(codec("lossy").default_chunk_depth(), 8);
+    assert_eq!(codec("lossy").default_chunk_depth(1 << 15), 8);
+    assert_eq!(codec("dolonius").default_chunk_depth(1024), 3);
     for bad in [
         "",
         "rgb",

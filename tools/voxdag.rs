@@ -59,8 +59,8 @@ pub struct BuildArgs {
     /// (T: per-channel error threshold in (0, 1], default 0.06). See docs/colors.md.
     #[arg(long, default_value = "lossless", value_parser = commands::parse_colors)]
     colors: ColorsArg,
-    /// Depth below the root of the SVO nodes that own one colour chunk each (default: 7 for the
-    /// lossless codecs, 8 for the lossy ones).
+    /// Depth below the root of the SVO nodes that own one colour chunk each (default: nodes of
+    /// 256^3 voxels for the exact codecs, 128^3 for the lossy ones).
     #[arg(long)]
     chunk_depth: Option<u32>,
     /// Output .vdag file.

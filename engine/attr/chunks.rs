@@ -112,7 +112,7 @@ impl ChunkedColors {
         bar: &ProgressBar,
     ) -> Result<ChunkedColors, AttrError> {
         let depth = chunk_depth
-            .unwrap_or_else(|| codec.default_chunk_depth())
+            .unwrap_or_else(|| codec.default_chunk_depth(dag.resolution))
             .min(dag.root_level());
         let sizes = chunk_sizes(dag, &VoxelIndex::new(dag), depth);
         let voxels: u64 = sizes.iter().sum();

@@ -246,13 +246,25 @@ impl ColorCodec {
         )
     }
 
-    /// Default chunk depth below the root (§5.1): 7 for the lossless formats, 8 for the lossy.
-    pub fn default_chunk_depth(&self) -> u32 {
+    /// Side in voxels of the SVO nodes that default chunks cover: 256 for the exact formats, 128
+    /// for the lossy one (whose blocks need no per-chunk palette, so smaller chunks cost little).
+    pub fn default_chunk_side(&self) -> u32 {
         if self.format() == ColorFormat::Varbit {
-            8
+            128
         } else {
-            7
+            256
         }
+    }
+
+    /// Default chunk depth below the root (§5.1) for a grid of side `resolution`: the depth whose
+    /// nodes are `default_chunk_side()` voxels wide (0 when the grid is smaller). At a 32K^3 grid
+    /// this is the dissertation's 7 (exact) and 8 (lossy); a fixed depth would make chunks of a
+    /// few voxels at smaller grids, where per-chunk tables swamp the codecs (docs/colors.md).
+    pub fn default_chunk_depth(&self, resolution: u32) -> u32 {
+        resolution
+            .max(1)
+            .ilog2()
+            .saturating_sub(self.default_chunk_side().ilog2())
     }
 
     /// Encodes one chunk of colours.

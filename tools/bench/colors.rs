@@ -271,7 +271,7 @@ fn measure(
     chunk_depth: Option<u32>,
 ) -> Result<CodecRow> {
     let depth = chunk_depth
-        .unwrap_or_else(|| codec.default_chunk_depth())
+        .unwrap_or_else(|| codec.default_chunk_depth(dag.resolution))
         .min(dag.root_level());
     let sizes = chunk_sizes(dag, index, depth);
     let start = Instant::now();
