@@ -2,7 +2,9 @@
 //!
 //! Data flows one way through the modules:
 //! `scene` (import + voxelize) -> `dag` (SVO -> SVDAG, file format, CPU queries)
-//! -> `gpu` (Vulkan device layer) -> `render` (GPU traversal, CPU reference renderer).
+//! -> `attr` (per-voxel colours in chunks, colour codecs) -> `gpu` (Vulkan device layer)
+//! -> `render` (GPU traversal, CPU reference renderer), `attr_gpu` (colour codec passes) and
+//! `hash` (GPU slab hash tables, allocator and garbage collection for editing).
 
 #![warn(missing_docs)]
 

@@ -34,7 +34,7 @@ pub struct BenchColorsArgs {
     /// Per-channel error threshold of the lossy codecs (colours in [0, 1]).
     #[arg(long, default_value_t = voxdag::attr::DEFAULT_THRESHOLD)]
     threshold: f32,
-    /// Chunk depth below the root for every codec (default: each codec's own, 7 lossless / 8 lossy).
+    /// Chunk depth below the root for every codec (default: each codec's own: nodes of 256^3 exact, 128^3 lossy).
     #[arg(long)]
     chunk_depth: Option<u32>,
     /// Leave out the Perlin-noise-painted terrain.
