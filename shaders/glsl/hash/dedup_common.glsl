@@ -31,6 +31,11 @@ const uint NO_SLAB = 0;
 const uint COUNTER_POOL_USED = 0;
 const uint COUNTER_ENTRIES = 1;
 const uint COUNTER_OVERFLOW = 2;
+// Bits of counters[COUNTER_OVERFLOW].
+const uint OVERFLOW_POOL = 1;        // pass 1 ran out of pool slabs (the host grows, reruns)
+const uint OVERFLOW_NO_ENTRY = 2;    // pass 2 found a key without an entry
+const uint OVERFLOW_BROKEN_CHAIN = 4; // a chain longer than the table has slabs (a loop)
+
 
 layout(buffer_reference, std430, buffer_reference_align = 4) coherent buffer Words {
     uint w[];
@@ -52,6 +57,12 @@ layout(push_constant, std430) uniform Push {
 
 Words slab_at(uint slab) {
     return Words(push.table + uint64_t(slab) * uint64_t(push.slab_words) * 4ul);
+}
+
+// Whether a walk that has followed `links` links to `slab` must stop: more links than the table
+// has slabs (a loop), or a slab outside the table. Every chain walk is bounded by this check.
+bool chain_broken(uint links, uint slab) {
+    return links > push.buckets + push.pool_slabs || slab >= push.buckets + push.pool_slabs;
 }
 
 uint rotl(uint x, uint r) {
