@@ -98,11 +98,14 @@ uint subgroup_count() {
 }
 
 // Whether slot `s` of `slab` is ready and holds the key of input `i` (false for s >= 32).
+// Called by the whole subgroup: the barrier stays out of divergent code (on lavapipe a
+// memoryBarrierBuffer() there loses invocations, see docs/hash.md).
 bool slot_has_key(Words slab, uint s, Words keys, uint i) {
-    if (s >= SLOTS || slab.w[s] != TAG_READY) {
+    bool ready = s < SLOTS && slab.w[min(s, SLOTS - 1)] == TAG_READY;
+    memoryBarrierBuffer(); // the key words were published before the tag
+    if (!ready) {
         return false;
     }
-    memoryBarrierBuffer(); // the key words were published before the tag
     bool equal = true;
     for (uint j = 0; j < KEY_WORDS; ++j) {
         equal = equal && slab.w[KEYS_OFFSET + s * KEY_WORDS + j] == keys.w[i * KEY_WORDS + j];

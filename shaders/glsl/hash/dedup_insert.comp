@@ -73,11 +73,14 @@ void insert(uint i) {
         if (s != SLOTS) {
             // One lane writes the key and publishes it: no ordering between lanes needed (and
             // subgroupBarrier() acts on the whole workgroup on lavapipe).
-            if (subgroupElect()) {
+            bool leader = subgroupElect();
+            if (leader) {
                 for (uint j = 0; j < KEY_WORDS; ++j) {
                     slab.w[KEYS_OFFSET + s * KEY_WORDS + j] = keys.w[i * KEY_WORDS + j];
                 }
-                memoryBarrierBuffer();
+            }
+            memoryBarrierBuffer(); // by the whole subgroup: no barrier in divergent code
+            if (leader) {
                 atomicExchange(slab.w[s], TAG_READY);
                 atomicAdd(Words(push.counters).w[COUNTER_ENTRIES], 1);
             }
