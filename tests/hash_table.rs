@@ -9,6 +9,8 @@ use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 
 use voxdag::gpu::{GpuContext, MemLocation, Profiler};
+use voxdag::hash::gc::GpuGarbageCollector;
+use voxdag::hash::layout::SUPER_BLOCK_BITMASK_WORDS;
 use voxdag::hash::{
     GpuHashTable, Handle, HashError, HashTableConfig, HashVariant, ReferenceTable, TableImage,
     TeamMode, HANDLE_INVALID, HANDLE_MISS,
@@ -345,6 +347,68 @@ fn duplicates_in_one_batch_get_separate_slots() {
         // A search finds one of the copies.
         let found = gpu.search(&[5, 6], None).unwrap()[0].unwrap();
         assert!(handles.contains(&found));
+    }
+    assert_clean(&ctx);
+}
+
+/// A table whose only bucket chain is corrupted on purpose: the last slab's link points back
+/// to the first slab (`cycle`), or to a slab beyond the pool. Returns the items' handles too.
+fn corrupted_table(
+    ctx: &Arc<GpuContext>,
+    variant: HashVariant,
+    team: TeamMode,
+    cycle: bool,
+) -> (GpuHashTable, Vec<Handle>) {
+    let config = HashTableConfig {
+        team,
+        ..HashTableConfig::new(variant, 2, 1)
+    };
+    let mut gpu = GpuHashTable::new(ctx, &config).unwrap();
+    let items = random_items(100, 2, 7, &mut HashSet::new());
+    let (handles, _) = gpu.insert(&flat(&items), None).unwrap();
+    let image = gpu.download().unwrap();
+    let layout = gpu.layout();
+    // Follow the chain to its last slab (100 items: 4 slabs, all in super block 0).
+    let mut link = image.heads[0];
+    let mut last = link - 1;
+    while link != 0 {
+        last = link - 1;
+        link = image.slab(last).unwrap()[0];
+    }
+    let next = if cycle { image.heads[0] } else { 0x7fff_ffff };
+    let offset = 4 * (SUPER_BLOCK_BITMASK_WORDS as u64 + last as u64 * layout.slab_words as u64);
+    ctx.write_buffer(&gpu.pool().super_blocks()[0], offset, &[next])
+        .unwrap();
+    (gpu, handles)
+}
+
+fn expect_corrupt<T: std::fmt::Debug>(what: &str, result: Result<T, HashError>) {
+    match result {
+        Err(HashError::CorruptTable { walks }) => assert!(walks > 0, "{what}"),
+        other => panic!("{what}: expected CorruptTable, got {other:?}"),
+    }
+}
+
+/// Every chain walk is bounded: a looping or out-of-pool chain makes search, insert and GC
+/// report `CorruptTable` instead of hanging, in both team modes.
+#[test]
+fn corrupt_chains_are_reported_not_hung() {
+    let ctx = common::gpu();
+    let absent = random_items(64, 2, 8, &mut HashSet::new());
+    for team in [TeamMode::SingleLane, TeamMode::Subgroup] {
+        for variant in [HashVariant::Atomic64, HashVariant::AccelHash8] {
+            for cycle in [true, false] {
+                let what = format!("{variant:?} {team:?} cycle {cycle}");
+                let (gpu, _) = corrupted_table(&ctx, variant, team, cycle);
+                expect_corrupt(&format!("search {what}"), gpu.search(&flat(&absent), None));
+                let (mut gpu, _) = corrupted_table(&ctx, variant, team, cycle);
+                expect_corrupt(&format!("insert {what}"), gpu.insert(&flat(&absent), None));
+                // Everything live: the sweep keeps every slab, so it walks the loop.
+                let (mut gpu, live) = corrupted_table(&ctx, variant, team, cycle);
+                let gc = GpuGarbageCollector::new(&ctx, &gpu).unwrap();
+                expect_corrupt(&format!("gc {what}"), gc.collect(&mut gpu, &live, None));
+            }
+        }
     }
     assert_clean(&ctx);
 }

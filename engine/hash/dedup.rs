@@ -357,9 +357,10 @@ impl GpuDedup {
             if overflow == 0 {
                 return Ok((state[COUNTER_ENTRIES], attempt));
             }
+            // Bit 2: a chain walk was cut off (longer than the table: a loop, never a hang).
             // Every input links at most one slab per entry it makes and wastes at most one, so a
             // pool of 2 * count slabs never runs out.
-            if overflow & 1 == 0 || pool_slabs >= 2 * count {
+            if overflow & 1 == 0 || overflow & 4 != 0 || pool_slabs >= 2 * count {
                 return Err(DedupError::Inconsistent(format!(
                     "overflow state {overflow} with a pool of {pool_slabs} slabs"
                 )));

@@ -282,6 +282,12 @@ impl GpuGarbageCollector {
         if let Some(p) = profiler {
             p.resolve()?;
         }
+        let status = table.pool().read_status()?;
+        if status.broken_chains != 0 {
+            return Err(HashError::CorruptTable {
+                walks: status.broken_chains,
+            });
+        }
         let c: Vec<GcCounters> = self.ctx.download(&counters)?;
         Ok(GcReport {
             bad_handles: c[0].bad_handles,

@@ -35,7 +35,7 @@ pub const SLAB_ACTIVE: u32 = 1;
 pub const SLAB_OCCUPANCY: u32 = 2;
 
 /// Words of the status block (see [`HashStatus`]).
-pub const STATUS_WORDS: u32 = 4;
+pub const STATUS_WORDS: u32 = 5;
 
 /// Seed of the primary hash (bucket choice).
 pub const HASH_SEED: u32 = 0x9747_b28c;
@@ -235,6 +235,9 @@ pub struct HashStatus {
     pub invalid_items: u32,
     /// Non-zero when a pass ran with a subgroup size other than the specialised one.
     pub subgroup_mismatch: u32,
+    /// Chain walks a pass cut off after more links than the pool has slabs: a bucket chain
+    /// loops, the table is corrupt (the host reports [`super::HashError::CorruptTable`]).
+    pub broken_chains: u32,
 }
 
 /// Push constants of every hash pass (twin of `HashPush` in `hash_layout.h`, 56 bytes).

@@ -65,4 +65,11 @@ pub enum HashError {
         /// `gl_SubgroupSize` seen by the shader.
         actual: u32,
     },
+    /// A pass found a bucket chain longer than the pool has slabs (a cycle): the table is
+    /// corrupt. Every chain walk on the GPU is bounded, so this is reported instead of a hang.
+    #[error("corrupt hash table: {walks} chain walks were cut off after more links than the pool has slabs")]
+    CorruptTable {
+        /// Chain walks cut off so far (`HashStatus::broken_chains`).
+        walks: u32,
+    },
 }

@@ -323,7 +323,7 @@ impl GpuHashTable {
         if let Some(p) = profiler {
             p.resolve()?;
         }
-        self.check_subgroup()
+        self.check_status()
     }
 
     /// Insert of items known to be absent: fills `handles` with [`HANDLE_MISS`] and runs insert
@@ -429,7 +429,7 @@ impl GpuHashTable {
             }
             let last = self.status;
             self.status = self.pool.read_status()?;
-            self.check_subgroup_status()?;
+            Self::status_ok(&self.status, self.subgroup)?;
             let left = self.status.exhausted.wrapping_sub(last.exhausted);
             if left == 0 {
                 break;
@@ -453,20 +453,23 @@ impl GpuHashTable {
         Ok(report)
     }
 
-    fn check_subgroup(&self) -> Result<(), HashError> {
+    fn check_status(&self) -> Result<(), HashError> {
         let status = self.pool.read_status()?;
-        Self::subgroup_ok(&status, self.subgroup)
+        Self::status_ok(&status, self.subgroup)
     }
 
-    fn check_subgroup_status(&self) -> Result<(), HashError> {
-        Self::subgroup_ok(&self.status, self.subgroup)
-    }
-
-    fn subgroup_ok(status: &HashStatus, expected: u32) -> Result<(), HashError> {
+    /// The errors a pass leaves in the status block: a subgroup size other than the one the
+    /// pipelines were specialised for, or chain walks cut off (a corrupt table).
+    fn status_ok(status: &HashStatus, expected: u32) -> Result<(), HashError> {
         if status.subgroup_mismatch != 0 {
             return Err(HashError::SubgroupMismatch {
                 expected,
                 actual: status.subgroup_mismatch,
+            });
+        }
+        if status.broken_chains != 0 {
+            return Err(HashError::CorruptTable {
+                walks: status.broken_chains,
             });
         }
         Ok(())

@@ -42,6 +42,8 @@ uint hash_alloc_slab(uint64_t super_blocks, uint64_t status, uint blocks, uint r
         slab = hash_alloc_in_block(super_blocks, (start + i) % blocks, 0u);
     }
     if (slab != HASH_NO_SLAB) {
+        // Counted before the caller links it: chain walks bound themselves by this counter.
+        // (No memoryBarrierBuffer() here: on lavapipe a barrier in divergent code loses lanes.)
         atomicAdd(HashStatus(status).allocated_slabs, 1u);
     }
     return slab;

@@ -55,6 +55,26 @@ uint hash_item_word(uint slot, uint w) {
     return items + slot * ITEM_WORDS + w;
 }
 
+// Chain walks are bounded: no bucket chain has more slabs than status.allocated_slabs (the
+// allocator counts a slab, then a fence orders that before the CAS that links it) nor links
+// outside the pool. A walk past the bound is a loop in a corrupt table: it stops and counts
+// itself in status.broken_chains, which the host turns into HashError::CorruptTable.
+// (lavapipe also cuts any loop nest after 65535 iterations, silently: a tight bound keeps
+// the flag ahead of that.)
+uint hash_allocated_slabs(uint64_t status, bool fresh) {
+    return fresh ? atomicAdd(HashStatus(status).allocated_slabs, 0u)
+                 : HashStatus(status).allocated_slabs;
+}
+
+// Whether a link leaves the pool of `blocks` memory blocks (links are slab + 1).
+bool hash_link_outside(uint link, uint blocks) {
+    return link > blocks * HASH_SLABS_PER_BLOCK;
+}
+
+void hash_report_broken_chain(uint64_t status) {
+    atomicAdd(HashStatus(status).broken_chains, 1u);
+}
+
 // Device address of a super block buffer.
 uint64_t hash_super_block(uint64_t super_blocks, uint sb) {
     return HashWords64(super_blocks).w[sb];

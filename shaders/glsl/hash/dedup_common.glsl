@@ -31,6 +31,11 @@ const uint NO_SLAB = 0;
 const uint COUNTER_POOL_USED = 0;
 const uint COUNTER_ENTRIES = 1;
 const uint COUNTER_OVERFLOW = 2;
+// Bits of counters[COUNTER_OVERFLOW].
+const uint OVERFLOW_POOL = 1;        // pass 1 ran out of pool slabs (the host grows, reruns)
+const uint OVERFLOW_NO_ENTRY = 2;    // pass 2 found a key without an entry
+const uint OVERFLOW_BROKEN_CHAIN = 4; // a chain longer than the table has slabs (a loop)
+
 
 layout(buffer_reference, std430, buffer_reference_align = 4) coherent buffer Words {
     uint w[];
@@ -52,6 +57,12 @@ layout(push_constant, std430) uniform Push {
 
 Words slab_at(uint slab) {
     return Words(push.table + uint64_t(slab) * uint64_t(push.slab_words) * 4ul);
+}
+
+// Whether a walk that has followed `links` links to `slab` must stop: more links than the table
+// has slabs (a loop), or a slab outside the table. Every chain walk is bounded by this check.
+bool chain_broken(uint links, uint slab) {
+    return links > push.buckets + push.pool_slabs || slab >= push.buckets + push.pool_slabs;
 }
 
 uint rotl(uint x, uint r) {
@@ -87,11 +98,14 @@ uint subgroup_count() {
 }
 
 // Whether slot `s` of `slab` is ready and holds the key of input `i` (false for s >= 32).
+// Called by the whole subgroup: the barrier stays out of divergent code (on lavapipe a
+// memoryBarrierBuffer() there loses invocations, see docs/hash.md).
 bool slot_has_key(Words slab, uint s, Words keys, uint i) {
-    if (s >= SLOTS || slab.w[s] != TAG_READY) {
+    bool ready = s < SLOTS && slab.w[min(s, SLOTS - 1)] == TAG_READY;
+    memoryBarrierBuffer(); // the key words were published before the tag
+    if (!ready) {
         return false;
     }
-    memoryBarrierBuffer(); // the key words were published before the tag
     bool equal = true;
     for (uint j = 0; j < KEY_WORDS; ++j) {
         equal = equal && slab.w[KEYS_OFFSET + s * KEY_WORDS + j] == keys.w[i * KEY_WORDS + j];

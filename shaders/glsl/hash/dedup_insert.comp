@@ -42,7 +42,7 @@ uint next_slab(Words slab, inout uint spare) {
                     spare = push.buckets + taken;
                 } else {
                     // The host grows the pool and runs the batch again.
-                    atomicOr(Words(push.counters).w[COUNTER_OVERFLOW], 1);
+                    atomicOr(Words(push.counters).w[COUNTER_OVERFLOW], OVERFLOW_POOL);
                 }
             }
             if (spare != NO_SLAB) {
@@ -68,16 +68,19 @@ void insert(uint i) {
         return;
     }
     uint spare = NO_SLAB;
-    while (true) {
+    for (uint links = 0u;; ++links) {
         uint s = claim_slot(slab);
         if (s != SLOTS) {
             // One lane writes the key and publishes it: no ordering between lanes needed (and
             // subgroupBarrier() acts on the whole workgroup on lavapipe).
-            if (subgroupElect()) {
+            bool leader = subgroupElect();
+            if (leader) {
                 for (uint j = 0; j < KEY_WORDS; ++j) {
                     slab.w[KEYS_OFFSET + s * KEY_WORDS + j] = keys.w[i * KEY_WORDS + j];
                 }
-                memoryBarrierBuffer();
+            }
+            memoryBarrierBuffer(); // by the whole subgroup: no barrier in divergent code
+            if (leader) {
                 atomicExchange(slab.w[s], TAG_READY);
                 atomicAdd(Words(push.counters).w[COUNTER_ENTRIES], 1);
             }
@@ -85,6 +88,12 @@ void insert(uint i) {
         }
         slab_index = next_slab(slab, spare);
         if (slab_index == NO_SLAB) {
+            return;
+        }
+        if (chain_broken(links, slab_index)) {
+            if (subgroupElect()) {
+                atomicOr(Words(push.counters).w[COUNTER_OVERFLOW], OVERFLOW_BROKEN_CHAIN);
+            }
             return;
         }
         slab = slab_at(slab_index);

@@ -8,7 +8,7 @@
 void representative(uint i) {
     Words keys = Words(push.keys);
     uint slab_index = hash_key(keys, i) % push.buckets;
-    while (true) {
+    for (uint links = 0u;; ++links) {
         Words slab = slab_at(slab_index);
         uint s = find_key(slab, keys, i);
         if (s != SLOTS) {
@@ -19,10 +19,12 @@ void representative(uint i) {
             return;
         }
         slab_index = slab.w[NEXT_OFFSET];
-        if (slab_index == NO_SLAB) {
+        bool broken = slab_index != NO_SLAB && chain_broken(links, slab_index);
+        if (slab_index == NO_SLAB || broken) {
             // Unreachable after a successful pass 1: every key has an entry. Flag it, never guess.
             if (subgroupElect()) {
-                atomicOr(Words(push.counters).w[COUNTER_OVERFLOW], 2);
+                atomicOr(Words(push.counters).w[COUNTER_OVERFLOW],
+                         broken ? OVERFLOW_BROKEN_CHAIN : OVERFLOW_NO_ENTRY);
                 Words(push.canon).w[i] = ~0u;
             }
             return;

@@ -23,7 +23,13 @@ void sweep_bucket(uint bucket) {
     uint prev = HASH_NO_SLAB; // previous slab kept in the chain (the first slab is always kept)
     uint freed_items = 0u;
     uint freed_slabs = 0u;
-    while (link != 0u) {
+    // Read before this walk frees anything: the chain has at most that many slabs.
+    uint max_links = subgroupBroadcastFirst(hash_allocated_slabs(push.status, false));
+    for (uint links = 0u; link != 0u; ++links) {
+        if (links == max_links || hash_link_outside(link, push.blocks)) {
+            if (subgroupElect()) hash_report_broken_chain(push.status);
+            break;
+        }
         uint slab_index = link - 1u;
         HashWords slab = HashWords(hash_slab_address(push.super_blocks, slab_index));
         uint marked = slab.w[HASH_SLAB_ACTIVE];
@@ -65,8 +71,9 @@ void sweep_bucket(uint bucket) {
                 slab.w[w] = 0u;
             }
             if (subgroupElect()) {
+                // No barrier between unlink and free: nothing allocates during the sweep (and on
+                // lavapipe a memoryBarrierBuffer() in divergent code loses lanes).
                 HashWords(hash_slab_address(push.super_blocks, prev)).w[HASH_SLAB_NEXT] = next;
-                memoryBarrierBuffer();
                 hash_free_slab(push.super_blocks, push.status, slab_index);
             }
             freed_slabs += 1u;

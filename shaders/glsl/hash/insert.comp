@@ -32,25 +32,59 @@ void write_item(HashWords slab, uint slot, uint item[HASH_MAX_ITEM_WORDS], uint 
     }
 }
 
-// Atomic64: claim an empty prefix with a CAS; returns the slot or HASH_MISS when the slab is full.
-uint claim_atomic64(uint64_t slab_addr, uint item[HASH_MAX_ITEM_WORDS]) {
-    HashWords words = HashWords(slab_addr);
-    uint64_t prefix = hash_prefix64() ? packUint2x32(uvec2(item[0], item[1])) : 0ul;
+// Atomic64: whether `slot` holds no item (its prefix, or its only word, is zero).
+bool slot_empty_atomic64(uint64_t slab_addr, uint slot) {
+    return hash_prefix64() ? HashWords64(slab_addr).w[1u + slot] == 0ul
+                           : HashWords(slab_addr).w[hash_item_word(slot, 0u)] == 0u;
+}
+
+// Atomic64: CAS the item's prefix (its only word) into `slot`; whether it was still empty.
+bool cas_atomic64(uint64_t slab_addr, uint slot, uint item[HASH_MAX_ITEM_WORDS]) {
+    if (hash_prefix64()) {
+        uint64_t prefix = packUint2x32(uvec2(item[0], item[1]));
+        return atomicCompSwap(HashWords64(slab_addr).w[1u + slot], 0ul, prefix) == 0ul;
+    }
+    return atomicCompSwap(HashWords(slab_addr).w[hash_item_word(slot, 0u)], 0u, item[0]) == 0u;
+}
+
+// Atomic64, one lane alone: claim an empty slot from `first` on; HASH_MISS when none is left.
+uint claim_atomic64_single(uint64_t slab_addr, uint first, uint item[HASH_MAX_ITEM_WORDS]) {
+    for (uint slot = first; slot < HASH_SLAB_SLOTS; ++slot) {
+        if (slot_empty_atomic64(slab_addr, slot) && cas_atomic64(slab_addr, slot, item)) {
+            return slot;
+        }
+    }
+    return HASH_MISS;
+}
+
+// Atomic64, one lane alone: the first empty slot of a slab whose items form a prefix (inserts
+// claim the lowest empty slot; only GC punches holes): a binary search of 5 loads instead of a
+// scan of up to 32. With holes it may skip some, which the thorough walk then fills.
+uint first_empty_atomic64(uint64_t slab_addr) {
+    uint lo = 0u;
+    uint hi = HASH_SLAB_SLOTS;
+    while (lo < hi) {
+        uint mid = (lo + hi) / 2u;
+        if (slot_empty_atomic64(slab_addr, mid)) {
+            hi = mid;
+        } else {
+            lo = mid + 1u;
+        }
+    }
+    return lo;
+}
+
+// Atomic64, the whole team: claim an empty prefix with a CAS, slots scanned in chunks of TEAM;
+// returns the slot or HASH_MISS when the slab is full.
+uint claim_atomic64_team(uint64_t slab_addr, uint item[HASH_MAX_ITEM_WORDS]) {
     for (uint chunk = 0u; chunk < HASH_SLAB_SLOTS; chunk += TEAM) {
         uint slot = chunk + team_lane();
-        bool empty = false;
-        if (slot < HASH_SLAB_SLOTS) {
-            empty = hash_prefix64() ? HashWords64(slab_addr).w[1u + slot] == 0ul
-                                    : words.w[hash_item_word(slot, 0u)] == 0u;
-        }
+        bool empty = slot < HASH_SLAB_SLOTS && slot_empty_atomic64(slab_addr, slot);
         while (team_any(empty)) {
             uint winner = team_first(empty);
             uint won = HASH_MISS;
             if (team_lane() == winner) {
-                bool ok = hash_prefix64()
-                    ? atomicCompSwap(HashWords64(slab_addr).w[1u + slot], 0ul, prefix) == 0ul
-                    : atomicCompSwap(words.w[hash_item_word(slot, 0u)], 0u, item[0]) == 0u;
-                won = ok ? slot : HASH_MISS;
+                won = cas_atomic64(slab_addr, slot, item) ? slot : HASH_MISS;
                 empty = false;
             }
             won = team_min(won);
@@ -80,36 +114,50 @@ uint claim_ticket(HashWords words) {
     return team_from_leader(slot);
 }
 
-// Inserts one item; returns its handle or HASH_MISS when the pool is exhausted.
 // Atomic64 has no occupancy mask: whether a slab's last slot is empty. Slots are claimed lowest
 // first and only cleared by garbage collection, so a taken last slot means a full slab unless GC
 // punched holes since.
 bool last_slot_empty(uint64_t slab_addr) {
-    if (hash_prefix64()) return HashWords64(slab_addr).w[HASH_SLAB_SLOTS] == 0ul;
-    return HashWords(slab_addr).w[hash_item_word(HASH_SLAB_SLOTS - 1u, 0u)] == 0u;
+    return slot_empty_atomic64(slab_addr, HASH_SLAB_SLOTS - 1u);
 }
 
+// Inserts one item; returns its handle, or HASH_MISS when the pool is exhausted or the chain
+// loops (counted in status.exhausted / status.broken_chains). Words other teams may be writing
+// (links, slots) are read by the leader and broadcast, so the team never diverges.
 uint insert_item(uint item[HASH_MAX_ITEM_WORDS], uint h, uint rng) {
     HashWords link_words = HashWords(push.heads);
     uint link_index = h % push.buckets;
-    uint link = link_words.w[link_index];
-    // Atomic64 walks the chain twice before allocating: first scanning only slabs whose last
+    uint link = team_from_leader(link_words.w[link_index]);
+    // Atomic64 walks the chain twice before allocating: first trying only slabs whose last
     // slot is empty (one load per full slab instead of 32 prefixes), then every slab (holes left
     // by garbage collection).
     bool thorough = VARIANT != HASH_ATOMIC64;
-    for (uint attempt = 0u;; ++attempt) {
+    // Each step of a walk follows one link or links a new slab (a lost race means the chain
+    // grew): a walk of more than 2 * allocated + 2 steps goes round a loop. The bound is
+    // re-read (others allocate meanwhile) before the walk is declared broken.
+    uint max_links = team_from_leader(hash_allocated_slabs(push.status, false));
+    uint links = 0u;
+    for (uint step = 0u;; ++step, ++links) {
+        if (links > 2u * max_links + 2u) {
+            max_links = team_from_leader(team_leader() ? hash_allocated_slabs(push.status, true) : 0u);
+        }
+        if (links > 2u * max_links + 2u || hash_link_outside(link, push.blocks)) {
+            if (team_leader()) hash_report_broken_chain(push.status);
+            return HASH_MISS;
+        }
         if (link == 0u && !thorough) {
+            links = 0u;
             thorough = true;
             link_words = HashWords(push.heads);
             link_index = h % push.buckets;
-            link = link_words.w[link_index];
+            link = team_from_leader(link_words.w[link_index]);
         }
         if (link == 0u) {
             // End of the chain: allocate a zeroed slab and link it with a CAS.
             uint result = 0u;
             if (team_leader()) {
                 uint slab = hash_alloc_slab(push.super_blocks, push.status, push.blocks,
-                                            rng + attempt * 0x632be5abu);
+                                            rng + step * 0x632be5abu);
                 if (slab == HASH_NO_SLAB) {
                     atomicAdd(HashStatus(push.status).exhausted, 1u);
                 } else {
@@ -129,9 +177,17 @@ uint insert_item(uint item[HASH_MAX_ITEM_WORDS], uint h, uint rng) {
         uint slab = link - 1u;
         uint64_t addr = hash_slab_address(push.super_blocks, slab);
         HashWords words = HashWords(addr);
-        uint slot;
+        uint slot = HASH_MISS;
         if (VARIANT == HASH_ATOMIC64) {
-            slot = thorough || last_slot_empty(addr) ? claim_atomic64(addr, item) : HASH_MISS;
+            if (TEAM == 1u) {
+                if (thorough) {
+                    slot = claim_atomic64_single(addr, 0u, item);
+                } else if (last_slot_empty(addr)) {
+                    slot = claim_atomic64_single(addr, first_empty_atomic64(addr), item);
+                }
+            } else if (thorough || team_from_leader(last_slot_empty(addr) ? 1u : 0u) != 0u) {
+                slot = claim_atomic64_team(addr, item);
+            }
             if (slot != HASH_MISS) {
                 write_item(words, slot, item, hash_prefix64() ? 2u : 1u);
             }
@@ -155,7 +211,7 @@ uint insert_item(uint item[HASH_MAX_ITEM_WORDS], uint h, uint rng) {
         }
         link_words = words;
         link_index = HASH_SLAB_NEXT;
-        link = words.w[HASH_SLAB_NEXT];
+        link = team_from_leader(words.w[HASH_SLAB_NEXT]);
     }
     return HASH_MISS;
 }

@@ -31,7 +31,13 @@ void main() {
             uint h = hash_item(item);
             uint sec = hash_secondary_stored_form(h);
             uint link = heads.w[h % push.buckets];
-            while (link != 0u && found == HASH_MISS) {
+            // No insert runs meanwhile: the counter is exact.
+            uint max_links = hash_allocated_slabs(push.status, false);
+            for (uint links = 0u; link != 0u && found == HASH_MISS; ++links) {
+                if (links == max_links || hash_link_outside(link, push.blocks)) {
+                    if (team_leader()) hash_report_broken_chain(push.status);
+                    break;
+                }
                 uint64_t addr = hash_slab_address(push.super_blocks, link - 1u);
                 found = hash_find_in_slab(addr, link - 1u, item, sec);
                 link = HashWords(addr).w[HASH_SLAB_NEXT];

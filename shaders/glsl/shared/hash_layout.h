@@ -36,6 +36,7 @@ layout(buffer_reference, std430, buffer_reference_align = 4) coherent buffer Has
     uint allocated_slabs;    // +1 per hash_alloc_slab, -1 per hash_free_slab
     uint invalid_items;      // items the layout cannot store (Atomic64 zero prefix)
     uint subgroup_mismatch;  // gl_SubgroupSize seen when it differed from SUBGROUP_SIZE
+    uint broken_chains;      // walks cut off after more links than the pool has slabs (a cycle)
 };
 
 // Members of the push-constant block of every hash pass (mirror of HashPush, 56 bytes).
