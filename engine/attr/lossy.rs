@@ -13,9 +13,12 @@
 //! endpoint quantization, all stay within the threshold; a segment that fails even with 4 bits is
 //! cut before its first failing colour (or halved) and refitted.
 //!
-//! The block emitted is the cheapest in stored bits per colour (64 header bits + weights) of: the
-//! longest run one single colour holds, the Hough segment, and the segment's prefixes that its
-//! line (clipped to the prefix) holds with fewer bits; a single run that no endpoint block could
+//! The block emitted is the one with the lowest rate-distortion cost per colour (64 header bits +
+//! weights + [`ERROR_WEIGHT`] × squared error) of: the longest run one single colour holds, the
+//! longest within half the threshold, the Hough segment at every width that holds it, the segment
+//! refitted by least squares at every width that holds it, and the segment's prefixes that its
+//! line (clipped to the prefix) holds with fewer bits. Every candidate keeps the threshold; the
+//! cost spends the size budget on lowering the error. A single run that no endpoint block could
 //! beat skips the Hough pass. Macro blocks are encoded in parallel.
 
 use rayon::prelude::*;
@@ -486,5 +489,44 @@ mod tests {
             let end = blocks.get(j + 1).map_or(grey.len(), |n| n.start);
             assert!(end - b.start <= MAX_SEGMENT);
         }
+    }
+
+    #[test]
+    fn least_squares_line_spans_a_ramp_and_squared_error_matches_the_decoder() {
+        let ramp: Vec<[u8; 3]> = (0..100u8).map(|i| [i * 2, 200 - i, 50 + i / 2]).collect();
+        let [a, b] = least_squares_line(&ramp);
+        let (first, last) = (ramp[0].map(f32::from), ramp[99].map(f32::from));
+        let near = |p: [f32; 3], q: [f32; 3]| (0..3).all(|k| (p[k] - q[k]).abs() < 0.5);
+        assert!(
+            (near(a, first) && near(b, last)) || (near(a, last) && near(b, first)),
+            "{a:?} {b:?}"
+        );
+        // The error the block choice weighs is the decoder's.
+        let colors: Vec<u32> = (0..3000u32)
+            .map(|i| pack_rgb([(i * 7 % 251) as u8, (i / 13) as u8, (i * i % 97) as u8]))
+            .collect();
+        let blocks = encode_blocks(&colors, DEFAULT_THRESHOLD);
+        let decoded =
+            varbit::decode_all(&encode(&colors, DEFAULT_THRESHOLD), colors.len()).unwrap();
+        let expected: u64 = colors
+            .iter()
+            .zip(&decoded)
+            .map(|(&c, &d)| {
+                let (c, d) = (rgb(c), rgb(d));
+                (0..3)
+                    .map(|k| u64::from(c[k].abs_diff(d[k])).pow(2))
+                    .sum::<u64>()
+            })
+            .sum();
+        let rgb8: Vec<[u8; 3]> = colors.iter().map(|&c| rgb(c)).collect();
+        let weighed: u64 = blocks
+            .iter()
+            .enumerate()
+            .map(|(j, b)| {
+                let end = blocks.get(j + 1).map_or(colors.len(), |n| n.start);
+                squared_error(&rgb8[b.start..end], b)
+            })
+            .sum();
+        assert_eq!(weighed, expected);
     }
 }
