@@ -15,8 +15,8 @@
 //!
 //! The block emitted is the one with the lowest rate-distortion cost per colour (64 header bits +
 //! weights + [`ERROR_WEIGHT`] × squared error) of: the longest run one single colour holds, the
-//! longest within half the threshold, the Hough segment at every width that holds it, the segment
-//! refitted by least squares at every width that holds it, and the segment's prefixes that its
+//! longest within half the threshold, the Hough segment and the segment refitted by least squares,
+//! each at the fewest bits that hold it and one more, and the segment's prefixes that its
 //! line (clipped to the prefix) holds with fewer bits. Every candidate keeps the threshold; the
 //! cost spends the size budget on lowering the error. A single run that no endpoint block could
 //! beat skips the Hough pass. Macro blocks are encoded in parallel.
@@ -121,16 +121,20 @@ fn next_block(
     };
     let fewest_bits = block.bits;
     best = best.min(Candidate::new(colors, len, block));
-    // More bits than the fewest that hold the segment, and the least-squares line, trade size
-    // for error; the cost decides.
+    // One bit more than the fewest that hold the segment, and the least-squares line at its
+    // fewest bits and one more, trade size for error; the cost decides.
     let segment = &colors[..len];
-    let more_bits = [(line, fewest_bits + 1), (least_squares_line(segment), 1)];
-    for (line, first_bits) in more_bits {
-        for bits in first_bits..=4 {
-            if let Ok(block) = varbit::endpoint_block(segment, start, line, bits..=bits, max_delta)
-            {
-                best = best.min(Candidate::new(colors, len, block));
-            }
+    let one_more = |bits: u8| (bits < 4).then_some(bits + 1);
+    let mut refits = vec![(line, one_more(fewest_bits))];
+    let refit = least_squares_line(segment);
+    if let Ok(block) = varbit::endpoint_block(segment, start, refit, 1..=4, max_delta) {
+        refits.push((refit, one_more(block.bits)));
+        best = best.min(Candidate::new(colors, len, block));
+    }
+    for (line, bits) in refits {
+        let Some(bits) = bits else { continue };
+        if let Ok(block) = varbit::endpoint_block(segment, start, line, bits..=bits, max_delta) {
+            best = best.min(Candidate::new(colors, len, block));
         }
     }
     // Shorter prefixes on the same line, clipped to their own colours, may need fewer bits.
