@@ -13,15 +13,18 @@
 //! endpoint quantization, all stay within the threshold; a segment that fails even with 4 bits is
 //! cut before its first failing colour (or halved) and refitted.
 //!
-//! The block emitted is the cheapest in stored bits per colour (64 header bits + weights) of: the
-//! longest run one single colour holds, the Hough segment, and the segment's prefixes that its
-//! line (clipped to the prefix) holds with fewer bits; a single run that no endpoint block could
+//! The block emitted is the one with the lowest rate-distortion cost per colour (64 header bits +
+//! weights + [`ERROR_WEIGHT`] × squared error) of: the longest run one single colour holds, the
+//! longest within half the threshold, the Hough segment and the segment refitted by least squares,
+//! each at the fewest bits that hold it and one more, and the segment's prefixes that its
+//! line (clipped to the prefix) holds with fewer bits. Every candidate keeps the threshold; the
+//! cost spends the size budget on lowering the error. A single run that no endpoint block could
 //! beat skips the Hough pass. Macro blocks are encoded in parallel.
 
 use rayon::prelude::*;
 
 use super::rgb;
-use super::varbit::{self, VarbitBlock, MACRO_BLOCK_COLORS};
+use super::varbit::{self, BlockColors, VarbitBlock, MACRO_BLOCK_COLORS};
 
 /// The default per-channel error threshold (colours in [0, 1]).
 pub const DEFAULT_THRESHOLD: f32 = 0.06;
@@ -33,6 +36,11 @@ pub const MAX_SEGMENT: usize = 256;
 /// Half-width of the Hough band as a fraction of the threshold: the rest of the threshold is left
 /// to the weight quantization along the line.
 const BAND_FRACTION: f32 = 0.5;
+/// Bits a block may spend to remove one unit of squared error (8-bit steps, summed over
+/// channels): the exchange rate between size and error when choosing among blocks.
+const ERROR_WEIGHT: f64 = 0.04;
+/// Power iterations for the principal axis of a segment's colours.
+const POWER_ITERATIONS: usize = 8;
 
 /// Encodes RGBA8 colours (alpha ignored) so that every decoded channel is within `threshold`
 /// (colours in [0, 1]; more precisely within `varbit::max_delta(threshold)` 8-bit steps) of the
@@ -76,9 +84,10 @@ fn encode_macro_block(
     blocks
 }
 
-/// The block at the start of `colors` and its length: of the longest single-colour run, the
-/// Hough segment, and the segment's prefixes that its line holds with fewer bits, the one with
-/// the fewest stored bits per colour.
+/// The block at the start of `colors` and its length: of the longest single-colour run, a
+/// shorter run held within half the threshold, the Hough segment with its Hough and its
+/// least-squares line at every width that holds it, and the segment's prefixes that its line
+/// holds with fewer bits, the one with the lowest rate-distortion cost per colour.
 fn next_block(
     colors: &[[u8; 3]],
     start: usize,
@@ -88,12 +97,15 @@ fn next_block(
     let run = single_run(colors, max_delta);
     let single = varbit::single_block(&colors[..run], start, max_delta)
         .expect("single_run checked the block");
-    let cost = |len: usize, bits: u8| (64 + usize::from(bits) * len) as f64 / len as f64;
-    // No endpoint block (1 bit per weight at least) can beat a long enough single run.
-    if cost(run, 0) <= cost(colors.len(), 1) {
-        return (run, single);
+    let mut best = Candidate::new(colors, run, single);
+    // No endpoint block (1 bit per weight and no error at best) can beat a cheap enough run.
+    if best.cost <= (64 + colors.len()) as f64 / colors.len() as f64 {
+        return best.into_block();
     }
-    let mut best = (run, single);
+    let tight = single_run(colors, max_delta / 2);
+    if let Some(block) = varbit::single_block(&colors[..tight], start, max_delta / 2) {
+        best = best.min(Candidate::new(colors, tight, block));
+    }
     let mut limit = colors.len();
     let (len, line, block) = loop {
         let end = hough.segment(&colors[..limit]);
@@ -102,27 +114,132 @@ fn next_block(
             Ok(block) => break (end, line, block),
             // A segment no line holds ends before its first failing colour; the first colour
             // failing means the line is poor: halve the segment.
-            Err(0) if end <= 1 => return best,
+            Err(0) if end <= 1 => return best.into_block(),
             Err(0) => limit = end / 2,
             Err(fail) => limit = fail,
         }
     };
-    if cost(len, block.bits) < cost(best.0, 0) {
-        best = (len, block);
+    let fewest_bits = block.bits;
+    best = best.min(Candidate::new(colors, len, block));
+    // One bit more than the fewest that hold the segment, and the least-squares line at its
+    // fewest bits and one more, trade size for error; the cost decides.
+    let segment = &colors[..len];
+    let one_more = |bits: u8| (bits < 4).then_some(bits + 1);
+    let mut refits = vec![(line, one_more(fewest_bits))];
+    let refit = least_squares_line(segment);
+    if let Ok(block) = varbit::endpoint_block(segment, start, refit, 1..=4, max_delta) {
+        refits.push((refit, one_more(block.bits)));
+        best = best.min(Candidate::new(colors, len, block));
+    }
+    for (line, bits) in refits {
+        let Some(bits) = bits else { continue };
+        if let Ok(block) = varbit::endpoint_block(segment, start, line, bits..=bits, max_delta) {
+            best = best.min(Candidate::new(colors, len, block));
+        }
     }
     // Shorter prefixes on the same line, clipped to their own colours, may need fewer bits.
-    for bits in 1..best.1.bits.max(1) {
+    for bits in 1..fewest_bits {
         let prefix = varbit::longest_prefix(len, |p| {
             let clipped = clip(line, &colors[..p]);
             varbit::endpoint_block(&colors[..p], start, clipped, bits..=bits, max_delta).ok()
         });
         if let Some((p, block)) = prefix {
-            if cost(p, bits) < cost(best.0, best.1.bits) {
-                best = (p, block);
+            best = best.min(Candidate::new(colors, p, block));
+        }
+    }
+    best.into_block()
+}
+
+/// A block for the first `len` colours and its rate-distortion cost per colour: stored bits
+/// (64 header bits + weights) plus [`ERROR_WEIGHT`] times the squared error (8-bit steps, summed
+/// over channels).
+struct Candidate {
+    len: usize,
+    block: VarbitBlock,
+    cost: f64,
+}
+
+impl Candidate {
+    fn new(colors: &[[u8; 3]], len: usize, block: VarbitBlock) -> Candidate {
+        let bits = 64 + usize::from(block.bits) * len;
+        let error = squared_error(&colors[..len], &block);
+        let cost = (bits as f64 + ERROR_WEIGHT * error as f64) / len as f64;
+        Candidate { len, block, cost }
+    }
+
+    /// The cheaper of two candidates, `self` on a tie.
+    fn min(self, other: Candidate) -> Candidate {
+        if other.cost < self.cost {
+            other
+        } else {
+            self
+        }
+    }
+
+    fn into_block(self) -> (usize, VarbitBlock) {
+        (self.len, self.block)
+    }
+}
+
+/// Sum over `colors` and channels of the squared difference (8-bit steps) to what the decoder
+/// returns for `block`.
+fn squared_error(colors: &[[u8; 3]], block: &VarbitBlock) -> u64 {
+    let squared = |c: &[u8; 3], d: [u8; 3]| -> u64 {
+        (0..3).map(|k| u64::from(c[k].abs_diff(d[k])).pow(2)).sum()
+    };
+    match block.kind {
+        BlockColors::Single(word) => {
+            let decoded = varbit::expand101210(word);
+            colors.iter().map(|c| squared(c, decoded)).sum()
+        }
+        BlockColors::Endpoints { a565, b565 } => {
+            let (a8, b8) = (varbit::expand565(a565), varbit::expand565(b565));
+            let bits = u32::from(block.bits);
+            colors
+                .iter()
+                .zip(&block.weights)
+                .map(|(c, &w)| squared(c, varbit::blend(a8, b8, u32::from(w), bits)))
+                .sum()
+        }
+    }
+}
+
+/// The least-squares line through `colors` (endpoints, channels in [0, 255]): through their mean
+/// along the principal axis of their covariance, clipped to their projections.
+fn least_squares_line(colors: &[[u8; 3]]) -> [[f32; 3]; 2] {
+    let n = colors.len() as f32;
+    let mut mean = [0.0f32; 3];
+    for c in colors {
+        for k in 0..3 {
+            mean[k] += f32::from(c[k]) / n;
+        }
+    }
+    let mut cov = [[0.0f32; 3]; 3];
+    for c in colors {
+        let d = [0, 1, 2].map(|k| f32::from(c[k]) - mean[k]);
+        for i in 0..3 {
+            for j in 0..3 {
+                cov[i][j] += d[i] * d[j];
             }
         }
     }
-    best
+    // Power iteration from the widest channel's axis, which is never orthogonal to the principal
+    // axis unless the covariance is degenerate.
+    let widest = (0..3)
+        .max_by(|&i, &j| cov[i][i].total_cmp(&cov[j][j]))
+        .unwrap_or(0);
+    let mut axis = [0.0f32; 3];
+    axis[widest] = 1.0;
+    for _ in 0..POWER_ITERATIONS {
+        let next = [0, 1, 2].map(|i| dot(cov[i], axis));
+        let len = dot(next, next).sqrt();
+        if len <= f32::EPSILON {
+            break;
+        }
+        axis = next.map(|v| v / len);
+    }
+    let end = [0, 1, 2].map(|k| mean[k] + axis[k]);
+    clip([mean, end], colors)
 }
 
 /// The part of `line` (endpoints, channels in [0, 255]) between the projections of `colors`.
@@ -376,5 +493,44 @@ mod tests {
             let end = blocks.get(j + 1).map_or(grey.len(), |n| n.start);
             assert!(end - b.start <= MAX_SEGMENT);
         }
+    }
+
+    #[test]
+    fn least_squares_line_spans_a_ramp_and_squared_error_matches_the_decoder() {
+        let ramp: Vec<[u8; 3]> = (0..100u8).map(|i| [i * 2, 200 - i, 50 + i / 2]).collect();
+        let [a, b] = least_squares_line(&ramp);
+        let (first, last) = (ramp[0].map(f32::from), ramp[99].map(f32::from));
+        let near = |p: [f32; 3], q: [f32; 3]| (0..3).all(|k| (p[k] - q[k]).abs() < 0.5);
+        assert!(
+            (near(a, first) && near(b, last)) || (near(a, last) && near(b, first)),
+            "{a:?} {b:?}"
+        );
+        // The error the block choice weighs is the decoder's.
+        let colors: Vec<u32> = (0..3000u32)
+            .map(|i| pack_rgb([(i * 7 % 251) as u8, (i / 13) as u8, (i * i % 97) as u8]))
+            .collect();
+        let blocks = encode_blocks(&colors, DEFAULT_THRESHOLD);
+        let decoded =
+            varbit::decode_all(&encode(&colors, DEFAULT_THRESHOLD), colors.len()).unwrap();
+        let expected: u64 = colors
+            .iter()
+            .zip(&decoded)
+            .map(|(&c, &d)| {
+                let (c, d) = (rgb(c), rgb(d));
+                (0..3)
+                    .map(|k| u64::from(c[k].abs_diff(d[k])).pow(2))
+                    .sum::<u64>()
+            })
+            .sum();
+        let rgb8: Vec<[u8; 3]> = colors.iter().map(|&c| rgb(c)).collect();
+        let weighed: u64 = blocks
+            .iter()
+            .enumerate()
+            .map(|(j, b)| {
+                let end = blocks.get(j + 1).map_or(colors.len(), |n| n.start);
+                squared_error(&rgb8[b.start..end], b)
+            })
+            .sum();
+        assert_eq!(weighed, expected);
     }
 }
