@@ -184,3 +184,47 @@ fn bad_input_is_an_error() {
     let empty = dedup.dedup(&[], &[], None).unwrap();
     assert!(empty.representatives.is_empty());
 }
+
+/// Size of the timing tests: `2^VOXDAG_HASH_TIMING_LOG2` table items (default 2^14 to stay fast
+/// in CI; the measurements in docs/hash-gc-dedup.md use 21). Dedup batches are a quarter of it.
+fn timing_log2() -> u32 {
+    std::env::var("VOXDAG_HASH_TIMING_LOG2")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(14)
+}
+
+/// Dedup of distinct 6-word keys in both team modes: exact answers, GPU pass times printed
+/// (`--nocapture`).
+#[test]
+fn team_modes_agree_on_distinct_keys_and_report_their_times() {
+    let ctx = common::gpu();
+    let count = 1usize << timing_log2().saturating_sub(2);
+    let mut rng = Rng(0xd15c);
+    let keys: Vec<u32> = (0..count * 6).map(|_| rng.next() as u32).collect();
+    let values: Vec<u32> = (0..count as u32).collect();
+    let expected = dedup_cpu(&keys, 6, &values).unwrap();
+    for team in TEAMS {
+        let dedup = GpuDedup::with_team(&ctx, 6, team).unwrap();
+        // A first run compiles the shaders (lavapipe compiles at the first dispatch).
+        dedup.dedup(&keys[..6], &values[..1], None).unwrap();
+        let mut profiler = voxdag::gpu::Profiler::new(&ctx).unwrap();
+        let out = dedup.dedup(&keys, &values, Some(&mut profiler)).unwrap();
+        assert!(
+            out.representatives == expected,
+            "{team:?}: representatives differ"
+        );
+        let times: Vec<String> = profiler
+            .passes()
+            .iter()
+            .map(|p| format!("{} {:.2} ms", p.name, p.gpu_ms))
+            .collect();
+        println!(
+            "dedup {count} distinct 6-word keys, {team:?} (team {}): {}",
+            dedup.team_size(),
+            times.join(", ")
+        );
+    }
+    assert_eq!(ctx.validation_errors(), 0, "validation messages (see log)");
+    assert_eq!(ctx.live_allocations(), 0, "leaked GPU allocations");
+}

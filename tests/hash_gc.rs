@@ -313,3 +313,53 @@ fn bench_hash_cli_runs_and_verifies_at_a_tiny_size() {
         .contains("| accel8 | 3 | 96 |"));
     assert!(image::open(&png).is_ok());
 }
+
+/// Size of the timing test: `2^VOXDAG_HASH_TIMING_LOG2` items (default 2^14 to stay fast in CI;
+/// the measurements in docs/hash-gc-dedup.md use 21).
+fn timing_log2() -> u32 {
+    std::env::var("VOXDAG_HASH_TIMING_LOG2")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(14)
+}
+
+/// GC of a table keeping every other item, both team modes, Atomic64 and Acceleration Hash 8:
+/// the GPU image equals the CPU reference's; GPU pass times printed (`--nocapture`).
+#[test]
+fn team_modes_collect_a_large_table_exactly_and_report_their_times() {
+    let ctx = common::gpu();
+    let count = 1usize << timing_log2();
+    let buckets = (count / 64) as u32; // two slabs per bucket
+    let mut rng = Rng(0x9c);
+    let batch = items(&mut rng, 2, count, &HashSet::new());
+    for variant in [HashVariant::Atomic64, HashVariant::AccelHash8] {
+        for team in TEAMS {
+            let mut table = GpuHashTable::new(&ctx, &config(variant, 2, buckets, team)).unwrap();
+            let (handles, _) = table.insert(&flat(&batch), None).unwrap();
+            let live: Vec<Handle> = handles.iter().step_by(2).copied().collect();
+            let mut expected = table.download().unwrap();
+            let cpu = collect_cpu(&mut expected, &live);
+            let gc = GpuGarbageCollector::new(&ctx, &table).unwrap();
+            // A first run compiles the shaders (lavapipe compiles at the first dispatch).
+            gc.collect(&mut table, &handles, None).unwrap();
+            let mut profiler = voxdag::gpu::Profiler::new(&ctx).unwrap();
+            let report = gc.collect(&mut table, &live, Some(&mut profiler)).unwrap();
+            assert_eq!(report, cpu, "{variant:?} {team:?}");
+            assert!(
+                table.download().unwrap() == expected,
+                "{variant:?} {team:?}: GPU table image differs from the CPU reference"
+            );
+            let times: Vec<String> = profiler
+                .passes()
+                .iter()
+                .map(|p| format!("{} {:.2} ms", p.name, p.gpu_ms))
+                .collect();
+            println!(
+                "gc {variant:?} {count} 2-word items in {buckets} buckets, {team:?} (team {}): {}",
+                gc.team_size(),
+                times.join(", ")
+            );
+        }
+    }
+    assert_clean(&ctx);
+}

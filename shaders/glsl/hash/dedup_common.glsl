@@ -143,8 +143,14 @@ bool slot_has_key(Words slab, uint s, Words keys, uint i) {
 // which orders the key loads after it. Single lanes are what `TeamMode::Auto` picks only there.)
 uint find_key(Words slab, Words keys, uint i, bool racing) {
     if (TEAM == 1u) {
+        // Claims take the lowest empty slot, so the used slots are a prefix: stop at an empty
+        // tag. (In pass 1 a slot claimed after that read is missed: a duplicate, allowed.)
         for (uint s = 0; s < SLOTS; ++s) {
-            if (slab.w[s] == TAG_READY && (!racing || atomicOr(slab.w[s], 0u) == TAG_READY)
+            uint tag = slab.w[s];
+            if (tag == TAG_EMPTY) {
+                break;
+            }
+            if (tag == TAG_READY && (!racing || atomicOr(slab.w[s], 0u) == TAG_READY)
                 && key_equals(slab, s, keys, i)) {
                 return s;
             }
