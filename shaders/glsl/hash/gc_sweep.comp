@@ -15,8 +15,9 @@ uint team_or(uint v) {
 }
 
 // Occupied slots of a slab: the occupancy mask, or (Atomic64) the non-zero prefixes, each lane
-// testing its slots of every chunk.
-uint occupied_slots(HashWords slab) {
+// testing its slots of every chunk (a 2+-word prefix read as one 64-bit word).
+uint occupied_slots(uint64_t slab_addr) {
+    HashWords slab = HashWords(slab_addr);
     if (VARIANT != HASH_ATOMIC64) {
         return slab.w[HASH_SLAB_OCCUPANCY];
     }
@@ -25,8 +26,8 @@ uint occupied_slots(HashWords slab) {
         uint slot = chunk + team_lane();
         bool occ = false;
         if (slot < HASH_SLAB_SLOTS) {
-            uint first = slab.w[hash_item_word(slot, 0u)];
-            occ = ITEM_WORDS == 1u ? first != 0u : (first | slab.w[hash_item_word(slot, 1u)]) != 0u;
+            occ = hash_prefix64() ? HashWords64(slab_addr).w[1u + slot] != 0ul
+                                  : slab.w[hash_item_word(slot, 0u)] != 0u;
         }
         occupied |= team_or(occ ? 1u << slot : 0u);
     }
@@ -48,10 +49,11 @@ void sweep_bucket(uint bucket) {
             break;
         }
         uint slab_index = link - 1u;
-        HashWords slab = HashWords(hash_slab_address(push.super_blocks, slab_index));
+        uint64_t slab_addr = hash_slab_address(push.super_blocks, slab_index);
+        HashWords slab = HashWords(slab_addr);
         uint marked = slab.w[HASH_SLAB_ACTIVE];
         uint next = slab.w[HASH_SLAB_NEXT];
-        uint occupied = occupied_slots(slab);
+        uint occupied = occupied_slots(slab_addr);
         uint garbage = occupied & ~marked;
         uint kept = occupied & marked;
         freed_items += bitCount(garbage);
