@@ -8,6 +8,10 @@ mod common;
 use std::collections::{HashMap, HashSet};
 
 use voxdag::hash::dedup::{dedup_cpu, hash_key, DedupError, GpuDedup};
+use voxdag::hash::TeamMode;
+
+/// Both team modes: the whole subgroup per input, and one lane per input.
+const TEAMS: [TeamMode; 2] = [TeamMode::Subgroup, TeamMode::SingleLane];
 
 /// splitmix64: a small seeded generator for reproducible batches.
 struct Rng(u64);
@@ -103,8 +107,11 @@ fn hash_key_matches_murmur_style_reference_values() {
 fn gpu_matches_cpu_on_random_batches() {
     let ctx = common::gpu();
     let mut rng = Rng(0x5eed);
-    for key_words in [1u32, 2, 3, 5, 8, 10] {
-        let dedup = GpuDedup::new(&ctx, key_words).unwrap();
+    for (team, key_words) in TEAMS
+        .into_iter()
+        .flat_map(|t| [1u32, 2, 3, 5, 8, 10].map(|w| (t, w)))
+    {
+        let dedup = GpuDedup::with_team(&ctx, key_words, team).unwrap();
         for (count, distinct) in [(1, 1), (3000, 1), (20_000, 2_000), (20_000, 19_000)] {
             let (keys, values) = batch(&mut rng, key_words as usize, count, distinct);
             let out = dedup.dedup(&keys, &values, None).unwrap();
@@ -122,7 +129,7 @@ fn gpu_matches_cpu_on_random_batches() {
                 .position(|(a, b)| a != b);
             assert_eq!(
                 wrong, 0,
-                "{key_words} words, {count} inputs: first wrong at {first:?}"
+                "{team:?}, {key_words} words, {count} inputs: first wrong at {first:?}"
             );
             check_properties(&keys, key_words as usize, &values, &out.representatives);
             let distinct_keys: HashSet<&[u32]> = keys.chunks_exact(key_words as usize).collect();
@@ -140,19 +147,24 @@ fn a_too_small_pool_grows_and_the_answer_stays_exact() {
     let ctx = common::gpu();
     let mut rng = Rng(77);
     // 64 buckets for ~25 000 distinct keys: long chains, and a single overflow slab to start with.
-    let dedup = GpuDedup::new(&ctx, 4)
-        .unwrap()
-        .with_buckets(64)
-        .with_initial_pool(1);
     let (keys, values) = batch(&mut rng, 4, 30_000, 25_000);
-    let out = dedup.dedup(&keys, &values, None).unwrap();
-    assert!(out.attempts > 1, "the single-slab pool should have run out");
-    check_properties(&keys, 4, &values, &out.representatives);
-    assert!(
-        out.representatives == dedup_cpu(&keys, 4, &values).unwrap(),
-        "representatives differ"
-    );
-    drop(dedup);
+    let expected = dedup_cpu(&keys, 4, &values).unwrap();
+    for team in TEAMS {
+        let dedup = GpuDedup::with_team(&ctx, 4, team)
+            .unwrap()
+            .with_buckets(64)
+            .with_initial_pool(1);
+        let out = dedup.dedup(&keys, &values, None).unwrap();
+        assert!(
+            out.attempts > 1,
+            "{team:?}: the single-slab pool should have run out"
+        );
+        check_properties(&keys, 4, &values, &out.representatives);
+        assert!(
+            out.representatives == expected,
+            "{team:?}: representatives differ"
+        );
+    }
     assert_eq!(ctx.validation_errors(), 0, "validation messages (see log)");
     assert_eq!(ctx.live_allocations(), 0, "leaked GPU allocations");
 }
@@ -171,4 +183,48 @@ fn bad_input_is_an_error() {
     ));
     let empty = dedup.dedup(&[], &[], None).unwrap();
     assert!(empty.representatives.is_empty());
+}
+
+/// Size of the timing tests: `2^VOXDAG_HASH_TIMING_LOG2` table items (default 2^14 to stay fast
+/// in CI; the measurements in docs/hash-gc-dedup.md use 21). Dedup batches are a quarter of it.
+fn timing_log2() -> u32 {
+    std::env::var("VOXDAG_HASH_TIMING_LOG2")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(14)
+}
+
+/// Dedup of distinct 6-word keys in both team modes: exact answers, GPU pass times printed
+/// (`--nocapture`).
+#[test]
+fn team_modes_agree_on_distinct_keys_and_report_their_times() {
+    let ctx = common::gpu();
+    let count = 1usize << timing_log2().saturating_sub(2);
+    let mut rng = Rng(0xd15c);
+    let keys: Vec<u32> = (0..count * 6).map(|_| rng.next() as u32).collect();
+    let values: Vec<u32> = (0..count as u32).collect();
+    let expected = dedup_cpu(&keys, 6, &values).unwrap();
+    for team in TEAMS {
+        let dedup = GpuDedup::with_team(&ctx, 6, team).unwrap();
+        // A first run compiles the shaders (lavapipe compiles at the first dispatch).
+        dedup.dedup(&keys[..6], &values[..1], None).unwrap();
+        let mut profiler = voxdag::gpu::Profiler::new(&ctx).unwrap();
+        let out = dedup.dedup(&keys, &values, Some(&mut profiler)).unwrap();
+        assert!(
+            out.representatives == expected,
+            "{team:?}: representatives differ"
+        );
+        let times: Vec<String> = profiler
+            .passes()
+            .iter()
+            .map(|p| format!("{} {:.2} ms", p.name, p.gpu_ms))
+            .collect();
+        println!(
+            "dedup {count} distinct 6-word keys, {team:?} (team {}): {}",
+            dedup.team_size(),
+            times.join(", ")
+        );
+    }
+    assert_eq!(ctx.validation_errors(), 0, "validation messages (see log)");
+    assert_eq!(ctx.live_allocations(), 0, "leaked GPU allocations");
 }

@@ -11,7 +11,18 @@ use std::sync::Arc;
 use voxdag::gpu::GpuContext;
 use voxdag::hash::gc::{collect_cpu, GcReport, GpuGarbageCollector};
 use voxdag::hash::layout::{bucket_of, hash_item};
-use voxdag::hash::{GpuHashTable, Handle, HashError, HashTableConfig, HashVariant};
+use voxdag::hash::{GpuHashTable, Handle, HashError, HashTableConfig, HashVariant, TeamMode};
+
+/// Both team modes: the whole subgroup per bucket, and one lane per bucket.
+const TEAMS: [TeamMode; 2] = [TeamMode::Subgroup, TeamMode::SingleLane];
+
+/// A table configuration with an explicit team mode.
+fn config(variant: HashVariant, words: u32, buckets: u32, team: TeamMode) -> HashTableConfig {
+    HashTableConfig {
+        team,
+        ..HashTableConfig::new(variant, words, buckets)
+    }
+}
 
 /// splitmix64: a small seeded generator for reproducible workloads.
 struct Rng(u64);
@@ -57,10 +68,16 @@ fn assert_clean(ctx: &Arc<GpuContext>) {
 }
 
 /// One full cycle on one layout: insert, collect (GPU vs CPU image), check, insert again.
-fn gc_cycle(ctx: &Arc<GpuContext>, variant: HashVariant, words: u32, rng: &mut Rng) {
-    let what = format!("{variant:?} {words} words");
+fn gc_cycle(
+    ctx: &Arc<GpuContext>,
+    variant: HashVariant,
+    words: u32,
+    team: TeamMode,
+    rng: &mut Rng,
+) {
+    let what = format!("{variant:?} {words} words {team:?}");
     let buckets = 48;
-    let mut table = GpuHashTable::new(ctx, &HashTableConfig::new(variant, words, buckets)).unwrap();
+    let mut table = GpuHashTable::new(ctx, &config(variant, words, buckets, team)).unwrap();
     let first = items(rng, words as usize, 3000, &HashSet::new());
     let (handles, _) = table.insert(&flat(&first), None).unwrap();
 
@@ -83,6 +100,16 @@ fn gc_cycle(ctx: &Arc<GpuContext>, variant: HashVariant, words: u32, rng: &mut R
     let mut expected = before.clone();
     let cpu_report = collect_cpu(&mut expected, &live);
     let gc = GpuGarbageCollector::new(ctx, &table).unwrap();
+    let lanes = if team == TeamMode::SingleLane {
+        1
+    } else {
+        ctx.info().subgroup_size
+    };
+    assert_eq!(
+        gc.team_size(),
+        lanes,
+        "{what}: the collector follows the table"
+    );
     let report = gc.collect(&mut table, &live, None).unwrap();
     assert_eq!(report, cpu_report, "{what}: GC report");
     assert_eq!(
@@ -157,9 +184,11 @@ fn gc_cycle(ctx: &Arc<GpuContext>, variant: HashVariant, words: u32, rng: &mut R
 fn gc_keeps_exactly_the_marked_items_for_every_layout() {
     let ctx = common::gpu();
     let mut rng = Rng(0x6c);
-    for variant in HashVariant::ALL {
-        for words in [1, 2, 3, 7, 10] {
-            gc_cycle(&ctx, variant, words, &mut rng);
+    for team in TEAMS {
+        for variant in HashVariant::ALL {
+            for words in [1, 2, 3, 7, 10] {
+                gc_cycle(&ctx, variant, words, team, &mut rng);
+            }
         }
     }
     assert_clean(&ctx);
@@ -168,16 +197,20 @@ fn gc_keeps_exactly_the_marked_items_for_every_layout() {
 #[test]
 fn gc_of_nothing_live_empties_the_table_but_keeps_first_slabs() {
     let ctx = common::gpu();
+    for team in TEAMS {
+        nothing_live(&ctx, team);
+    }
+    assert_clean(&ctx);
+}
+
+fn nothing_live(ctx: &Arc<GpuContext>, team: TeamMode) {
     let mut rng = Rng(3);
     let buckets = 16;
-    let mut table = GpuHashTable::new(
-        &ctx,
-        &HashTableConfig::new(HashVariant::AccelHash8, 4, buckets),
-    )
-    .unwrap();
+    let mut table =
+        GpuHashTable::new(ctx, &config(HashVariant::AccelHash8, 4, buckets, team)).unwrap();
     let batch = items(&mut rng, 4, 2000, &HashSet::new());
     let (stale, _) = table.insert(&flat(&batch), None).unwrap();
-    let gc = GpuGarbageCollector::new(&ctx, &table).unwrap();
+    let gc = GpuGarbageCollector::new(ctx, &table).unwrap();
     let report = gc.collect(&mut table, &[], None).unwrap();
     assert_eq!(report.freed_items, 2000);
     let image = table.download().unwrap();
@@ -203,21 +236,26 @@ fn gc_of_nothing_live_empties_the_table_but_keeps_first_slabs() {
     assert_eq!(report.bad_handles as usize, in_free_slabs);
     assert!(
         table.download().unwrap() == expected,
-        "stale handles changed the table"
+        "{team:?}: stale handles changed the table"
     );
-    drop((gc, table));
-    assert_clean(&ctx);
 }
 
 #[test]
 fn handles_beyond_the_pool_are_rejected() {
     let ctx = common::gpu();
-    let mut table =
-        GpuHashTable::new(&ctx, &HashTableConfig::new(HashVariant::TicketBoard, 2, 8)).unwrap();
-    let gc = GpuGarbageCollector::new(&ctx, &table).unwrap();
+    for team in TEAMS {
+        let mut table =
+            GpuHashTable::new(&ctx, &config(HashVariant::TicketBoard, 2, 8, team)).unwrap();
+        beyond_the_pool(&ctx, &mut table);
+    }
+    assert_clean(&ctx);
+}
+
+fn beyond_the_pool(ctx: &Arc<GpuContext>, table: &mut GpuHashTable) {
+    let gc = GpuGarbageCollector::new(ctx, table).unwrap();
     let beyond = Handle::new(table.pool().capacity_slabs() as u32 + 5, 0);
     assert!(matches!(
-        gc.collect(&mut table, &[beyond], None),
+        gc.collect(table, &[beyond], None),
         Err(HashError::InvalidArgument(_))
     ));
     // The sentinels are skipped, not errors.
@@ -226,11 +264,9 @@ fn handles_beyond_the_pool_are_rejected() {
         Handle(voxdag::hash::HANDLE_INVALID),
     ];
     assert_eq!(
-        gc.collect(&mut table, &skipped, None).unwrap(),
+        gc.collect(table, &skipped, None).unwrap(),
         GcReport::default()
     );
-    drop((gc, table));
-    assert_clean(&ctx);
 }
 
 /// `voxdag bench hash` end to end at a tiny size (the hidden `--fill-log2`): every variant, two
@@ -276,4 +312,54 @@ fn bench_hash_cli_runs_and_verifies_at_a_tiny_size() {
         .unwrap()
         .contains("| accel8 | 3 | 96 |"));
     assert!(image::open(&png).is_ok());
+}
+
+/// Size of the timing test: `2^VOXDAG_HASH_TIMING_LOG2` items (default 2^14 to stay fast in CI;
+/// the measurements in docs/hash-gc-dedup.md use 21).
+fn timing_log2() -> u32 {
+    std::env::var("VOXDAG_HASH_TIMING_LOG2")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(14)
+}
+
+/// GC of a table keeping every other item, both team modes, Atomic64 and Acceleration Hash 8:
+/// the GPU image equals the CPU reference's; GPU pass times printed (`--nocapture`).
+#[test]
+fn team_modes_collect_a_large_table_exactly_and_report_their_times() {
+    let ctx = common::gpu();
+    let count = 1usize << timing_log2();
+    let buckets = (count / 64) as u32; // two slabs per bucket
+    let mut rng = Rng(0x9c);
+    let batch = items(&mut rng, 2, count, &HashSet::new());
+    for variant in [HashVariant::Atomic64, HashVariant::AccelHash8] {
+        for team in TEAMS {
+            let mut table = GpuHashTable::new(&ctx, &config(variant, 2, buckets, team)).unwrap();
+            let (handles, _) = table.insert(&flat(&batch), None).unwrap();
+            let live: Vec<Handle> = handles.iter().step_by(2).copied().collect();
+            let mut expected = table.download().unwrap();
+            let cpu = collect_cpu(&mut expected, &live);
+            let gc = GpuGarbageCollector::new(&ctx, &table).unwrap();
+            // A first run compiles the shaders (lavapipe compiles at the first dispatch).
+            gc.collect(&mut table, &handles, None).unwrap();
+            let mut profiler = voxdag::gpu::Profiler::new(&ctx).unwrap();
+            let report = gc.collect(&mut table, &live, Some(&mut profiler)).unwrap();
+            assert_eq!(report, cpu, "{variant:?} {team:?}");
+            assert!(
+                table.download().unwrap() == expected,
+                "{variant:?} {team:?}: GPU table image differs from the CPU reference"
+            );
+            let times: Vec<String> = profiler
+                .passes()
+                .iter()
+                .map(|p| format!("{} {:.2} ms", p.name, p.gpu_ms))
+                .collect();
+            println!(
+                "gc {variant:?} {count} 2-word items in {buckets} buckets, {team:?} (team {}): {}",
+                gc.team_size(),
+                times.join(", ")
+            );
+        }
+    }
+    assert_clean(&ctx);
 }

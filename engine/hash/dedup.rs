@@ -5,6 +5,7 @@
 //!
 //! Three GPU passes over a slab table that lives for one batch (`shaders/glsl/hash/dedup_*.comp`,
 //! layout in `dedup_common.glsl`, mirrored by [`DedupLayout`]):
+//! One team per input in passes 1 and 2: the whole subgroup or a single lane ([`TeamMode`]).
 //! 1. insert: each input checks its bucket's first slab for an equal key (the cheap duplicate
 //!    check) and otherwise inserts its key; duplicates the check misses are inserted again;
 //! 2. min: each input finds the first entry with its key along the chain (the same entry for all
@@ -20,6 +21,7 @@ use std::sync::Arc;
 
 use rustc_hash::FxHashMap;
 
+use super::TeamMode;
 use crate::gpu::{
     shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, MemLocation,
     Profiler,
@@ -169,8 +171,11 @@ const COUNTER_OVERFLOW: usize = 2;
 pub struct GpuDedup {
     ctx: Arc<GpuContext>,
     layout: DedupLayout,
-    /// Invocations per workgroup (specialization constant 0): one subgroup.
+    /// Invocations per workgroup (specialization constant 0): one subgroup with subgroup teams,
+    /// `max(64, subgroup)` with single lanes.
     workgroup: u32,
+    /// Lanes working on one input (specialization constant 2): the subgroup size or 1.
+    team: u32,
     /// Overflow pool of the first attempt; `None`: [`DedupLayout::pool_slabs`].
     initial_pool: Option<u32>,
     /// Bucket count; `None`: [`DedupLayout::buckets`].
@@ -181,18 +186,39 @@ pub struct GpuDedup {
 }
 
 impl GpuDedup {
-    /// Compiles the passes for keys of `key_words` words (1..=[`MAX_KEY_WORDS`]).
+    /// Compiles the passes for keys of `key_words` words (1..=[`MAX_KEY_WORDS`]) with the
+    /// device's team mode ([`TeamMode::Auto`]).
     pub fn new(ctx: &Arc<GpuContext>, key_words: u32) -> Result<GpuDedup, DedupError> {
+        GpuDedup::with_team(ctx, key_words, TeamMode::Auto)
+    }
+
+    /// Compiles the passes for keys of `key_words` words with `team` lanes per input (the whole
+    /// subgroup, or a single lane: see [`TeamMode`]).
+    pub fn with_team(
+        ctx: &Arc<GpuContext>,
+        key_words: u32,
+        team: TeamMode,
+    ) -> Result<GpuDedup, DedupError> {
         if key_words == 0 || key_words > MAX_KEY_WORDS {
             return Err(DedupError::InvalidInput(format!(
                 "key size {key_words} words is outside 1..={MAX_KEY_WORDS}"
             )));
         }
         let subgroup = ctx.info().subgroup_size.max(1);
-        // One subgroup per workgroup: on lavapipe (Mesa 22.3) a workgroup whose subgroups leave
-        // the pass at different times (fewer inputs than subgroups) gave wrong ballots.
-        let workgroup = subgroup;
-        let spec = [workgroup, key_words];
+        let single_lane = match team {
+            TeamMode::Auto => ctx.info().device_type == "cpu",
+            TeamMode::Subgroup => false,
+            TeamMode::SingleLane => true,
+        };
+        // Subgroup teams: one subgroup per workgroup (on lavapipe, Mesa 22.3, a workgroup whose
+        // subgroups leave the pass at different times gave wrong ballots). Single lanes use no
+        // subgroup operation, so any workgroup size works.
+        let (workgroup, team) = if single_lane {
+            (subgroup.max(64), 1)
+        } else {
+            (subgroup, subgroup)
+        };
+        let spec = [workgroup, key_words, team];
         let pipeline = |name: &str, spirv: &[u32]| {
             ctx.create_compute_pipeline(&ComputePipelineDesc {
                 name,
@@ -206,6 +232,7 @@ impl GpuDedup {
             ctx: Arc::clone(ctx),
             layout: DedupLayout { key_words },
             workgroup,
+            team,
             initial_pool: None,
             buckets: None,
             insert: pipeline("dedup insert", shaders::HASH_DEDUP_INSERT)?,
@@ -226,6 +253,11 @@ impl GpuDedup {
     pub fn with_buckets(mut self, buckets: u32) -> GpuDedup {
         self.buckets = Some(buckets.max(1));
         self
+    }
+
+    /// Lanes working on one input: the subgroup size, or 1 (see [`TeamMode`]).
+    pub fn team_size(&self) -> u32 {
+        self.team
     }
 
     /// The slab layout of this table.
@@ -319,7 +351,8 @@ impl GpuDedup {
                 pool_slabs,
                 slab_words: self.layout.slab_words() as u32,
             };
-            let per_subgroup = [count.min(MAX_WORKGROUPS), 1, 1];
+            let teams_per_group = self.workgroup / self.team;
+            let per_team = [count.div_ceil(teams_per_group).min(MAX_WORKGROUPS), 1, 1];
             let per_invocation = [count.div_ceil(self.workgroup).min(MAX_WORKGROUPS), 1, 1];
             let mut cmd = self.ctx.begin_commands("dedup")?;
             cmd.fill_buffer(&table, 0);
@@ -327,7 +360,7 @@ impl GpuDedup {
             if let Some(p) = profiler.as_deref_mut() {
                 p.begin_pass(&mut cmd, "dedup insert");
             }
-            cmd.dispatch(&self.insert, per_subgroup, bytemuck::bytes_of(&push), None)?;
+            cmd.dispatch(&self.insert, per_team, bytemuck::bytes_of(&push), None)?;
             if let Some(p) = profiler.as_deref_mut() {
                 p.end_pass(&mut cmd);
             }
@@ -335,7 +368,7 @@ impl GpuDedup {
             if let Some(p) = profiler.as_deref_mut() {
                 p.begin_pass(&mut cmd, "dedup representatives");
             }
-            cmd.dispatch(&self.min, per_subgroup, bytemuck::bytes_of(&push), None)?;
+            cmd.dispatch(&self.min, per_team, bytemuck::bytes_of(&push), None)?;
             cmd.barrier();
             cmd.dispatch(
                 &self.resolve,

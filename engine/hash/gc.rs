@@ -5,7 +5,8 @@
 //! Two GPU passes (`shaders/glsl/hash/gc_{mark,sweep}.comp`) in one submission:
 //! 1. mark: each live handle sets its slot's bit in its slab's `active` word (header word 1,
 //!    reserved for GC by the table layout, zero between collections);
-//! 2. sweep: one subgroup per bucket walks the chain, clears every occupied slot whose bit is
+//! 2. sweep: one team per bucket (the table's [`TeamMode`](super::TeamMode): the whole subgroup,
+//!    or a single lane on CPU devices) walks the chain, clears every occupied slot whose bit is
 //!    clear (the slot's words, the occupancy bit, the secondary hash), resets `active` to zero,
 //!    and unlinks, zeroes and frees every slab left empty except the bucket's first.
 //!
@@ -146,16 +147,19 @@ pub fn collect_cpu(image: &mut TableImage, live: &[Handle]) -> GcReport {
 pub struct GpuGarbageCollector {
     ctx: Arc<GpuContext>,
     layout: SlabLayout,
-    /// Invocations per workgroup: one subgroup (the sweep walks one bucket per subgroup; on
-    /// lavapipe, Mesa 22.3, subgroups of one workgroup leaving a pass at different times gave
-    /// wrong ballots, so a workgroup is a single subgroup).
+    /// Invocations per workgroup: with subgroup teams one subgroup (on lavapipe, Mesa 22.3,
+    /// subgroups of one workgroup leaving a pass at different times gave wrong ballots), with
+    /// single lanes the table's workgroup (no subgroup operations).
     workgroup: u32,
+    /// Lanes sweeping one bucket: the subgroup size or 1.
+    team: u32,
     mark: ComputePipeline,
     sweep: ComputePipeline,
 }
 
 impl GpuGarbageCollector {
-    /// Compiles the passes for `table`'s layout (usable with any table of the same layout).
+    /// Compiles the passes for `table`'s layout and team size (usable with any table of the same
+    /// layout).
     pub fn new(
         ctx: &Arc<GpuContext>,
         table: &GpuHashTable,
@@ -166,10 +170,10 @@ impl GpuGarbageCollector {
                 "unsupported subgroup size {subgroup}"
             )));
         }
-        // The table's constants with a workgroup of one subgroup; the GC passes always work as a
-        // whole subgroup (team = subgroup size).
-        let [_, _, variant, item_words, _] = table.spec_constants();
-        let spec = [subgroup, subgroup, variant, item_words, subgroup];
+        // The table's constants; subgroup teams get a workgroup of one subgroup.
+        let [table_workgroup, _, variant, item_words, team] = table.spec_constants();
+        let workgroup = if team == 1 { table_workgroup } else { subgroup };
+        let spec = [workgroup, subgroup, variant, item_words, team];
         let pipeline = |name: &str, spirv: &[u32]| {
             ctx.create_compute_pipeline(&ComputePipelineDesc {
                 name,
@@ -182,10 +186,16 @@ impl GpuGarbageCollector {
         Ok(GpuGarbageCollector {
             ctx: Arc::clone(ctx),
             layout: table.layout(),
-            workgroup: subgroup,
+            workgroup,
+            team,
             mark: pipeline("hash gc mark", shaders::HASH_GC_MARK)?,
             sweep: pipeline("hash gc sweep", shaders::HASH_GC_SWEEP)?,
         })
+    }
+
+    /// Lanes sweeping one bucket: the subgroup size, or 1 (the table's team mode).
+    pub fn team_size(&self) -> u32 {
+        self.team
     }
 
     /// Collects `table`, keeping the items named by the host handles `live` (sentinels are
@@ -268,7 +278,9 @@ impl GpuGarbageCollector {
         if let Some(p) = profiler.as_deref_mut() {
             p.begin_pass(&mut cmd, "hash gc sweep");
         }
-        let sweep_groups = buckets.min(MAX_WORKGROUPS);
+        let sweep_groups = buckets
+            .div_ceil(self.workgroup / self.team)
+            .min(MAX_WORKGROUPS);
         cmd.dispatch(
             &self.sweep,
             [sweep_groups, 1, 1],
@@ -283,6 +295,12 @@ impl GpuGarbageCollector {
             p.resolve()?;
         }
         let status = table.pool().read_status()?;
+        if status.subgroup_mismatch != 0 {
+            return Err(HashError::SubgroupMismatch {
+                expected: self.team,
+                actual: status.subgroup_mismatch,
+            });
+        }
         if status.broken_chains != 0 {
             return Err(HashError::CorruptTable {
                 walks: status.broken_chains,

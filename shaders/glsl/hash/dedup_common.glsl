@@ -16,6 +16,9 @@
 
 layout(local_size_x_id = 0) in;
 layout(constant_id = 1) const uint KEY_WORDS = 1;
+// Lanes working on one input: the subgroup size (workgroups of one subgroup), or 1 (every lane
+// its own input, no subgroup operations or barriers: faster on CPU devices, see docs/hash.md).
+layout(constant_id = 2) const uint TEAM = 1;
 
 const uint SLOTS = 32;
 const uint TAG_EMPTY = 0;
@@ -85,16 +88,42 @@ uint hash_key(Words keys, uint i) {
     return h;
 }
 
-// One input per subgroup at a time: every lane runs the same control flow (atomics are issued by
-// one elected lane and their results broadcast), as in the hash table passes. Divergent
-// per-invocation atomics on the same slabs gave wrong results on lavapipe (Mesa 22.3).
+// One input per team at a time. With TEAM > 1 every lane of the subgroup runs the same control
+// flow (atomics are issued by one elected lane and their results broadcast), as in the hash table
+// passes: divergent per-invocation atomics on the same slabs gave wrong results on lavapipe
+// (Mesa 22.3) in the subgroup algorithm. With TEAM == 1 the team_* helpers are plain values.
 // (gl_NumSubgroups is derived from the workgroup size: lavapipe's own value was unreliable.)
-uint subgroup_index() {
+uint team_index() {
+    if (TEAM == 1u) return gl_GlobalInvocationID.x;
     return gl_WorkGroupID.x * (gl_WorkGroupSize.x / gl_SubgroupSize) + gl_SubgroupID;
 }
 
-uint subgroup_count() {
+uint team_count() {
+    if (TEAM == 1u) return gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     return gl_NumWorkGroups.x * (gl_WorkGroupSize.x / gl_SubgroupSize);
+}
+
+uint team_lane() {
+    return TEAM == 1u ? 0u : gl_SubgroupInvocationID;
+}
+
+bool team_leader() {
+    if (TEAM == 1u) return true;
+    return subgroupElect();
+}
+
+uint team_from_leader(uint v) {
+    if (TEAM == 1u) return v;
+    return subgroupBroadcastFirst(v);
+}
+
+// Whether `s` holds the key of input `i` (key words only; the caller checked the tag).
+bool key_equals(Words slab, uint s, Words keys, uint i) {
+    bool equal = true;
+    for (uint j = 0; j < KEY_WORDS; ++j) {
+        equal = equal && slab.w[KEYS_OFFSET + s * KEY_WORDS + j] == keys.w[i * KEY_WORDS + j];
+    }
+    return equal;
 }
 
 // Whether slot `s` of `slab` is ready and holds the key of input `i` (false for s >= 32).
@@ -103,19 +132,31 @@ uint subgroup_count() {
 bool slot_has_key(Words slab, uint s, Words keys, uint i) {
     bool ready = s < SLOTS && slab.w[min(s, SLOTS - 1)] == TAG_READY;
     memoryBarrierBuffer(); // the key words were published before the tag
-    if (!ready) {
-        return false;
-    }
-    bool equal = true;
-    for (uint j = 0; j < KEY_WORDS; ++j) {
-        equal = equal && slab.w[KEYS_OFFSET + s * KEY_WORDS + j] == keys.w[i * KEY_WORDS + j];
-    }
-    return equal;
+    return ready && key_equals(slab, s, keys, i);
 }
 
-// The lowest slot of `slab` holding the key of input `i` (scanned by the whole subgroup in chunks
-// of gl_SubgroupSize lanes), or SLOTS when there is none.
-uint find_key(Words slab, Words keys, uint i) {
+// The lowest slot of `slab` holding the key of input `i`, or SLOTS when there is none.
+// `racing`: other inputs may be writing keys into the slab (pass 1). A single lane has no barrier
+// to order its tag and key reads (it would be in divergent code): it re-reads a ready tag with an
+// atomic before trusting the key words, so the key it compares was published. (SPIR-V calls that
+// atomic relaxed; lavapipe emits every atomic as a sequentially consistent read-modify-write,
+// which orders the key loads after it. Single lanes are what `TeamMode::Auto` picks only there.)
+uint find_key(Words slab, Words keys, uint i, bool racing) {
+    if (TEAM == 1u) {
+        // Claims take the lowest empty slot, so the used slots are a prefix: stop at an empty
+        // tag. (In pass 1 a slot claimed after that read is missed: a duplicate, allowed.)
+        for (uint s = 0; s < SLOTS; ++s) {
+            uint tag = slab.w[s];
+            if (tag == TAG_EMPTY) {
+                break;
+            }
+            if (tag == TAG_READY && (!racing || atomicOr(slab.w[s], 0u) == TAG_READY)
+                && key_equals(slab, s, keys, i)) {
+                return s;
+            }
+        }
+        return SLOTS;
+    }
     for (uint chunk = 0; chunk < SLOTS; chunk += gl_SubgroupSize) {
         uvec4 hits = subgroupBallot(slot_has_key(slab, chunk + gl_SubgroupInvocationID, keys, i));
         if (subgroupBallotBitCount(hits) != 0) {

@@ -1,13 +1,22 @@
 #version 460
-// Duplicate-detection table, pass 1 of 3 (see dedup_common.glsl): one subgroup per input.
+// Duplicate-detection table, pass 1 of 3 (see dedup_common.glsl): one team per input.
 // The cheap duplicate check scans the bucket's first slab for a ready slot with an equal key; when
 // there is none the key is inserted into the first empty slot of the bucket's chain (claim the
 // tag, write the key, publish the tag). Keys whose duplicate sits in an overflow slab, or is being
 // written at the same time, are inserted again: pass 2 makes all copies agree.
 #include "hash/dedup_common.glsl"
 
-// Claims an empty slot of `slab` for the subgroup: SLOTS when the slab is full.
+// Claims an empty slot of `slab` for the team: SLOTS when the slab is full.
 uint claim_slot(Words slab) {
+    if (TEAM == 1u) {
+        for (uint s = 0; s < SLOTS; ++s) {
+            if (slab.w[s] == TAG_EMPTY
+                && atomicCompSwap(slab.w[s], TAG_EMPTY, TAG_WRITING) == TAG_EMPTY) {
+                return s;
+            }
+        }
+        return SLOTS;
+    }
     for (uint chunk = 0; chunk < SLOTS; chunk += gl_SubgroupSize) {
         uint s = chunk + gl_SubgroupInvocationID;
         uvec4 empty = subgroupBallot(s < SLOTS && slab.w[min(s, SLOTS - 1)] == TAG_EMPTY);
@@ -33,7 +42,7 @@ uint claim_slot(Words slab) {
 // linked its own first), kept for the next time.
 uint next_slab(Words slab, inout uint spare) {
     uint next = 0;
-    if (subgroupElect()) {
+    if (team_leader()) {
         next = atomicAdd(slab.w[NEXT_OFFSET], 0);
         if (next == NO_SLAB) {
             if (spare == NO_SLAB) {
@@ -56,15 +65,15 @@ uint next_slab(Words slab, inout uint spare) {
             }
         }
     }
-    spare = subgroupBroadcastFirst(spare);
-    return subgroupBroadcastFirst(next);
+    spare = team_from_leader(spare);
+    return team_from_leader(next);
 }
 
 void insert(uint i) {
     Words keys = Words(push.keys);
     uint slab_index = hash_key(keys, i) % push.buckets;
     Words slab = slab_at(slab_index);
-    if (find_key(slab, keys, i) != SLOTS) {
+    if (find_key(slab, keys, i, true) != SLOTS) {
         return;
     }
     uint spare = NO_SLAB;
@@ -73,13 +82,16 @@ void insert(uint i) {
         if (s != SLOTS) {
             // One lane writes the key and publishes it: no ordering between lanes needed (and
             // subgroupBarrier() acts on the whole workgroup on lavapipe).
-            bool leader = subgroupElect();
+            bool leader = team_leader();
             if (leader) {
                 for (uint j = 0; j < KEY_WORDS; ++j) {
                     slab.w[KEYS_OFFSET + s * KEY_WORDS + j] = keys.w[i * KEY_WORDS + j];
                 }
             }
-            memoryBarrierBuffer(); // by the whole subgroup: no barrier in divergent code
+            if (TEAM > 1u) {
+                memoryBarrierBuffer(); // by the whole subgroup: no barrier in divergent code
+            }
+            // (A single lane publishes with the atomic exchange alone: see find_key.)
             if (leader) {
                 atomicExchange(slab.w[s], TAG_READY);
                 atomicAdd(Words(push.counters).w[COUNTER_ENTRIES], 1);
@@ -91,7 +103,7 @@ void insert(uint i) {
             return;
         }
         if (chain_broken(links, slab_index)) {
-            if (subgroupElect()) {
+            if (team_leader()) {
                 atomicOr(Words(push.counters).w[COUNTER_OVERFLOW], OVERFLOW_BROKEN_CHAIN);
             }
             return;
@@ -101,7 +113,7 @@ void insert(uint i) {
 }
 
 void main() {
-    for (uint i = subgroup_index(); i < push.count; i += subgroup_count()) {
+    for (uint i = team_index(); i < push.count; i += team_count()) {
         insert(i);
     }
 }

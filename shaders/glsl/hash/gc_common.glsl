@@ -1,16 +1,19 @@
 // Shared by the garbage-collection passes gc_mark.comp and gc_sweep.comp (dissertation §4.4.3),
 // driven by engine/hash/gc.rs. They reuse the tables' push constants and specialization
 // constants (hash/common.glsl), with `push.items` naming the GC counters and `push.handles` the
-// live handles. Workgroups are one subgroup each (see engine/hash/gc.rs).
+// live handles. TEAM (spec constant 4) lanes work on one bucket: the whole subgroup (workgroups
+// of one subgroup, see engine/hash/gc.rs) or a single lane (no subgroup operations at all).
 #extension GL_EXT_buffer_reference : require
 #extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_arithmetic : require
 #extension GL_KHR_shader_subgroup_ballot : require
+#extension GL_KHR_shader_subgroup_vote : require
 
 #include "shared/hash_layout.h"
 #include "hash/common.glsl"
 #include "hash/alloc.glsl"
+#include "hash/slab.glsl"
 
 layout(push_constant, std430) uniform Push { HASH_PUSH_MEMBERS } push;
 

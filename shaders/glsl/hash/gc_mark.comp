@@ -2,7 +2,8 @@
 // Garbage collection, mark: every live handle sets its slot's bit in its slab's active word
 // (atomicOr). Sentinels (HASH_MISS, HASH_INVALID) are skipped; handles beyond the pool or in a
 // free slab (stale) are counted in GC_BAD_HANDLES and ignored: a bit in a free slab would break
-// the allocator's all-zero invariant. Loop bounds are uniform in the subgroup (no early exit).
+// the allocator's all-zero invariant. Loop bounds are uniform in the workgroup (no early exit);
+// one handle per invocation in both team modes, only the bad-handle count differs.
 #include "hash/gc_common.glsl"
 
 void main() {
@@ -25,9 +26,15 @@ void main() {
             HashWords slab = HashWords(hash_slab_address(push.super_blocks, slab_index));
             atomicOr(slab.w[HASH_SLAB_ACTIVE], 1u << (handle & 31u));
         }
-        uint bad = subgroupAdd(!sentinel && !valid ? 1u : 0u);
-        if (bad != 0u && subgroupElect()) {
-            atomicAdd(HashWords(push.items).w[GC_BAD_HANDLES], bad);
+        bool bad = !sentinel && !valid;
+        if (TEAM == 1u) {
+            // Single lanes: no subgroup operation (bad handles are rare, one atomic each).
+            if (bad) atomicAdd(HashWords(push.items).w[GC_BAD_HANDLES], 1u);
+        } else {
+            uint bad_count = subgroupAdd(bad ? 1u : 0u);
+            if (bad_count != 0u && subgroupElect()) {
+                atomicAdd(HashWords(push.items).w[GC_BAD_HANDLES], bad_count);
+            }
         }
     }
 }
