@@ -185,21 +185,12 @@ fn bad_input_is_an_error() {
     assert!(empty.representatives.is_empty());
 }
 
-/// Size of the timing tests: `2^VOXDAG_HASH_TIMING_LOG2` table items (default 2^14 to stay fast
-/// in CI; the measurements in docs/hash-gc-dedup.md use 21). Dedup batches are a quarter of it.
-fn timing_log2() -> u32 {
-    std::env::var("VOXDAG_HASH_TIMING_LOG2")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(14)
-}
-
-/// Dedup of distinct 6-word keys in both team modes: exact answers, GPU pass times printed
-/// (`--nocapture`).
+/// Dedup of distinct 6-word keys (a quarter of `common::hash_timing_log2` items) in both team
+/// modes: exact answers, GPU pass times printed (`--nocapture`).
 #[test]
 fn team_modes_agree_on_distinct_keys_and_report_their_times() {
     let ctx = common::gpu();
-    let count = 1usize << timing_log2().saturating_sub(2);
+    let count = 1usize << common::hash_timing_log2().saturating_sub(2);
     let mut rng = Rng(0xd15c);
     let keys: Vec<u32> = (0..count * 6).map(|_| rng.next() as u32).collect();
     let values: Vec<u32> = (0..count as u32).collect();

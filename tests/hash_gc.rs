@@ -314,21 +314,12 @@ fn bench_hash_cli_runs_and_verifies_at_a_tiny_size() {
     assert!(image::open(&png).is_ok());
 }
 
-/// Size of the timing test: `2^VOXDAG_HASH_TIMING_LOG2` items (default 2^14 to stay fast in CI;
-/// the measurements in docs/hash-gc-dedup.md use 21).
-fn timing_log2() -> u32 {
-    std::env::var("VOXDAG_HASH_TIMING_LOG2")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(14)
-}
-
 /// GC of a table keeping every other item, both team modes, Atomic64 and Acceleration Hash 8:
 /// the GPU image equals the CPU reference's; GPU pass times printed (`--nocapture`).
 #[test]
 fn team_modes_collect_a_large_table_exactly_and_report_their_times() {
     let ctx = common::gpu();
-    let count = 1usize << timing_log2();
+    let count = 1usize << common::hash_timing_log2();
     let buckets = (count / 64) as u32; // two slabs per bucket
     let mut rng = Rng(0x9c);
     let batch = items(&mut rng, 2, count, &HashSet::new());

@@ -155,3 +155,12 @@ pub fn check_golden(name: &str, image: &RenderOutput, channel_tolerance: u8, max
         );
     }
 }
+
+/// Size of the hash timing tests, as log2 of the table items: `VOXDAG_HASH_TIMING_LOG2` (default 14
+/// to stay fast in CI; the measurements in docs/hash-gc-dedup.md use 21).
+pub fn hash_timing_log2() -> u32 {
+    std::env::var("VOXDAG_HASH_TIMING_LOG2")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(14)
+}
