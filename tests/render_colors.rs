@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{check_golden, compare, gpu, shared_data};
+use common::{assert_renders_match, check_golden, gpu, shared_data};
 use indicatif::ProgressBar;
 use voxdag::attr::{ColorCodec, StoredColors};
 use voxdag::dag::{Svdag, VoxelIndex};
@@ -50,33 +50,6 @@ fn render_both(
     (gpu_image, cpu_image)
 }
 
-/// The tolerance of `tests/render_gpu.rs`: hit masks differ on at most 0.1% of the pixels, colours
-/// by at most 4 units on at most 0.4%.
-fn assert_gpu_matches_cpu(name: &str, gpu_image: &RenderOutput, cpu_image: &RenderOutput) {
-    let pixels = gpu_image.hits.len();
-    assert!(
-        cpu_image.hit_count() > pixels / 20,
-        "{name}: scene not in view"
-    );
-    let mismatched = gpu_image
-        .hits
-        .iter()
-        .zip(&cpu_image.hits)
-        .filter(|(g, c)| g != c)
-        .count();
-    let allowed = pixels / 1000;
-    assert!(
-        mismatched <= allowed,
-        "{name}: {mismatched} hit pixels differ"
-    );
-    let diff = compare(&cpu_image.rgba, &gpu_image.rgba, 4);
-    assert!(
-        diff.differing <= allowed * 4,
-        "{name}: {} pixels differ in colour by more than 4",
-        diff.differing
-    );
-}
-
 /// A 64^3 sphere shell painted by position, with speckles, so every chunk has distinct colours.
 fn painted_sphere() -> Svdag {
     let n = 64i32;
@@ -116,7 +89,7 @@ fn chunked_colours_render_like_their_decoded_values() {
         let stored = encode(&dag, codec, Some(3));
         assert!(stored.chunks.chunk_count() > 100);
         let (gpu_image, cpu_image) = render_both(&dag, &stored, &settings);
-        assert_gpu_matches_cpu(codec, &gpu_image, &cpu_image);
+        assert_renders_match(codec, &gpu_image, &cpu_image);
         // The CPU per-hit decode equals rendering the fully decoded colours.
         let mut decoded = dag.clone();
         decoded.colors = stored.chunks.decode_all().unwrap();
@@ -156,7 +129,7 @@ fn golden_textured_scenes_per_codec() {
             let stored = encode(&dag, codec, None);
             let (gpu_image, cpu_image) = render_both(&dag, &stored, &settings);
             let name = format!("{scene_name}/{codec}");
-            assert_gpu_matches_cpu(&name, &gpu_image, &cpu_image);
+            assert_renders_match(&name, &gpu_image, &cpu_image);
             match *codec {
                 "raw" => raw_image = Some(gpu_image.clone()),
                 "lossless" => assert_eq!(

@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{build_scene, check_golden, compare, gpu, repo, shared_data};
+use common::{build_scene, check_golden, gpu, repo, shared_data};
 use voxdag::dag::{Svdag, VoxelIndex};
 use voxdag::render::gpu::GpuRenderer;
 use voxdag::render::{render_cpu, Camera, RenderOutput, RenderSettings};
@@ -60,33 +60,12 @@ fn render_both(dag: &Svdag, settings: &RenderSettings) -> (RenderOutput, RenderO
     (gpu_image, cpu_image)
 }
 
-/// Hit masks may differ on at most 0.1% of the pixels (rays grazing exact edges); colours of pixels
-/// where both hit may differ by a few units from float evaluation order.
+/// Renders `dag` at 128x128 from the default camera on both paths and compares them
+/// (`common::assert_renders_match`).
 fn assert_gpu_matches_cpu(name: &str, dag: &Svdag) {
     let settings = RenderSettings::new(128, 128, Camera::frame(dag));
     let (gpu_image, cpu_image) = render_both(dag, &settings);
-    let hits = cpu_image.hits.iter().filter(|&&h| h != 0).count();
-    assert!(
-        hits > 128 * 128 / 20,
-        "{name}: the default camera should see the scene ({hits} hits)"
-    );
-    let mismatched = gpu_image
-        .hits
-        .iter()
-        .zip(&cpu_image.hits)
-        .filter(|(g, c)| g != c)
-        .count();
-    let allowed = 128 * 128 / 1000;
-    assert!(
-        mismatched <= allowed,
-        "{name}: {mismatched} hit-mask pixels differ (allowed {allowed})"
-    );
-    let diff = compare(&cpu_image.rgba, &gpu_image.rgba, 4);
-    assert!(
-        diff.differing <= allowed * 4,
-        "{name}: {} pixels differ in colour by more than 4",
-        diff.differing
-    );
+    common::assert_renders_match(name, &gpu_image, &cpu_image);
 }
 
 #[test]

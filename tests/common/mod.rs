@@ -164,3 +164,32 @@ pub fn hash_timing_log2() -> u32 {
         .and_then(|v| v.parse().ok())
         .unwrap_or(14)
 }
+
+/// GPU vs CPU render tolerance: the scene fills at least 5% of the image, hit masks differ on at
+/// most 0.1% of the pixels (rays grazing exact edges), colours by more than 4 units on at most 0.4%
+/// (float evaluation order).
+pub fn assert_renders_match(name: &str, gpu_image: &RenderOutput, cpu_image: &RenderOutput) {
+    let pixels = gpu_image.hits.len();
+    let hits = cpu_image.hit_count();
+    assert!(
+        hits > pixels / 20,
+        "{name}: the camera should see the scene ({hits} hits)"
+    );
+    let mismatched = gpu_image
+        .hits
+        .iter()
+        .zip(&cpu_image.hits)
+        .filter(|(g, c)| g != c)
+        .count();
+    let allowed = pixels / 1000;
+    assert!(
+        mismatched <= allowed,
+        "{name}: {mismatched} hit-mask pixels differ (allowed {allowed})"
+    );
+    let diff = compare(&cpu_image.rgba, &gpu_image.rgba, 4);
+    assert!(
+        diff.differing <= allowed * 4,
+        "{name}: {} pixels differ in colour by more than 4",
+        diff.differing
+    );
+}
