@@ -13,26 +13,14 @@ use voxdag::hash::TeamMode;
 /// Both team modes: the whole subgroup per input, and one lane per input.
 const TEAMS: [TeamMode; 2] = [TeamMode::Subgroup, TeamMode::SingleLane];
 
-/// splitmix64: a small seeded generator for reproducible batches.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    fn below(&mut self, n: u64) -> u64 {
-        self.next() % n
-    }
-}
-
 /// `count` keys of `key_words` words drawn from `distinct` random keys (some words zero, so
 /// that keys differing only in late words occur), and distinct shuffled values.
-fn batch(rng: &mut Rng, key_words: usize, count: usize, distinct: usize) -> (Vec<u32>, Vec<u32>) {
+fn batch(
+    rng: &mut common::Rng,
+    key_words: usize,
+    count: usize,
+    distinct: usize,
+) -> (Vec<u32>, Vec<u32>) {
     let pool: Vec<u32> = (0..distinct * key_words)
         .map(|_| match rng.below(4) {
             0 => 0,
@@ -106,7 +94,7 @@ fn hash_key_matches_murmur_style_reference_values() {
 #[test]
 fn gpu_matches_cpu_on_random_batches() {
     let ctx = common::gpu();
-    let mut rng = Rng(0x5eed);
+    let mut rng = common::Rng(0x5eed);
     for (team, key_words) in TEAMS
         .into_iter()
         .flat_map(|t| [1u32, 2, 3, 5, 8, 10].map(|w| (t, w)))
@@ -145,7 +133,7 @@ fn gpu_matches_cpu_on_random_batches() {
 #[test]
 fn a_too_small_pool_grows_and_the_answer_stays_exact() {
     let ctx = common::gpu();
-    let mut rng = Rng(77);
+    let mut rng = common::Rng(77);
     // 64 buckets for ~25 000 distinct keys: long chains, and a single overflow slab to start with.
     let (keys, values) = batch(&mut rng, 4, 30_000, 25_000);
     let expected = dedup_cpu(&keys, 4, &values).unwrap();
@@ -191,7 +179,7 @@ fn bad_input_is_an_error() {
 fn team_modes_agree_on_distinct_keys_and_report_their_times() {
     let ctx = common::gpu();
     let count = 1usize << common::hash_timing_log2().saturating_sub(2);
-    let mut rng = Rng(0xd15c);
+    let mut rng = common::Rng(0xd15c);
     let keys: Vec<u32> = (0..count * 6).map(|_| rng.next() as u32).collect();
     let values: Vec<u32> = (0..count as u32).collect();
     let expected = dedup_cpu(&keys, 6, &values).unwrap();

@@ -24,21 +24,13 @@ fn config(variant: HashVariant, words: u32, buckets: u32, team: TeamMode) -> Has
     }
 }
 
-/// splitmix64: a small seeded generator for reproducible workloads.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-}
-
 /// `count` distinct items of `words` words with a non-zero first word (storable by every layout).
-fn items(rng: &mut Rng, words: usize, count: usize, avoid: &HashSet<Vec<u32>>) -> Vec<Vec<u32>> {
+fn items(
+    rng: &mut common::Rng,
+    words: usize,
+    count: usize,
+    avoid: &HashSet<Vec<u32>>,
+) -> Vec<Vec<u32>> {
     let mut seen = avoid.clone();
     let mut out = Vec::with_capacity(count);
     while out.len() < count {
@@ -73,7 +65,7 @@ fn gc_cycle(
     variant: HashVariant,
     words: u32,
     team: TeamMode,
-    rng: &mut Rng,
+    rng: &mut common::Rng,
 ) {
     let what = format!("{variant:?} {words} words {team:?}");
     let buckets = 48;
@@ -183,7 +175,7 @@ fn gc_cycle(
 #[test]
 fn gc_keeps_exactly_the_marked_items_for_every_layout() {
     let ctx = common::gpu();
-    let mut rng = Rng(0x6c);
+    let mut rng = common::Rng(0x6c);
     for team in TEAMS {
         for variant in HashVariant::ALL {
             for words in [1, 2, 3, 7, 10] {
@@ -204,7 +196,7 @@ fn gc_of_nothing_live_empties_the_table_but_keeps_first_slabs() {
 }
 
 fn nothing_live(ctx: &Arc<GpuContext>, team: TeamMode) {
-    let mut rng = Rng(3);
+    let mut rng = common::Rng(3);
     let buckets = 16;
     let mut table =
         GpuHashTable::new(ctx, &config(HashVariant::AccelHash8, 4, buckets, team)).unwrap();
@@ -321,7 +313,7 @@ fn team_modes_collect_a_large_table_exactly_and_report_their_times() {
     let ctx = common::gpu();
     let count = 1usize << common::hash_timing_log2();
     let buckets = (count / 64) as u32; // two slabs per bucket
-    let mut rng = Rng(0x9c);
+    let mut rng = common::Rng(0x9c);
     let batch = items(&mut rng, 2, count, &HashSet::new());
     for variant in [HashVariant::Atomic64, HashVariant::AccelHash8] {
         for team in TEAMS {

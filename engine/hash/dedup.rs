@@ -21,6 +21,7 @@ use std::sync::Arc;
 
 use rustc_hash::FxHashMap;
 
+use super::layout::murmur_words;
 use super::TeamMode;
 use crate::gpu::{
     shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, MemLocation,
@@ -119,24 +120,9 @@ impl DedupLayout {
     }
 }
 
-/// Murmur3-style hash of a key (the same function as `hash_key` in `dedup_common.glsl`).
+/// Hash of a key (the same function as `hash_key` in `dedup_common.glsl`).
 pub fn hash_key(key: &[u32]) -> u32 {
-    let mut h = 0x9e37_79b9u32 ^ key.len() as u32;
-    for &word in key {
-        let k = word
-            .wrapping_mul(0xcc9e_2d51)
-            .rotate_left(15)
-            .wrapping_mul(0x1b87_3593);
-        h = (h ^ k)
-            .rotate_left(13)
-            .wrapping_mul(5)
-            .wrapping_add(0xe654_6b64);
-    }
-    h ^= h >> 16;
-    h = h.wrapping_mul(0x85eb_ca6b);
-    h ^= h >> 13;
-    h = h.wrapping_mul(0xc2b2_ae35);
-    h ^ (h >> 16)
+    murmur_words(0x9e37_79b9, key)
 }
 
 /// Push constants of the dedup passes (mirror of `Push` in `dedup_common.glsl`).

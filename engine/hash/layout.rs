@@ -197,10 +197,10 @@ pub fn fmix32(mut h: u32) -> u32 {
     h
 }
 
-/// Primary hash of an item: murmur3-style mix of every word (twin of `hash_item` in GLSL).
-pub fn hash_item(item: &[u32]) -> u32 {
-    let mut h = HASH_SEED ^ item.len() as u32;
-    for &w in item {
+/// Murmur3-style mix of every word of `words`, seeded with `seed ^ words.len()`, then `fmix32`.
+pub fn murmur_words(seed: u32, words: &[u32]) -> u32 {
+    let mut h = seed ^ words.len() as u32;
+    for &w in words {
         let k = w
             .wrapping_mul(0xcc9e_2d51)
             .rotate_left(15)
@@ -211,6 +211,11 @@ pub fn hash_item(item: &[u32]) -> u32 {
             .wrapping_add(0xe654_6b64);
     }
     fmix32(h)
+}
+
+/// Primary hash of an item (twin of `hash_item` in GLSL).
+pub fn hash_item(item: &[u32]) -> u32 {
+    murmur_words(HASH_SEED, item)
 }
 
 /// Bucket of an item with primary hash `hash`.
