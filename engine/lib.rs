@@ -8,6 +8,10 @@
 
 #![warn(missing_docs)]
 
+// First: its `gpu_shared!` macro is used by the rooms' `gpu_shared.rs` files below.
+#[macro_use]
+pub mod gpu_shared;
+
 pub mod atomic_file;
 pub mod attr;
 pub mod attr_gpu;

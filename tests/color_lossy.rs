@@ -11,6 +11,7 @@ use proptest::prelude::*;
 use voxdag::attr::varbit::{self, BlockColors, VarbitBlock, MACRO_BLOCK_COLORS};
 use voxdag::attr::{dado, AttrError};
 use voxdag::dag::Svdag;
+use voxdag::gpu::test_layouts::DecodeTestPush;
 use voxdag::gpu::{shaders, ComputePipelineDesc, GpuContext, MemLocation};
 use voxdag::scene::{self, ImportOptions};
 
@@ -156,7 +157,7 @@ fn decode_on_gpu(ctx: &Arc<GpuContext>, spirv: &[u32], words: &[u32], count: usi
             name: "test colour decode",
             spirv,
             spec_constants: &[],
-            push_constant_size: 20,
+            push_constant_size: std::mem::size_of::<DecodeTestPush>() as u32,
             storage_image: false,
         })
         .unwrap();
@@ -168,10 +169,13 @@ fn decode_on_gpu(ctx: &Arc<GpuContext>, spirv: &[u32], words: &[u32], count: usi
             MemLocation::GpuOnly,
         )
         .unwrap();
-    let mut push = Vec::with_capacity(20);
-    push.extend_from_slice(&chunk.address().to_le_bytes());
-    push.extend_from_slice(&out.address().to_le_bytes());
-    push.extend_from_slice(&(count as u32).to_le_bytes());
+    let push = bytemuck::bytes_of(&DecodeTestPush {
+        chunk_addr: chunk.address(),
+        out_addr: out.address(),
+        count: count as u32,
+        pad: 0,
+    })
+    .to_vec();
     let mut cmd = ctx.begin_commands("colour decode").unwrap();
     cmd.dispatch(
         &pipeline,

@@ -4,6 +4,7 @@
 use std::sync::Arc;
 
 use voxdag::dag::{Svdag, VoxelIndex};
+use voxdag::gpu::test_layouts::{FillPush, ImagePush};
 use voxdag::gpu::{
     shaders, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, GpuOptions, MemLocation,
     Profiler,
@@ -35,19 +36,20 @@ fn fill_pipeline(ctx: &Arc<GpuContext>, name: &str, spec: [u32; 2]) -> ComputePi
         name,
         spirv: shaders::TEST_FILL,
         spec_constants: &spec,
-        push_constant_size: 24,
+        push_constant_size: std::mem::size_of::<FillPush>() as u32,
         storage_image: false,
     })
     .unwrap()
 }
 
 fn fill_push(out: u64, aux: u64, count: u32, seed: u32) -> Vec<u8> {
-    let mut v = Vec::with_capacity(24);
-    v.extend_from_slice(&out.to_le_bytes());
-    v.extend_from_slice(&aux.to_le_bytes());
-    v.extend_from_slice(&count.to_le_bytes());
-    v.extend_from_slice(&seed.to_le_bytes());
-    v
+    bytemuck::bytes_of(&FillPush {
+        out_addr: out,
+        aux_addr: aux,
+        count,
+        seed,
+    })
+    .to_vec()
 }
 
 #[test]
@@ -271,14 +273,19 @@ fn storage_image_readback() {
                 name: "test image",
                 spirv: shaders::TEST_IMAGE,
                 spec_constants: &[],
-                push_constant_size: 12,
+                push_constant_size: std::mem::size_of::<ImagePush>() as u32,
                 storage_image: true,
             })
             .unwrap();
         // A fresh image reads back as zeros.
         assert!(ctx.read_image(&image).unwrap().iter().all(|&b| b == 0));
         let mut cmd = ctx.begin_commands("image").unwrap();
-        let push: Vec<u8> = [w, h, seed].iter().flat_map(|v| v.to_le_bytes()).collect();
+        let push = bytemuck::bytes_of(&ImagePush {
+            width: w,
+            height: h,
+            seed,
+        })
+        .to_vec();
         assert!(
             cmd.dispatch(&pipeline, [1, 1, 1], &push, None).is_err(),
             "image missing"

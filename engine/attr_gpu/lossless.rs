@@ -11,6 +11,7 @@
 
 use std::sync::Arc;
 
+use super::gpu_shared::{DecodePush, PlanPush, ScanPush, WritePush};
 use crate::attr::lossless::{self, LosslessVariant, BLOCK_COLORS, EXTRA_SHIFTS};
 use crate::gpu::{
     shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, MemLocation,
@@ -23,56 +24,6 @@ const WORKGROUP: u32 = 64;
 const SCAN_WORKGROUP: u32 = 256;
 /// Words per block in the plan buffer: header A, header B, size in words, unused.
 const PLAN_WORDS: u64 = 4;
-
-/// Push constants of `lossless_plan.comp`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-struct PlanPush {
-    colors: u64,
-    plans: u64,
-    count: u32,
-    variant: u32,
-}
-
-/// Push constants of `lossless_scan.comp`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-struct ScanPush {
-    plans: u64,
-    offsets: u64,
-    blocks: u32,
-    pad: u32,
-}
-
-/// Push constants of `lossless_write.comp`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-struct WritePush {
-    colors: u64,
-    plans: u64,
-    offsets: u64,
-    out_words: u64,
-    count: u32,
-    variant: u32,
-}
-
-/// Push constants of `lossless_decode.comp`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-struct DecodePush {
-    chunk: u64,
-    out_colors: u64,
-    count: u32,
-    pad: u32,
-}
-
-const _: () = {
-    assert!(std::mem::size_of::<PlanPush>() == 24);
-    assert!(std::mem::size_of::<ScanPush>() == 24);
-    assert!(std::mem::size_of::<WritePush>() == 40);
-    assert!(std::mem::offset_of!(WritePush, count) == 32);
-    assert!(std::mem::size_of::<DecodePush>() == 24);
-};
 
 /// The lossless codec's compute pipelines.
 pub struct LosslessGpu {

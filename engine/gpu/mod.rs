@@ -21,6 +21,10 @@ mod memory;
 mod pipeline;
 mod profiler;
 pub mod shaders;
+/// Push constants of the test shaders (`shaders/glsl/test/`, `shaders::TEST_*`), for the
+/// GPU-layer tests.
+#[path = "gpu_shared.rs"]
+pub mod test_layouts;
 
 pub use commands::Commands;
 pub use context::{DeviceInfo, GpuContext, GpuOptions};

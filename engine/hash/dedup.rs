@@ -21,6 +21,7 @@ use std::sync::Arc;
 
 use rustc_hash::FxHashMap;
 
+use super::gpu_shared::DedupPush;
 use super::layout::murmur_words;
 use super::TeamMode;
 use crate::gpu::{
@@ -124,29 +125,6 @@ impl DedupLayout {
 pub fn hash_key(key: &[u32]) -> u32 {
     murmur_words(0x9e37_79b9, key)
 }
-
-/// Push constants of the dedup passes (mirror of `Push` in `dedup_common.glsl`).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-struct DedupPush {
-    keys: u64,
-    values: u64,
-    table: u64,
-    canon: u64,
-    reps: u64,
-    counters: u64,
-    count: u32,
-    buckets: u32,
-    pool_slabs: u32,
-    slab_words: u32,
-}
-
-const _: () = {
-    assert!(std::mem::size_of::<DedupPush>() == 64);
-    assert!(std::mem::offset_of!(DedupPush, counters) == 40);
-    assert!(std::mem::offset_of!(DedupPush, count) == 48);
-    assert!(std::mem::offset_of!(DedupPush, pool_slabs) == 56);
-};
 
 /// Counters written by the passes (`counters[]` in `dedup_common.glsl`).
 const COUNTER_POOL_USED: usize = 0;

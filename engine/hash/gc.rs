@@ -16,6 +16,7 @@
 
 use std::sync::Arc;
 
+use super::gpu_shared::GcCounters;
 use super::layout::{
     Handle, HashVariant, SlabLayout, HANDLE_INVALID, HANDLE_MISS, SLABS_PER_SUPER_BLOCK,
     SLAB_ACTIVE, SLAB_NEXT, SLAB_OCCUPANCY, SLAB_SLOTS, SUPER_BLOCK_BITMASK_WORDS,
@@ -39,16 +40,6 @@ pub struct GcReport {
     pub freed_items: u32,
     /// Slabs unlinked and returned to the allocator.
     pub freed_slabs: u32,
-}
-
-/// GC counters written by the passes (mirror of `GC_*` in `gc_common.glsl`).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
-struct GcCounters {
-    bad_handles: u32,
-    freed_items: u32,
-    freed_slabs: u32,
-    pad: u32,
 }
 
 /// Word range of a slab inside its super block: (super block, first word).

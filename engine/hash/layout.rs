@@ -228,59 +228,9 @@ pub fn secondary_hash(hash: u32) -> u32 {
     fmix32(hash ^ SECONDARY_SALT)
 }
 
-/// Status block of a table on the GPU (twin of `HashStatus` in `hash_layout.h`).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct HashStatus {
-    /// Items an insert pass could not place because no free slab was found (retried by the host).
-    pub exhausted: u32,
-    /// Slabs currently allocated (incremented by `alloc_slab`, decremented by `free_slab`).
-    pub allocated_slabs: u32,
-    /// Items rejected by the layout (Atomic64 zero prefix) since the last reset.
-    pub invalid_items: u32,
-    /// Non-zero when a pass ran with a subgroup size other than the specialised one.
-    pub subgroup_mismatch: u32,
-    /// Chain walks a pass cut off after more links than the pool has slabs: a bucket chain
-    /// loops, the table is corrupt (the host reports [`super::HashError::CorruptTable`]).
-    pub broken_chains: u32,
-}
+pub use super::gpu_shared::{HashPush, HashStatus};
 
-/// Push constants of every hash pass (twin of `HashPush` in `hash_layout.h`, 56 bytes).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct HashPush {
-    /// Address of the super-block address table (`u64` per super block).
-    pub super_blocks: u64,
-    /// Address of the bucket heads (`u32` link per bucket).
-    pub heads: u64,
-    /// Address of the [`HashStatus`] block.
-    pub status: u64,
-    /// Address of the items (`item_words` words each).
-    pub items: u64,
-    /// Address of the handles (one `u32` per item).
-    pub handles: u64,
-    /// Number of items (or handles).
-    pub count: u32,
-    /// Number of buckets.
-    pub buckets: u32,
-    /// Number of memory blocks in the pool (super blocks x 16).
-    pub blocks: u32,
-    /// Seed for the random block choice (changes every pass).
-    pub seed: u32,
-}
-
-const _: () = {
-    assert!(std::mem::size_of::<HashStatus>() == 4 * STATUS_WORDS as usize);
-    assert!(std::mem::size_of::<HashPush>() == 56);
-    assert!(std::mem::offset_of!(HashPush, heads) == 8);
-    assert!(std::mem::offset_of!(HashPush, status) == 16);
-    assert!(std::mem::offset_of!(HashPush, items) == 24);
-    assert!(std::mem::offset_of!(HashPush, handles) == 32);
-    assert!(std::mem::offset_of!(HashPush, count) == 40);
-    assert!(std::mem::offset_of!(HashPush, buckets) == 44);
-    assert!(std::mem::offset_of!(HashPush, blocks) == 48);
-    assert!(std::mem::offset_of!(HashPush, seed) == 52);
-};
+const _: () = assert!(std::mem::size_of::<HashStatus>() == 4 * STATUS_WORDS as usize);
 
 #[cfg(test)]
 mod tests {

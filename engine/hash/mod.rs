@@ -14,6 +14,7 @@
 pub mod alloc;
 pub mod dedup;
 pub mod gc;
+mod gpu_shared;
 pub mod layout;
 pub mod reference;
 pub mod table;

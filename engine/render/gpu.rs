@@ -10,6 +10,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use super::cpu::ColorSource;
+use super::gpu_shared::PrimaryPush;
 use super::params::{RenderParams, FLAG_HAS_COLORS};
 use super::{RenderOutput, RenderSettings};
 use crate::attr::ColorFormat;
@@ -21,34 +22,6 @@ use crate::gpu::{
 
 /// Workgroup size of `primary.comp` (specialization constants 0 and 1).
 const WORKGROUP: [u32; 2] = [8, 8];
-
-/// Push constants of `primary.comp`: device addresses of its buffers, then the colour format.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-struct PrimaryPush {
-    params: u64,
-    words: u64,
-    node_voxels: u64,
-    color_words: u64,
-    chunk_starts: u64,
-    chunk_offsets: u64,
-    hits: u64,
-    color_format: u32,
-    chunk_count: u32,
-}
-
-const _: () = {
-    assert!(std::mem::size_of::<PrimaryPush>() == 64);
-    assert!(std::mem::offset_of!(PrimaryPush, params) == 0);
-    assert!(std::mem::offset_of!(PrimaryPush, words) == 8);
-    assert!(std::mem::offset_of!(PrimaryPush, node_voxels) == 16);
-    assert!(std::mem::offset_of!(PrimaryPush, color_words) == 24);
-    assert!(std::mem::offset_of!(PrimaryPush, chunk_starts) == 32);
-    assert!(std::mem::offset_of!(PrimaryPush, chunk_offsets) == 40);
-    assert!(std::mem::offset_of!(PrimaryPush, hits) == 48);
-    assert!(std::mem::offset_of!(PrimaryPush, color_format) == 56);
-    assert!(std::mem::offset_of!(PrimaryPush, chunk_count) == 60);
-};
 
 /// Renders SVDAGs on the GPU; holds the compiled pipeline.
 pub struct GpuRenderer {

@@ -7,6 +7,7 @@
 pub mod camera;
 pub mod cpu;
 pub mod gpu;
+mod gpu_shared;
 pub mod params;
 
 use std::io;

@@ -1,8 +1,5 @@
 //! `RenderParams`: the per-frame constants shared by the CPU reference renderer and the GPU
-//! (mirror of `shaders/glsl/shared/render_params.h`; keep both in sync, the asserts below check
-//! the Rust side against the header's documented offsets).
-
-use bytemuck::{Pod, Zeroable};
+//! (defined once in `render/gpu_shared.rs`, from which build.rs generates the GLSL members).
 
 use super::camera::{generate_ray, normalize, pixel_scale, CameraBasis};
 use super::{RenderError, RenderSettings};
@@ -21,51 +18,7 @@ pub const MAX_GPU_FRAMES: u32 = 16;
 /// f32 ulps of the largest coordinate, 0.25 voxel at 64K^3, 3e-5 voxel at 8^3).
 pub const SHADOW_EPSILON_PER_VOXEL_SIDE: f32 = 1.0 / 262144.0;
 
-/// Frame constants, std430/scalar layout: five `vec4`s then eight `uint`s (112 bytes).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
-pub struct RenderParams {
-    /// xyz: eye position (grid coordinates); w: `tan(fov_y / 2)`.
-    pub eye: [f32; 4],
-    /// xyz: unit camera right; w: pixel scale `2 tan(fov_y / 2) / height`.
-    pub right: [f32; 4],
-    /// xyz: unit camera up; w: shadow-ray offset along the normal (grid units).
-    pub up: [f32; 4],
-    /// xyz: unit viewing direction; w: 0 (reserved).
-    pub forward: [f32; 4],
-    /// xyz: unit direction towards the light; w: 0 (reserved).
-    pub light_dir: [f32; 4],
-    /// Image width in pixels.
-    pub width: u32,
-    /// Image height in pixels.
-    pub height: u32,
-    /// Grid side length N.
-    pub resolution: u32,
-    /// Level of the DAG root (`log2(N) - 2`).
-    pub root_level: u32,
-    /// `FLAG_HAS_COLORS | FLAG_SHADOWS`.
-    pub flags: u32,
-    /// Entries of the colour buffer (0 without colours); larger colour indices shade white.
-    pub color_count: u32,
-    /// Explicit padding to a 16-byte multiple.
-    pub _pad: [u32; 2],
-}
-
-const _: () = {
-    assert!(std::mem::size_of::<RenderParams>() == 112);
-    assert!(std::mem::offset_of!(RenderParams, eye) == 0);
-    assert!(std::mem::offset_of!(RenderParams, right) == 16);
-    assert!(std::mem::offset_of!(RenderParams, up) == 32);
-    assert!(std::mem::offset_of!(RenderParams, forward) == 48);
-    assert!(std::mem::offset_of!(RenderParams, light_dir) == 64);
-    assert!(std::mem::offset_of!(RenderParams, width) == 80);
-    assert!(std::mem::offset_of!(RenderParams, height) == 84);
-    assert!(std::mem::offset_of!(RenderParams, resolution) == 88);
-    assert!(std::mem::offset_of!(RenderParams, root_level) == 92);
-    assert!(std::mem::offset_of!(RenderParams, flags) == 96);
-    assert!(std::mem::offset_of!(RenderParams, color_count) == 100);
-    assert!(std::mem::offset_of!(RenderParams, _pad) == 104);
-};
+pub use super::gpu_shared::RenderParams;
 
 /// Default direction towards the light (normalised when used).
 pub const DEFAULT_LIGHT_DIR: [f32; 3] = [0.4, 1.0, 0.3];

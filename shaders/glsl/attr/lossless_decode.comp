@@ -14,12 +14,9 @@ layout(buffer_reference, std430, buffer_reference_align = 4) writeonly buffer De
 };
 
 // Mirror of `DecodePush` in engine/attr_gpu/lossless.rs (24 bytes).
-layout(push_constant, std430) uniform Push {
-    uint64_t chunk; // encoded words
-    uint64_t out_colors;
-    uint count;
-    uint pad;
-} push;
+#include "gen/attr.glsl"
+// Members: `DecodePush` in engine/attr_gpu/gpu_shared.rs.
+layout(push_constant, std430) uniform Push { DECODE_PUSH_MEMBERS } push;
 
 void main() {
     DecodedColors out_colors = DecodedColors(push.out_colors);

@@ -10,12 +10,9 @@ layout(local_size_x_id = 0) in;
 #include "attr/lossless_encode.glsl"
 
 // Mirror of `PlanPush` in engine/attr_gpu/lossless.rs (24 bytes).
-layout(push_constant, std430) uniform Push {
-    uint64_t colors; // count RGBA8 words
-    uint64_t plans;  // 4 words per block
-    uint count;
-    uint variant;
-} push;
+#include "gen/attr.glsl"
+// Members: `PlanPush` in engine/attr_gpu/gpu_shared.rs.
+layout(push_constant, std430) uniform Push { PLAN_PUSH_MEMBERS } push;
 
 void main() {
     uint blocks = (push.count + LOSSLESS_BLOCK_COLORS - 1u) / LOSSLESS_BLOCK_COLORS;

@@ -13,12 +13,9 @@ layout(local_size_x_id = 0) in;
 #include "attr/lossless_encode.glsl"
 
 // Mirror of `ScanPush` in engine/attr_gpu/lossless.rs (24 bytes).
-layout(push_constant, std430) uniform Push {
-    uint64_t plans;   // 4 words per block
-    uint64_t offsets; // blocks + 1 uint64
-    uint blocks;
-    uint pad;
-} push;
+#include "gen/attr.glsl"
+// Members: `ScanPush` in engine/attr_gpu/gpu_shared.rs.
+layout(push_constant, std430) uniform Push { SCAN_PUSH_MEMBERS } push;
 
 shared uint64_t range_sums[gl_WorkGroupSize.x];
 

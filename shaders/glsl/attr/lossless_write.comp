@@ -11,14 +11,9 @@ layout(local_size_x_id = 0) in;
 #include "attr/lossless_encode.glsl"
 
 // Mirror of `WritePush` in engine/attr_gpu/lossless.rs (40 bytes).
-layout(push_constant, std430) uniform Push {
-    uint64_t colors;  // count RGBA8 words
-    uint64_t plans;   // 4 words per block
-    uint64_t offsets; // blocks + 1 uint64
-    uint64_t out_words;
-    uint count;
-    uint variant;
-} push;
+#include "gen/attr.glsl"
+// Members: `WritePush` in engine/attr_gpu/gpu_shared.rs.
+layout(push_constant, std430) uniform Push { WRITE_PUSH_MEMBERS } push;
 
 // LSB-first bit writer: bits gather in `acc` and leave as whole words.
 LosslessEncWords out_words;

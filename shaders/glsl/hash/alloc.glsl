@@ -34,10 +34,10 @@ uint hash_alloc_in_block(uint64_t super_blocks, uint block, uint start_word) {
 uint hash_alloc_slab(uint64_t super_blocks, uint64_t status, uint blocks, uint rng) {
     uint slab = HASH_NO_SLAB;
     for (uint a = 0u; a < HASH_ALLOC_RANDOM_ATTEMPTS && slab == HASH_NO_SLAB; ++a) {
-        uint r = hash_fmix32(rng + a * 0x9e3779b9u);
+        uint r = murmur_fmix32(rng + a * 0x9e3779b9u);
         slab = hash_alloc_in_block(super_blocks, r % blocks, r >> 27);
     }
-    uint start = hash_fmix32(rng ^ 0x68e31da4u) % blocks;
+    uint start = murmur_fmix32(rng ^ 0x68e31da4u) % blocks;
     for (uint i = 0u; i < blocks && slab == HASH_NO_SLAB; ++i) {
         slab = hash_alloc_in_block(super_blocks, (start + i) % blocks, 0u);
     }

@@ -13,6 +13,9 @@ layout(constant_id = 4) const uint TEAM = 32;
 
 #define HASH_MAX_ITEM_WORDS 10
 
+#include "shared/murmur.glsl"
+#include "shared/team.glsl"
+
 layout(buffer_reference, std430, buffer_reference_align = 4) coherent buffer HashWords {
     uint w[];
 };
@@ -88,31 +91,17 @@ uint64_t hash_slab_address(uint64_t super_blocks, uint slab) {
          + uint64_t(local) * uint64_t(hash_slab_words() * 4u);
 }
 
-uint hash_fmix32(uint h) {
-    h ^= h >> 16;
-    h *= 0x85ebca6bu;
-    h ^= h >> 13;
-    h *= 0xc2b2ae35u;
-    h ^= h >> 16;
-    return h;
-}
-
-uint hash_rotl(uint x, uint r) {
-    return (x << r) | (x >> (32u - r));
-}
-
 // Primary hash: murmur3-style mix of every word (twin of layout::hash_item).
 uint hash_item(uint item[HASH_MAX_ITEM_WORDS]) {
     uint h = HASH_SEED ^ ITEM_WORDS;
     for (uint i = 0u; i < ITEM_WORDS; ++i) {
-        uint k = hash_rotl(item[i] * 0xcc9e2d51u, 15u) * 0x1b873593u;
-        h = hash_rotl(h ^ k, 13u) * 5u + 0xe6546b64u;
+        h = murmur_mix(h, item[i]);
     }
-    return hash_fmix32(h);
+    return murmur_fmix32(h);
 }
 
 uint hash_secondary(uint h) {
-    return hash_fmix32(h ^ HASH_SECONDARY_SALT);
+    return murmur_fmix32(h ^ HASH_SECONDARY_SALT);
 }
 
 // Whether the layout can store the item (Atomic64 reserves the all-zero prefix for "empty").

@@ -13,6 +13,10 @@
 #extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_ballot : require
 #extension GL_KHR_shader_subgroup_vote : require
+#extension GL_KHR_shader_subgroup_arithmetic : require
+
+#include "gen/hash.glsl"
+#include "shared/murmur.glsl"
 
 layout(local_size_x_id = 0) in;
 layout(constant_id = 1) const uint KEY_WORDS = 1;
@@ -44,19 +48,8 @@ layout(buffer_reference, std430, buffer_reference_align = 4) coherent buffer Wor
     uint w[];
 };
 
-// Mirror of `DedupPush` in engine/hash/dedup.rs (64 bytes).
-layout(push_constant, std430) uniform Push {
-    uint64_t keys;      // count * KEY_WORDS words
-    uint64_t values;    // count words
-    uint64_t table;     // (buckets + pool_slabs) * SLAB_WORDS words, zeroed
-    uint64_t canon;     // count words: slab * 32 + slot of the key's first entry
-    uint64_t reps;      // count words: the representative value per input
-    uint64_t counters;  // 3 words, zeroed
-    uint count;
-    uint buckets;
-    uint pool_slabs;
-    uint slab_words;    // SLAB_WORDS, as a plain value for 64-bit address arithmetic
-} push;
+// Members: `DedupPush` in engine/hash/gpu_shared.rs.
+layout(push_constant, std430) uniform Push { DEDUP_PUSH_MEMBERS } push;
 
 Words slab_at(uint slab) {
     return Words(push.table + uint64_t(slab) * uint64_t(push.slab_words) * 4ul);
@@ -68,54 +61,20 @@ bool chain_broken(uint links, uint slab) {
     return links > push.buckets + push.pool_slabs || slab >= push.buckets + push.pool_slabs;
 }
 
-uint rotl(uint x, uint r) {
-    return (x << r) | (x >> (32 - r));
-}
-
 // Murmur3-style hash of the key words of input `i` (the same function as `dedup::hash_key`).
 uint hash_key(Words keys, uint i) {
     uint h = 0x9e3779b9u ^ KEY_WORDS;
     for (uint j = 0; j < KEY_WORDS; ++j) {
-        uint k = keys.w[i * KEY_WORDS + j] * 0xcc9e2d51u;
-        k = rotl(k, 15) * 0x1b873593u;
-        h = rotl(h ^ k, 13) * 5u + 0xe6546b64u;
+        h = murmur_mix(h, keys.w[i * KEY_WORDS + j]);
     }
-    h ^= h >> 16;
-    h *= 0x85ebca6bu;
-    h ^= h >> 13;
-    h *= 0xc2b2ae35u;
-    h ^= h >> 16;
-    return h;
+    return murmur_fmix32(h);
 }
 
-// One input per team at a time. With TEAM > 1 every lane of the subgroup runs the same control
-// flow (atomics are issued by one elected lane and their results broadcast), as in the hash table
-// passes: divergent per-invocation atomics on the same slabs gave wrong results on lavapipe
-// (Mesa 22.3) in the subgroup algorithm. With TEAM == 1 the team_* helpers are plain values.
-// (gl_NumSubgroups is derived from the workgroup size: lavapipe's own value was unreliable.)
-uint team_index() {
-    if (TEAM == 1u) return gl_GlobalInvocationID.x;
-    return gl_WorkGroupID.x * (gl_WorkGroupSize.x / gl_SubgroupSize) + gl_SubgroupID;
-}
-
-uint team_count() {
-    if (TEAM == 1u) return gl_NumWorkGroups.x * gl_WorkGroupSize.x;
-    return gl_NumWorkGroups.x * (gl_WorkGroupSize.x / gl_SubgroupSize);
-}
-
-uint team_lane() {
-    return TEAM == 1u ? 0u : gl_SubgroupInvocationID;
-}
-
-bool team_leader() {
-    if (TEAM == 1u) return true;
-    return subgroupElect();
-}
-
-uint team_from_leader(uint v) {
-    if (TEAM == 1u) return v;
-    return subgroupBroadcastFirst(v);
-}
+// One input per team at a time (shared/team.glsl). With TEAM > 1 every lane of the subgroup
+// runs the same control flow (atomics are issued by one elected lane and their results
+// broadcast), as in the hash table passes: divergent per-invocation atomics on the same slabs
+// gave wrong results on lavapipe (Mesa 22.3) in the subgroup algorithm.
+#include "shared/team.glsl"
 
 // Whether `s` holds the key of input `i` (key words only; the caller checked the tag).
 bool key_equals(Words slab, uint s, Words keys, uint i) {

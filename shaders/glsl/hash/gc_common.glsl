@@ -17,7 +17,7 @@
 
 layout(push_constant, std430) uniform Push { HASH_PUSH_MEMBERS } push;
 
-// GC counters (`push.items`), mirror of `GcCounters` in engine/hash/gc.rs.
-#define GC_BAD_HANDLES 0u   // live handles naming no slab of the pool (ignored)
-#define GC_FREED_ITEMS 1u   // occupied slots cleared by the sweep
-#define GC_FREED_SLABS 2u   // slabs unlinked and returned to the allocator
+// GC counters at `push.items`; members: `GcCounters` in engine/hash/gpu_shared.rs.
+layout(buffer_reference, std430, buffer_reference_align = 4) coherent buffer GcCountersRef {
+    GC_COUNTERS_MEMBERS
+};

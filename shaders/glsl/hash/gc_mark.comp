@@ -1,7 +1,7 @@
 #version 460
 // Garbage collection, mark: every live handle sets its slot's bit in its slab's active word
 // (atomicOr). Sentinels (HASH_MISS, HASH_INVALID) are skipped; handles beyond the pool or in a
-// free slab (stale) are counted in GC_BAD_HANDLES and ignored: a bit in a free slab would break
+// free slab (stale) are counted in `bad_handles` and ignored: a bit in a free slab would break
 // the allocator's all-zero invariant. Loop bounds are uniform in the workgroup (no early exit);
 // one handle per invocation in both team modes, only the bad-handle count differs.
 #include "hash/gc_common.glsl"
@@ -29,11 +29,11 @@ void main() {
         bool bad = !sentinel && !valid;
         if (TEAM == 1u) {
             // Single lanes: no subgroup operation (bad handles are rare, one atomic each).
-            if (bad) atomicAdd(HashWords(push.items).w[GC_BAD_HANDLES], 1u);
+            if (bad) atomicAdd(GcCountersRef(push.items).bad_handles, 1u);
         } else {
             uint bad_count = subgroupAdd(bad ? 1u : 0u);
             if (bad_count != 0u && subgroupElect()) {
-                atomicAdd(HashWords(push.items).w[GC_BAD_HANDLES], bad_count);
+                atomicAdd(GcCountersRef(push.items).bad_handles, bad_count);
             }
         }
     }

@@ -103,8 +103,8 @@ void sweep_bucket(uint bucket) {
         link = next;
     }
     if (team_leader()) {
-        if (freed_items != 0u) atomicAdd(HashWords(push.items).w[GC_FREED_ITEMS], freed_items);
-        if (freed_slabs != 0u) atomicAdd(HashWords(push.items).w[GC_FREED_SLABS], freed_slabs);
+        if (freed_items != 0u) atomicAdd(GcCountersRef(push.items).freed_items, freed_items);
+        if (freed_slabs != 0u) atomicAdd(GcCountersRef(push.items).freed_slabs, freed_slabs);
     }
 }
 

@@ -237,7 +237,7 @@ void main() {
                 atomicAdd(HashStatus(push.status).invalid_items, 1u);
             }
         } else {
-            handle = insert_item(item, hash_item(item), hash_fmix32(push.seed ^ (i * 0x9e3779b9u)));
+            handle = insert_item(item, hash_item(item), murmur_fmix32(push.seed ^ (i * 0x9e3779b9u)));
         }
         if (team_leader()) {
             handles.w[i] = handle;

@@ -1,52 +1,7 @@
 // Cooperative slab scans shared by the search and insert passes: one item per team (the whole
 // subgroup, or a single lane when TEAM == 1), the 32 slots of a slab looked at in chunks of
-// TEAM lanes (lane l takes slot chunk + l). Include after hash/common.glsl; needs subgroup
-// ballot, vote and arithmetic. With TEAM == 1 the team_* helpers are plain values (the
-// subgroup branches are removed at specialization).
-
-// The team's lane index.
-uint team_lane() {
-    return TEAM == 1u ? 0u : gl_SubgroupInvocationID;
-}
-
-// Whether this lane is the team's leader (the one that runs scalar sections).
-bool team_leader() {
-    if (TEAM == 1u) return true;
-    return subgroupElect();
-}
-
-// The leader's value, in every lane of the team.
-uint team_from_leader(uint v) {
-    if (TEAM == 1u) return v;
-    return subgroupBroadcastFirst(v);
-}
-
-bool team_any(bool b) {
-    if (TEAM == 1u) return b;
-    return subgroupAny(b);
-}
-
-// Lowest team lane where b holds (only call when team_any(b)).
-uint team_first(bool b) {
-    if (TEAM == 1u) return 0u;
-    return subgroupBallotFindLSB(subgroupBallot(b));
-}
-
-uint team_min(uint v) {
-    if (TEAM == 1u) return v;
-    return subgroupMin(v);
-}
-
-// Index of this lane's team among all teams of the dispatch, and the number of teams.
-uint team_index() {
-    uint per_group = gl_WorkGroupSize.x / TEAM;
-    uint in_group = TEAM == 1u ? gl_LocalInvocationIndex : gl_SubgroupID;
-    return gl_WorkGroupID.x * per_group + in_group;
-}
-
-uint team_count() {
-    return gl_NumWorkGroups.x * (gl_WorkGroupSize.x / TEAM);
-}
+// TEAM lanes (lane l takes slot chunk + l). Include after hash/common.glsl (which brings the
+// team_* helpers of shared/team.glsl).
 
 // Whether the pass runs with the subgroup size it was specialised for (cooperative teams only).
 bool team_size_ok() {

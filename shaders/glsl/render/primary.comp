@@ -24,18 +24,8 @@ layout(buffer_reference, std430, buffer_reference_align = 4) writeonly buffer Hi
     uint h[];
 };
 
-// Mirror of `PrimaryPush` in engine/render/gpu.rs (64 bytes).
-layout(push_constant, std430) uniform Push {
-    uint64_t params;        // RenderParams
-    uint64_t words;         // Svdag::words
-    uint64_t node_voxels;   // VoxelIndex::node_voxels as uint
-    uint64_t color_words;   // ChunkedColors::words (encoded colour chunks)
-    uint64_t chunk_starts;  // ChunkedColors::chunk_starts (u64)
-    uint64_t chunk_offsets; // ChunkedColors::chunk_offsets (u64)
-    uint64_t hits;          // one uint per pixel
-    uint color_format;      // attr::ColorFormat id of every chunk
-    uint chunk_count;       // chunks
-} push;
+// Members: `PrimaryPush` in engine/render/gpu_shared.rs.
+layout(push_constant, std430) uniform Push { PRIMARY_PUSH_MEMBERS } push;
 
 #include "render/colors.glsl"
 

@@ -30,25 +30,12 @@
 #define HASH_SEED 0x9747b28cu
 #define HASH_SECONDARY_SALT 0x85ebca6bu
 
-// Status block (mirror of HashStatus).
-layout(buffer_reference, std430, buffer_reference_align = 4) coherent buffer HashStatus {
-    uint exhausted;          // items not inserted for lack of a free slab (host grows, retries)
-    uint allocated_slabs;    // +1 per hash_alloc_slab, -1 per hash_free_slab
-    uint invalid_items;      // items the layout cannot store (Atomic64 zero prefix)
-    uint subgroup_mismatch;  // gl_SubgroupSize seen when it differed from SUBGROUP_SIZE
-    uint broken_chains;      // walks cut off after more links than the pool has slabs (a cycle)
-};
+// Status block and push constants: members from `HashStatus` and `HashPush` in
+// engine/hash/gpu_shared.rs (generated into gen/hash.glsl by build.rs).
+#include "gen/hash.glsl"
 
-// Members of the push-constant block of every hash pass (mirror of HashPush, 56 bytes).
-#define HASH_PUSH_MEMBERS \
-    uint64_t super_blocks; /* uint64_t address per super block */ \
-    uint64_t heads;        /* uint link per bucket */ \
-    uint64_t status;       /* HashStatus */ \
-    uint64_t items;        /* item_words uints per item */ \
-    uint64_t handles;      /* one uint per item */ \
-    uint count; \
-    uint buckets; \
-    uint blocks;           /* memory blocks in the pool = super blocks * 16 */ \
-    uint seed;
+layout(buffer_reference, std430, buffer_reference_align = 4) coherent buffer HashStatus {
+    HASH_STATUS_MEMBERS
+};
 
 #endif

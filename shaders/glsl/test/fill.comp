@@ -14,12 +14,8 @@ layout(buffer_reference, std430, buffer_reference_align = 4) buffer Words {
     uint w[];
 };
 
-layout(push_constant, std430) uniform Push {
-    uint64_t out_addr;
-    uint64_t aux_addr;
-    uint count;
-    uint seed;
-} push;
+#include "gen/test.glsl"
+layout(push_constant, std430) uniform Push { FILL_PUSH_MEMBERS } push;
 
 void main() {
     Words out_words = Words(push.out_addr);

@@ -5,11 +5,8 @@ layout(local_size_x = 8, local_size_y = 8) in;
 
 layout(set = 0, binding = 0, rgba8) uniform writeonly image2D img;
 
-layout(push_constant, std430) uniform Push {
-    uint width;
-    uint height;
-    uint seed;
-} push;
+#include "gen/test.glsl"
+layout(push_constant, std430) uniform Push { IMAGE_PUSH_MEMBERS } push;
 
 void main() {
     uvec2 p = gl_GlobalInvocationID.xy;

@@ -11,11 +11,8 @@ layout(buffer_reference, std430, buffer_reference_align = 4) writeonly buffer Ou
     uint w[];
 };
 
-layout(push_constant, std430) uniform Push {
-    uint64_t chunk_addr;
-    uint64_t out_addr;
-    uint count;
-} push;
+#include "gen/test.glsl"
+layout(push_constant, std430) uniform Push { DECODE_TEST_PUSH_MEMBERS } push;
 
 void main() {
     uint i = gl_GlobalInvocationID.x;

@@ -1,0 +1,38 @@
+// Push constants of the test shaders (shaders/glsl/test/), defined once (see
+// engine/gpu_shared.rs): the engine expands this file into Rust structs, build.rs into
+// `gen/test.glsl`.
+gpu_shared! {
+    /// Push constants of `test/fill.comp`.
+    pub struct FillPush {
+        /// Output words (`count` of them).
+        pub out_addr: uint64_t,
+        /// Optional per-invocation subgroup sizes (0 = none).
+        pub aux_addr: uint64_t,
+        /// Words to write.
+        pub count: uint,
+        /// Added to every word.
+        pub seed: uint,
+    }
+
+    /// Push constants of `test/image.comp`.
+    pub struct ImagePush {
+        /// Image width in pixels.
+        pub width: uint,
+        /// Image height in pixels.
+        pub height: uint,
+        /// Mixed into every pixel.
+        pub seed: uint,
+    }
+
+    /// Push constants of the colour-decoder test shaders (`test/*_decode.comp`).
+    pub struct DecodeTestPush {
+        /// The encoded chunk's words.
+        pub chunk_addr: uint64_t,
+        /// One RGBA8 word per colour.
+        pub out_addr: uint64_t,
+        /// Colours to decode.
+        pub count: uint,
+        /// Padding to 8 bytes.
+        pub pad: uint,
+    }
+}

@@ -1,0 +1,55 @@
+// The structs the renderer shares with its shaders, defined once (see engine/gpu_shared.rs):
+// the engine expands this file into Rust structs, build.rs into `gen/render.glsl`.
+gpu_shared! {
+    /// Frame constants shared by the CPU reference renderer and the GPU (`struct RenderParams`
+    /// in `render_params.h`): five `vec4`s then eight `uint`s, 112 bytes.
+    #[derive(PartialEq)]
+    pub struct RenderParams {
+        /// xyz: eye position (grid coordinates); w: `tan(fov_y / 2)`.
+        pub eye: vec4,
+        /// xyz: unit camera right; w: pixel scale `2 tan(fov_y / 2) / height`.
+        pub right: vec4,
+        /// xyz: unit camera up; w: shadow-ray offset along the normal (grid units).
+        pub up: vec4,
+        /// xyz: unit viewing direction; w: 0 (reserved).
+        pub forward: vec4,
+        /// xyz: unit direction towards the light; w: 0 (reserved).
+        pub light_dir: vec4,
+        /// Image width in pixels.
+        pub width: uint,
+        /// Image height in pixels.
+        pub height: uint,
+        /// Grid side length N.
+        pub resolution: uint,
+        /// Level of the DAG root (`log2(N) - 2`).
+        pub root_level: uint,
+        /// `FLAG_HAS_COLORS | FLAG_SHADOWS`.
+        pub flags: uint,
+        /// Entries of the colour buffer (0 without colours); larger colour indices shade white.
+        pub color_count: uint,
+        /// Explicit padding to a 16-byte multiple.
+        pub _pad: [uint; 2],
+    }
+
+    /// Push constants of `primary.comp`: device addresses of its buffers, then the colour format.
+    pub(crate) struct PrimaryPush {
+        /// `RenderParams`.
+        pub(crate) params: uint64_t,
+        /// The DAG's words.
+        pub(crate) words: uint64_t,
+        /// Voxel count below each node (colour indexing).
+        pub(crate) node_voxels: uint64_t,
+        /// Encoded colour words.
+        pub(crate) color_words: uint64_t,
+        /// First voxel of each colour chunk.
+        pub(crate) chunk_starts: uint64_t,
+        /// Word offset of each colour chunk.
+        pub(crate) chunk_offsets: uint64_t,
+        /// One hit flag per pixel.
+        pub(crate) hits: uint64_t,
+        /// `ColorFormat` id.
+        pub(crate) color_format: uint,
+        /// Number of colour chunks.
+        pub(crate) chunk_count: uint,
+    }
+}
