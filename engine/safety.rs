@@ -76,7 +76,7 @@ fn address_space_limit() -> u64 {
     {
         return u64::MAX;
     }
-    limit.rlim_cur as u64
+    limit.rlim_cur
 }
 
 /// The default memory limit: the smallest of physical RAM, the cgroup limit and RLIMIT_AS.

@@ -167,7 +167,7 @@ fn mkfifo(path: &Path) {
     assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
 }
 
-/// 1. References outside the model's folder are never opened (the outside file is a FIFO: an
+/// Class 1: References outside the model's folder are never opened (the outside file is a FIFO: an
 /// open would block until the deadline); `--asset-root` widens the root; subfolders,
 /// percent-encoded names, data URIs and symlinked folders inside keep working.
 #[test]
@@ -247,7 +247,7 @@ fn asset_references_stay_inside_the_root() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }
 
-/// 1. OBJ `mtllib` and `map_Kd` outside the folder: one warning each, base colour, a result.
+/// Class 1: OBJ `mtllib` and `map_Kd` outside the folder: one warning each, base colour, a result.
 #[test]
 fn obj_references_outside_are_warnings() {
     let dir = tempfile::tempdir().unwrap();
@@ -275,7 +275,7 @@ fn obj_references_outside_are_warnings() {
     assert!(stderr.contains("absolute path"), "{stderr}");
 }
 
-/// 2. Requests sized by the input fail before allocating: a 2^32-1 vertex accessor, a `.vdag`
+/// Class 2: Requests sized by the input fail before allocating: a 2^32-1 vertex accessor, a `.vdag`
 /// header announcing 2^60 bytes, `/dev/zero`, and a build under an address-space limit.
 #[test]
 fn unbounded_requests_fail_cleanly() {
@@ -319,6 +319,13 @@ fn unbounded_requests_fail_cleanly() {
     std::fs::write(&big, &header).unwrap();
     expect(&run(&["verify", s(&big)]), 1, &["memory limit"]);
     expect(&run(&["verify", "/dev/zero"]), 1, &["bad magic"]);
+    // Models that are devices: refused, not read without end.
+    for name in ["z.vox", "z.obj", "z.gltf"] {
+        let link = dir.path().join(name);
+        std::os::unix::fs::symlink("/dev/zero", &link).unwrap();
+        let o = run(&["build", s(&link), "-r", "16", "-o", s(&out)]);
+        expect(&o, 1, &["not a regular file"]);
+    }
     // A FIFO that never ends: the header is all that is read.
     let fifo = dir.path().join("in.vdag");
     mkfifo(&fifo);
@@ -375,7 +382,7 @@ fn solid(n: u32) -> Svdag {
     dag
 }
 
-/// 3. A 1 KB file of 2^63 voxels: verify in seconds, export refused before writing; a solid
+/// Class 3: A 1 KB file of 2^63 voxels: verify in seconds, export refused before writing; a solid
 /// 65536^3 grid (2^48 voxels) renders on the CPU and the GPU.
 #[test]
 fn huge_valid_scene() {
@@ -469,7 +476,7 @@ fn fix_crc(b: &mut [u8]) {
     b[n - 4..].copy_from_slice(&crc.to_le_bytes());
 }
 
-/// 4. `verify` proves colours too: a colour changed under a repaired checksum fails; a file
+/// Class 4: `verify` proves colours too: a colour changed under a repaired checksum fails; a file
 /// without the digest section exits 2.
 #[test]
 fn verify_is_honest() {
@@ -497,7 +504,7 @@ fn verify_is_honest() {
     );
 }
 
-/// 5. Output files: SIGTERM mid-export leaves nothing; FIFOs are written in place; `-o -`;
+/// Class 5: Output files: SIGTERM mid-export leaves nothing; FIFOs are written in place; `-o -`;
 /// a symlink at the output is replaced, not followed; bad `--report` fails before the build.
 #[test]
 fn output_files_are_clean() {
@@ -617,7 +624,10 @@ fn output_files_are_clean() {
     expect(&o, 1, &["does not exist"]);
 }
 
-/// 6. Messages: malformed glTF is one error line without panic text; OS errors print once.
+/// An edit of the glTF JSON.
+type Patch = Box<dyn FnOnce(&mut serde_json::Value)>;
+
+/// Class 6: Messages: malformed glTF is one error line without panic text; OS errors print once.
 #[test]
 fn malformed_models_give_one_line() {
     let dir = tempfile::tempdir().unwrap();
@@ -625,7 +635,7 @@ fn malformed_models_give_one_line() {
     let o = run(&["-q", "build", "/no/such/model.obj", "-o", s(&out)]);
     let stderr = expect(&o, 1, &["os error 2"]);
     assert_eq!(stderr.matches("os error 2").count(), 1, "{stderr}");
-    let cases: Vec<(&str, Box<dyn FnOnce(&mut serde_json::Value)>)> = vec![
+    let cases: Vec<(&str, Patch)> = vec![
         (
             "",
             Box::new(|v| v["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = 99.into()),

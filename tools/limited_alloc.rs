@@ -93,6 +93,7 @@ unsafe impl GlobalAlloc for LimitedAlloc {
         take(layout.size());
         let p = System.alloc(layout);
         if p.is_null() {
+            LIVE.fetch_sub(layout.size(), Ordering::Relaxed);
             out_of_memory(layout.size(), true);
         }
         p
@@ -102,6 +103,7 @@ unsafe impl GlobalAlloc for LimitedAlloc {
         take(layout.size());
         let p = System.alloc_zeroed(layout);
         if p.is_null() {
+            LIVE.fetch_sub(layout.size(), Ordering::Relaxed);
             out_of_memory(layout.size(), true);
         }
         p
@@ -119,6 +121,7 @@ unsafe impl GlobalAlloc for LimitedAlloc {
         }
         let p = System.realloc(ptr, layout, new_size);
         if p.is_null() {
+            LIVE.fetch_sub(new_size.saturating_sub(old), Ordering::Relaxed);
             out_of_memory(new_size, true);
         }
         if new_size < old {

@@ -53,12 +53,15 @@ impl Hasher2 {
     }
 }
 
+/// Known (hash, voxel count) per (level, node handle).
+type Memo<N> = FxHashMap<(u32, N), ([u64; 2], u64)>;
+
 /// Hash and voxel count of a node of `view` at `level`, memoized per (level, handle).
 fn node_hash<V: TreeView>(
     view: &V,
     node: &V::Node,
     level: u32,
-    memo: &mut FxHashMap<(u32, V::Node), ([u64; 2], u64)>,
+    memo: &mut Memo<V::Node>,
 ) -> Result<([u64; 2], u64), EncodeError>
 where
     V::Node: Hash + Eq,

@@ -207,6 +207,11 @@ fn parse_stored_colors(
             ),
         ));
     }
+    // Decoded colours can outgrow the file (a compressed run): check before decoding.
+    crate::safety::check_memory(
+        format!("{}: decoding {color_count} colours", name.display()),
+        color_count.saturating_mul(8),
+    )?;
     // Every chunk must decode (in parallel); report the first failure with its byte offset.
     let decoded: Vec<Result<Vec<u32>, AttrError>> = (0..chunks_parsed.chunk_count())
         .into_par_iter()
