@@ -20,4 +20,5 @@ pub mod dag;
 pub mod gpu;
 pub mod hash;
 pub mod render;
+pub mod safety;
 pub mod scene;

@@ -7,9 +7,12 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
-use voxdag::atomic_file::write_atomic;
+use voxdag::atomic_file::{check_output_path, write_atomic};
 use voxdag::attr::{ColorCodec, LosslessVariant, StoredColors};
-use voxdag::dag::encode::{EncodedDag, SsvdagEncoding, TsvdagEncoding, TsvdagOptions, VoxelDigest};
+use voxdag::dag::digest::ContentDigest;
+use voxdag::dag::encode::{
+    DigestBuilder, EncodedDag, SsvdagEncoding, TsvdagEncoding, TsvdagOptions, VoxelDigest,
+};
 use voxdag::dag::{
     analyze_symmetry, export_vox, export_xyz_u32_file, DagStats, Svdag, SymmetryAnalysis,
     TransformSet, VdagFile, VoxelIndex,
@@ -98,6 +101,43 @@ pub fn parse_colors(text: &str) -> Result<ColorsArg, String> {
     ColorCodec::parse(text).map(|c| ColorsArg(Some(c)))
 }
 
+/// Parses a byte count: digits with an optional K, M, G or T suffix (powers of 1024).
+pub fn parse_bytes(text: &str) -> Result<u64, String> {
+    let t = text.trim();
+    let (digits, shift) = match t.char_indices().last() {
+        Some((i, c)) if c.is_ascii_alphabetic() => {
+            let shift = match c.to_ascii_uppercase() {
+                'K' => 10,
+                'M' => 20,
+                'G' => 30,
+                'T' => 40,
+                _ => return Err(format!("unknown size suffix {c:?} (K, M, G or T)")),
+            };
+            (&t[..i], shift)
+        }
+        _ => (t, 0),
+    };
+    let n: u64 = digits
+        .parse()
+        .map_err(|e| format!("bad byte count {text:?}: {e}"))?;
+    n.checked_mul(1u64 << shift)
+        .filter(|&b| b > 0)
+        .ok_or_else(|| format!("byte count {text:?} out of range (1..2^64)"))
+}
+
+/// `verify` found nothing wrong but could not prove the voxels (no content digest): the CLI
+/// prints this line and exits 2.
+#[derive(Debug)]
+pub struct Unproven(pub String);
+
+impl std::fmt::Display for Unproven {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Unproven {}
+
 /// Parses "x,y,z".
 pub fn parse_vec3(text: &str) -> Result<[f32; 3], String> {
     let parts: Vec<&str> = text.split(',').collect();
@@ -130,7 +170,7 @@ pub fn build_scene_digest(
     };
     let bar = progress_bar(quiet);
     let start = Instant::now();
-    let mut voxels = scene::import(&args.input, &options, &bar)?;
+    let mut voxels = scene::import_in(&args.input, &options, args.asset_root.as_deref(), &bar)?;
     bar.finish_and_clear();
     if args.no_colors || args.colors.0.is_none() {
         voxels.colors = Vec::new();
@@ -213,9 +253,9 @@ pub fn load_svdag_stored(path: &Path) -> Result<(Svdag, Option<StoredColors>)> {
 
 /// `voxdag build`.
 pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
-    check_output_dir(&args.output)?;
+    check_output(&args.output)?;
     if let Some(report) = &args.report {
-        check_output_dir(report)?;
+        check_output(report)?;
     }
     let (dag, report, digest) = build_scene_digest(args, quiet)?;
     let options = TsvdagOptions {
@@ -417,69 +457,64 @@ pub fn encoded_bytes(dag: &Svdag, analysis: &SymmetryAnalysis) -> Result<Vec<(St
     Ok(out)
 }
 
-/// `voxdag verify`: traverses the stored encoding and compares it with the build-time digest
-/// (and, with `--against`, voxel by voxel with another file).
+/// Most voxels `verify` enumerates to check a file that has only the v1 position checksum.
+const LEGACY_MAX_VOXELS: u64 = 1 << 32;
+
+/// `voxdag verify`: decodes the stored nodes and colours and compares them with the content
+/// digest written with the file (O(stored nodes) for svdag32 and ssvdag); `--against` also
+/// compares with another file, voxel by voxel where their digests differ. A file without a
+/// content digest is checked as far as it can be and reported [`Unproven`] (exit 2).
 pub fn verify(args: &VerifyArgs) -> Result<()> {
-    let file = VdagFile::load(&args.file)?;
+    let (file, stored) = VdagFile::load_with_digest(&args.file)?;
+    let name = args.file.display();
     let kind = file.encoded.kind().name();
     if let EncodedDag::Svdag32(dag) = &file.encoded {
         dag.validate()?;
     }
-    let digest = file
-        .encoded
-        .digest()
-        .with_context(|| format!("{}: traversing the {kind} encoding", args.file.display()))?;
+    let digest = ContentDigest::of(&file.encoded, &file.colors)
+        .with_context(|| format!("{name}: traversing the {kind} encoding"))?;
     if !file.colors.is_empty() && file.colors.len() as u64 != digest.voxels {
         bail!(
-            "{}: {} colours for {} decoded voxels",
-            args.file.display(),
+            "{name}: {} colours for {} decoded voxels",
             file.colors.len(),
             digest.voxels
         );
     }
-    match file.digest {
-        Some(stored) if stored != digest => bail!(
-            "{}: decoded {} voxels with checksum {:#010x}, built from {} voxels with checksum {:#010x}",
-            args.file.display(),
-            digest.voxels,
-            digest.crc32,
-            stored.voxels,
-            stored.crc32
-        ),
-        Some(_) => {}
-        None if args.against.is_none() => println!(
-            "{}: no build-time digest stored (v1 file): structure and decoding checked only",
-            args.file.display()
-        ),
-        None => {}
-    }
-    if let Some(other) = &args.against {
-        let reference = VdagFile::load(other)?;
-        let mut a = file.encoded.voxels();
-        let mut b = reference.encoded.voxels();
-        loop {
-            match (a.next().transpose()?, b.next().transpose()?) {
-                (None, None) => break,
-                (x, y) if x == y => continue,
-                (x, y) => {
-                    let code = match (x, y) {
-                        (Some(x), Some(y)) => x.min(y),
-                        (Some(x), None) => x,
-                        (None, Some(y)) => y,
-                        (None, None) => unreachable!(),
-                    };
-                    let [vx, vy, vz] = voxdag::scene::morton::decode(code);
-                    let here = file.encoded.contains(vx, vy, vz)?;
-                    bail!(
-                        "first differing voxel ({vx}, {vy}, {vz}): {} in {}, {} in {}",
-                        if here { "set" } else { "empty" },
-                        args.file.display(),
-                        if here { "empty" } else { "set" },
-                        other.display()
-                    );
-                }
-            }
+    if let Some(v1) = file.digest {
+        if v1.voxels != digest.voxels {
+            bail!(
+                "{name}: decoded {} voxels, built from {} voxels",
+                digest.voxels,
+                v1.voxels
+            );
         }
+    }
+    let unproven = match stored {
+        Some(s) if s.voxels != digest.voxels || s.dag != digest.dag => bail!(
+            "{name}: the decoded voxels ({} voxels, digest {}) differ from those it was \
+             written with ({} voxels, digest {})",
+            digest.voxels,
+            hex128(digest.dag),
+            s.voxels,
+            hex128(s.dag)
+        ),
+        Some(s) if s.colors != digest.colors => bail!(
+            "{name}: the decoded colours (hash {:016x}) differ from those it was written with \
+             (hash {:016x})",
+            digest.colors,
+            s.colors
+        ),
+        Some(_) => None,
+        None => Some(legacy_check(&file, &name.to_string(), digest.voxels)?),
+    };
+    if let Some(other) = &args.against {
+        compare_voxels(&file, &args.file, other)?;
+    }
+    if let Some(what) = unproven {
+        return Err(Unproven(format!(
+            "no digest: the voxels are not proven ({name}: {what})"
+        ))
+        .into());
     }
     // Loading already decoded every colour chunk; say what was checked.
     let colors = match &file.stored_colors {
@@ -489,15 +524,91 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
             s.chunks.chunk_count(),
             s.chunks.codec.name()
         ),
-        None => String::new(),
+        None if file.colors.is_empty() => String::new(),
+        None => format!(", {} colours", file.colors.len()),
     };
     println!(
-        "ok: {} ({kind}, {} voxels, checksum {:#010x}{colors})",
-        args.file.display(),
+        "ok: {name} ({kind}, {} voxels, digest {}{colors}, matching the content digest)",
         digest.voxels,
-        digest.crc32
+        hex128(digest.dag)
     );
     Ok(())
+}
+
+/// A 128-bit hash in hex.
+fn hex128(h: [u64; 2]) -> String {
+    format!("{:016x}{:016x}", h[1], h[0])
+}
+
+/// What `verify` can still check in a file without a content digest: the v1 position checksum
+/// (section 4) when there is one and the voxels are few enough to enumerate. Returns what was
+/// checked, for the "not proven" line.
+fn legacy_check(file: &VdagFile, name: &str, voxels: u64) -> Result<String> {
+    let Some(v1) = file.digest else {
+        return Ok("structure and decoding checked; no digest stored".into());
+    };
+    if voxels > LEGACY_MAX_VOXELS {
+        return Ok(format!(
+            "structure checked; {voxels} voxels are too many to enumerate against the v1 \
+             position checksum"
+        ));
+    }
+    let mut builder = DigestBuilder::default();
+    for code in file.encoded.voxels() {
+        builder.push(code?);
+    }
+    let d = builder.finish();
+    if d != v1 {
+        bail!(
+            "{name}: decoded {} voxels with checksum {:#010x}, built from {} voxels with \
+             checksum {:#010x}",
+            d.voxels,
+            d.crc32,
+            v1.voxels,
+            v1.crc32
+        );
+    }
+    Ok(format!(
+        "voxel positions match the v1 checksum {:#010x}; no content digest covers the colours \
+         and the DAG",
+        d.crc32
+    ))
+}
+
+/// `verify --against`: equal content digests prove equal voxels; otherwise the first differing
+/// voxel is found by enumerating both files.
+fn compare_voxels(file: &VdagFile, path: &Path, other: &Path) -> Result<()> {
+    let reference = VdagFile::load(other)?;
+    let a = ContentDigest::of(&file.encoded, &[])?;
+    let b = ContentDigest::of(&reference.encoded, &[])?;
+    if a == b {
+        return Ok(());
+    }
+    let mut x_it = file.encoded.voxels();
+    let mut y_it = reference.encoded.voxels();
+    loop {
+        match (x_it.next().transpose()?, y_it.next().transpose()?) {
+            (None, None) => return Ok(()),
+            (x, y) if x == y => continue,
+            (x, y) => {
+                let code = match (x, y) {
+                    (Some(x), Some(y)) => x.min(y),
+                    (Some(x), None) => x,
+                    (None, Some(y)) => y,
+                    (None, None) => unreachable!(),
+                };
+                let [vx, vy, vz] = voxdag::scene::morton::decode(code);
+                let here = file.encoded.contains(vx, vy, vz)?;
+                bail!(
+                    "first differing voxel ({vx}, {vy}, {vz}): {} in {}, {} in {}",
+                    if here { "set" } else { "empty" },
+                    path.display(),
+                    if here { "empty" } else { "set" },
+                    other.display()
+                );
+            }
+        }
+    }
 }
 
 /// A human-readable table of DAG statistics (with the transform columns when computed).
@@ -545,19 +656,73 @@ pub fn stats_table(file: &Path, stats: &DagStats, encoded: &[(String, u64)]) -> 
 }
 
 /// `voxdag export-voxels`.
+/// Exports know their size in advance: it is checked against `--max-output` and the free
+/// space of the target filesystem before anything is written.
 pub fn export_voxels(args: &ExportArgs) -> Result<()> {
+    check_output(&args.output)?;
     let dag = load_svdag(&args.file)?;
-    check_output_dir(&args.output)?;
+    let voxels = dag.voxel_count();
+    let size = match args.format {
+        ExportFormat::XyzU32 => voxels.saturating_mul(12),
+        // Header, size and voxel chunks, the 256-entry palette.
+        ExportFormat::Vox => voxels.saturating_mul(4).saturating_add(2048),
+    };
+    if let Some(max) = args.max_output {
+        if size > max {
+            bail!(
+                "{}: the export is {} ({voxels} voxels), more than --max-output {}",
+                args.output.display(),
+                voxdag::safety::human_bytes(size),
+                voxdag::safety::human_bytes(max)
+            );
+        }
+    }
+    if let Some(free) = free_space(&args.output) {
+        if size > free {
+            bail!(
+                "{}: the export is {} ({voxels} voxels), more than the {} free on its \
+                 filesystem",
+                args.output.display(),
+                voxdag::safety::human_bytes(size),
+                voxdag::safety::human_bytes(free)
+            );
+        }
+    }
     match args.format {
         ExportFormat::XyzU32 => export_xyz_u32_file(&dag, &args.output)?,
         ExportFormat::Vox => export_vox(&dag, &args.output)?,
     }
-    println!(
-        "{}: wrote {} voxels",
-        args.output.display(),
-        dag.voxel_count()
-    );
+    let line = format!("{}: wrote {voxels} voxels", args.output.display());
+    if args.output.as_os_str() == "-" {
+        eprintln!("{line}"); // stdout carries the export
+    } else {
+        println!("{line}");
+    }
     Ok(())
+}
+
+/// Free bytes for an unprivileged user on the filesystem a new file at `output` goes to;
+/// `None` for stdout and existing non-regular files (written in place) or when unknown.
+fn free_space(output: &Path) -> Option<u64> {
+    use std::os::unix::ffi::OsStrExt;
+    if output.as_os_str() == "-"
+        || std::fs::metadata(output).is_ok_and(|m| !m.is_file())
+        || output.starts_with("/dev")
+    {
+        return None;
+    }
+    let dir = output
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let c = std::ffi::CString::new(dir.as_os_str().as_bytes()).ok()?;
+    // SAFETY: `stat` is a plain struct statvfs fills in; `c` is a valid C string.
+    let mut stat: libc::statvfs = unsafe { std::mem::zeroed() };
+    if unsafe { libc::statvfs(c.as_ptr(), &mut stat) } != 0 {
+        return None;
+    }
+    // The old file, when replaced, frees its blocks only after the rename.
+    Some((stat.f_bavail as u64).saturating_mul(stat.f_frsize as u64))
 }
 
 /// Builds render settings from the CLI camera flags.
@@ -584,9 +749,9 @@ pub fn render(args: &RenderArgs) -> Result<()> {
             bail!("--fov {fov} out of range (1..=179 degrees)");
         }
     }
-    check_output_dir(&args.out)?;
+    check_output(&args.out)?;
     if let Some(trace) = &args.trace {
-        check_output_dir(trace)?;
+        check_output(trace)?;
     }
     let (dag, stored) = load_svdag_stored(&args.file)?;
     // Encoded colours are decoded per hit from their chunks, as an engine would keep them.
@@ -660,6 +825,7 @@ pub fn demo(args: &DemoArgs, quiet: bool) -> Result<()> {
         resolution: Some(args.resolution),
         vox_scale: 1,
         texture: None,
+        asset_root: None,
         no_colors: false,
         colors: ColorsArg(Some(ColorCodec::Lossless(LosslessVariant::Rgb888))),
         chunk_depth: None,
@@ -696,16 +862,10 @@ pub fn demo(args: &DemoArgs, quiet: bool) -> Result<()> {
     Ok(())
 }
 
-/// Fails early, before any work, when the output's folder does not exist.
-fn check_output_dir(output: &Path) -> Result<()> {
-    let dir = output
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    if !dir.is_dir() {
-        bail!("output folder {} does not exist", dir.display());
-    }
-    Ok(())
+/// Fails early, before any work, when an output cannot be written (missing or unwritable
+/// folder, a directory in its place).
+fn check_output(output: &Path) -> Result<()> {
+    Ok(check_output_path(output)?)
 }
 
 /// Writes pretty JSON atomically.

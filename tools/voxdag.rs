@@ -2,6 +2,7 @@
 
 mod bench;
 mod commands;
+mod limited_alloc;
 
 use std::path::PathBuf;
 
@@ -15,6 +16,10 @@ struct Cli {
     /// Hide progress bars.
     #[arg(long, short, global = true)]
     quiet: bool,
+    /// Memory limit in bytes (suffixes K, M, G, T: powers of 1024). Default: the smallest of
+    /// physical RAM, the cgroup limit and RLIMIT_AS. Input-sized allocations are checked first.
+    #[arg(long, global = true, value_parser = commands::parse_bytes)]
+    memory_limit: Option<u64>,
     #[command(subcommand)]
     command: Command,
 }
@@ -52,6 +57,10 @@ pub struct BuildArgs {
     /// Base-colour texture for OBJ files that have no material library.
     #[arg(long)]
     texture: Option<PathBuf>,
+    /// Folder the model's referenced files (buffers, textures, material libraries) may also
+    /// lie in, besides the model's own folder (see docs/security.md).
+    #[arg(long)]
+    asset_root: Option<PathBuf>,
     /// Drop voxel colours (same as `--colors none`).
     #[arg(long, conflicts_with = "colors")]
     no_colors: bool,
@@ -154,9 +163,12 @@ pub struct ExportArgs {
     /// Output format.
     #[arg(long, value_enum)]
     format: ExportFormat,
-    /// Output file.
+    /// Output file (`-`: stdout).
     #[arg(long, short)]
     output: PathBuf,
+    /// Refuse, before writing, an export larger than this many bytes (suffixes K, M, G, T).
+    #[arg(long, value_parser = commands::parse_bytes)]
+    max_output: Option<u64>,
 }
 
 /// Arguments of `voxdag render`.
@@ -204,8 +216,55 @@ pub struct DemoArgs {
     resolution: u32,
 }
 
+/// Counts heap bytes against the memory limit; any allocation failure is one line and exit 1.
+#[global_allocator]
+static ALLOCATOR: limited_alloc::LimitedAlloc = limited_alloc::LimitedAlloc;
+
+/// No panic text reaches the user: silent where the panic is caught and turned into an error
+/// (third-party parsers), otherwise one line, temporary files removed, exit 1.
+fn install_panic_hook() {
+    std::panic::set_hook(Box::new(|info| {
+        if voxdag::safety::catching_panics() {
+            return;
+        }
+        let payload = info.payload();
+        let message = payload
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| payload.downcast_ref::<String>().cloned())
+            .unwrap_or_default();
+        let at = info
+            .location()
+            .map(|l| format!(" at {}:{}", l.file(), l.line()))
+            .unwrap_or_default();
+        eprintln!("error: internal error: {message}{at}");
+        voxdag::atomic_file::remove_temp_files();
+        std::process::exit(1);
+    }));
+}
+
+/// The error and its causes on one line, each cause once (an OS error wrapped by an error
+/// that already prints it is not repeated).
+fn one_line(err: &anyhow::Error) -> String {
+    let mut line = err.to_string();
+    for cause in err.chain().skip(1) {
+        let text = cause.to_string();
+        if !line.contains(&text) {
+            line += ": ";
+            line += &text;
+        }
+    }
+    line.replace('\n', " ")
+}
+
 fn main() {
+    install_panic_hook();
+    voxdag::atomic_file::install_signal_handlers();
     let cli = Cli::parse();
+    if let Some(limit) = cli.memory_limit {
+        voxdag::safety::set_memory_limit(limit);
+    }
+    limited_alloc::set_limit(voxdag::safety::memory_limit());
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("voxdag=info"))
         .format_timestamp(None)
         .init();
@@ -219,8 +278,13 @@ fn main() {
         Command::Demo(args) => commands::demo(&args, cli.quiet),
     };
     if let Err(err) = result {
+        voxdag::atomic_file::remove_temp_files();
+        if let Some(unproven) = err.downcast_ref::<commands::Unproven>() {
+            eprintln!("{unproven}");
+            std::process::exit(2);
+        }
         // One line: the whole cause chain, no backtrace, no panic.
-        eprintln!("error: {err:#}");
+        eprintln!("error: {}", one_line(&err));
         std::process::exit(1);
     }
 }

@@ -9,6 +9,7 @@ use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::path::Path;
 
+use super::digest::{ContentDigest, CONTENT_DIGEST_LEN};
 use super::encode::{
     EncodeError, EncodedDag, EncodingKind, SsvdagEncoding, TsvdagEncoding, VoxelDigest,
 };
@@ -39,6 +40,8 @@ const SECTION_DIGEST: u32 = 4;
 const SECTION_PAYLOAD: u32 = 5;
 /// Section id: chunked encoded colours (colour format 2; layout in `docs/vdag-format.md`).
 const SECTION_CHUNKED_COLORS: u32 = 6;
+/// Section id: content digest (canonical DAG hash and colour hash, `dag::digest`).
+const SECTION_CONTENT_DIGEST: u32 = 7;
 /// Bytes of the fixed fields at the start of the chunked colour section.
 const CHUNKED_HEADER_LEN: u64 = 40;
 
@@ -204,6 +207,11 @@ fn parse_stored_colors(
             ),
         ));
     }
+    // Decoded colours can outgrow the file (a compressed run): check before decoding.
+    crate::safety::check_memory(
+        format!("{}: decoding {color_count} colours", name.display()),
+        color_count.saturating_mul(8),
+    )?;
     // Every chunk must decode (in parallel); report the first failure with its byte offset.
     let decoded: Vec<Result<Vec<u32>, AttrError>> = (0..chunks_parsed.chunk_count())
         .into_par_iter()
@@ -377,6 +385,42 @@ pub(crate) fn write_atomic(
     })
 }
 
+/// Reads a `.vdag` file, bounded: the header first, then never more than the file size the
+/// header states (checked against the memory limit first), so `/dev/zero`, a FIFO or a
+/// growing file cannot make it read or allocate without end.
+pub(crate) fn read_vdag(path: &Path) -> Result<Vec<u8>, DagError> {
+    use std::io::Read;
+    let io_err = |source: io::Error| DagError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut file = File::open(path).map_err(io_err)?;
+    let mut bytes = Vec::new();
+    (&mut file)
+        .take(HEADER_LEN)
+        .read_to_end(&mut bytes)
+        .map_err(io_err)?;
+    if bytes.len() < HEADER_LEN as usize {
+        return Ok(bytes); // too short: parse_header says so
+    }
+    if bytes[..8] != MAGIC {
+        return Err(DagError::Format {
+            path: path.to_path_buf(),
+            offset: 0,
+            reason: "not a .vdag file (bad magic)".into(),
+        });
+    }
+    let size = u64_at(&bytes, 32);
+    crate::safety::check_memory(format!("{}", path.display()), size)?;
+    // One byte more than announced, so that a longer file is detected.
+    let rest = (size + 1).saturating_sub(HEADER_LEN);
+    bytes
+        .try_reserve_exact(rest as usize)
+        .map_err(|e| io_err(io::Error::other(e.to_string())))?;
+    file.take(rest).read_to_end(&mut bytes).map_err(io_err)?;
+    Ok(bytes)
+}
+
 /// Reads little-endian integers from a byte slice whose length was checked by the caller.
 fn u32_at(b: &[u8], at: u64) -> u32 {
     let at = at as usize;
@@ -396,8 +440,8 @@ struct Parsed {
     level_count: u32,
     color_format: ColorFormat,
     color_count: u64,
-    /// `(offset, length)` of sections 1..=6.
-    sections: [Option<(u64, u64)>; 6],
+    /// `(offset, length)` of sections 1..=7.
+    sections: [Option<(u64, u64)>; 7],
 }
 
 /// Checks everything up to and including the section table (reading rules 1-3 of
@@ -501,7 +545,7 @@ fn parse_header(bytes: &[u8], name: &Path) -> Result<Parsed, DagError> {
     }
 
     // Section table: known ids at most once, inside the file, expected lengths, no overlap.
-    let mut sections: [Option<(u64, u64)>; 6] = [None; 6];
+    let mut sections: [Option<(u64, u64)>; 7] = [None; 7];
     let mut ranges: Vec<(u64, u64, u64)> = Vec::new(); // (start, end, table entry offset)
     for i in 0..section_count as u64 {
         let at = HEADER_LEN + i * ENTRY_LEN;
@@ -530,6 +574,7 @@ fn parse_header(bytes: &[u8], name: &Path) -> Result<Parsed, DagError> {
                 ))
             }
             SECTION_DIGEST => Some(16),
+            SECTION_CONTENT_DIGEST => Some(CONTENT_DIGEST_LEN),
             SECTION_PAYLOAD if !svdag32 => Some(count),
             SECTION_LEVELS | SECTION_WORDS | SECTION_PAYLOAD => {
                 return Err(err(
@@ -545,7 +590,7 @@ fn parse_header(bytes: &[u8], name: &Path) -> Result<Parsed, DagError> {
                 format!("section {id} is {length} bytes, expected {expected:?}"),
             ));
         }
-        if (1..=6).contains(&id) {
+        if (1..=7).contains(&id) {
             let slot = &mut sections[id as usize - 1];
             if slot.is_some() {
                 return Err(err(at, format!("section {id} listed twice")));
@@ -596,16 +641,17 @@ fn u32s(bytes: &[u8], (at, n): (u64, u64)) -> Vec<u32> {
 impl Svdag {
     /// Serialises the DAG in `.vdag` v1 format (encoding `svdag32`) to a writer.
     pub fn write_to(&self, w: &mut impl Write) -> io::Result<()> {
-        self.write_with(w, None, None)
+        self.write_with(w, None, None, None)
     }
 
-    /// `write_to`, with an optional digest section and optional encoded colours (which replace
+    /// `write_to`, with optional digest sections and optional encoded colours (which replace
     /// `self.colors` in the file).
     fn write_with(
         &self,
         w: &mut impl Write,
         digest: Option<&VoxelDigest>,
         stored: Option<&StoredColors>,
+        content: Option<&ContentDigest>,
     ) -> io::Result<()> {
         let (color_format, raw_colors, chunked) = color_sections(&self.colors, stored);
         let h = HeaderFields {
@@ -627,10 +673,15 @@ impl Svdag {
         if let Some(c) = chunked {
             sections.push((SECTION_CHUNKED_COLORS, c));
         }
+        let content = content.map(|c| c.to_bytes());
+        if let Some(c) = &content {
+            sections.push((SECTION_CONTENT_DIGEST, Data::Bytes(c)));
+        }
         write_file(w, &h, &sections)
     }
 
-    /// The `.vdag` v1 bytes of this DAG.
+    /// The `.vdag` v1 bytes of this DAG (without the content digest that [`Svdag::save`]
+    /// adds).
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut bytes = Vec::new();
         self.write_to(&mut bytes)
@@ -638,19 +689,20 @@ impl Svdag {
         bytes
     }
 
-    /// Saves the DAG as a `.vdag` v1 file, atomically (temporary file, fsync, rename).
+    /// Saves the DAG as a `.vdag` v1 file with its content digest (section 7), atomically
+    /// (temporary file, fsync, rename).
     pub fn save(&self, path: &Path) -> Result<(), DagError> {
-        write_atomic(path, |w| self.write_to(w))
+        let content = ContentDigest::of_svdag(self, &self.colors).map_err(|e| DagError::Io {
+            path: path.to_path_buf(),
+            source: io::Error::other(e.to_string()),
+        })?;
+        write_atomic(path, |w| self.write_with(w, None, None, Some(&content)))
     }
 
     /// Loads and validates a `.vdag` file whose encoding is `svdag32` (see [`VdagFile::load`]
     /// for the other encodings).
     pub fn load(path: &Path) -> Result<Svdag, DagError> {
-        let bytes = std::fs::read(path).map_err(|source| DagError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        Self::from_bytes(&bytes, path)
+        Self::from_bytes(&read_vdag(path)?, path)
     }
 
     /// Parses and validates `.vdag` bytes of encoding `svdag32`; `name` is used in error messages.
@@ -730,16 +782,20 @@ pub struct VdagFile {
 
 impl VdagFile {
     /// Serialises the file to a writer.
+    /// Every file written here stores the content digest (section 7) of its nodes and its
+    /// decoded colours.
     pub fn write_to(&self, w: &mut impl Write) -> io::Result<()> {
+        let content = ContentDigest::of(&self.encoded, &self.colors)
+            .map_err(|e| io::Error::other(format!("content digest: {e}")))?;
         let payload = match &self.encoded {
             EncodedDag::Svdag32(dag) => {
                 let stored = self.stored_colors.as_ref();
                 if dag.colors == self.colors {
-                    return dag.write_with(w, self.digest.as_ref(), stored);
+                    return dag.write_with(w, self.digest.as_ref(), stored, Some(&content));
                 }
                 let mut dag = dag.clone();
                 dag.colors = self.colors.clone();
-                return dag.write_with(w, self.digest.as_ref(), stored);
+                return dag.write_with(w, self.digest.as_ref(), stored, Some(&content));
             }
             other => other.payload(),
         };
@@ -764,6 +820,8 @@ impl VdagFile {
         if let Some(c) = chunked {
             sections.push((SECTION_CHUNKED_COLORS, c));
         }
+        let content = content.to_bytes();
+        sections.push((SECTION_CONTENT_DIGEST, Data::Bytes(&content)));
         write_file(w, &h, &sections)
     }
 
@@ -784,17 +842,33 @@ impl VdagFile {
 
     /// Loads and validates a file of any encoding (v1 svdag32 files included).
     pub fn load(path: &Path) -> Result<VdagFile, DagError> {
-        let bytes = std::fs::read(path).map_err(|source| DagError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-        Self::from_bytes(&bytes, path)
+        Ok(Self::load_with_digest(path)?.0)
+    }
+
+    /// [`VdagFile::load`] with the stored content digest (section 7), if any.
+    pub fn load_with_digest(path: &Path) -> Result<(VdagFile, Option<ContentDigest>), DagError> {
+        Self::from_bytes_with_digest(&read_vdag(path)?, path)
     }
 
     /// Parses and validates bytes; `name` is used in error messages.
     pub fn from_bytes(bytes: &[u8], name: impl AsRef<Path>) -> Result<VdagFile, DagError> {
+        Ok(Self::from_bytes_with_digest(bytes, name)?.0)
+    }
+
+    /// [`VdagFile::from_bytes`] with the stored content digest (section 7), if any.
+    pub fn from_bytes_with_digest(
+        bytes: &[u8],
+        name: impl AsRef<Path>,
+    ) -> Result<(VdagFile, Option<ContentDigest>), DagError> {
         let name = name.as_ref();
         let parsed = parse_header(bytes, name)?;
+        let content = parsed.sections[SECTION_CONTENT_DIGEST as usize - 1]
+            .map(|(at, n)| ContentDigest::from_bytes(&bytes[at as usize..(at + n) as usize]));
+        Ok((Self::from_parsed(bytes, name, parsed)?, content))
+    }
+
+    /// The file of a checked header and section table.
+    fn from_parsed(bytes: &[u8], name: &Path, parsed: Parsed) -> Result<VdagFile, DagError> {
         let err = |offset: u64, reason: String| DagError::Format {
             path: name.to_path_buf(),
             offset,

@@ -18,6 +18,7 @@
 
 mod build;
 pub mod canonical;
+pub mod digest;
 pub mod encode;
 mod export;
 mod file;
@@ -90,6 +91,9 @@ pub enum DagError {
         /// The underlying error.
         source: std::io::Error,
     },
+    /// An allocation sized by the input would pass the memory limit.
+    #[error(transparent)]
+    Memory(#[from] crate::safety::MemoryError),
     /// The export format cannot hold this DAG.
     #[error("{}: cannot export: {reason}", path.display())]
     Export {

@@ -111,7 +111,14 @@ impl GpuRenderer {
         }
         let index = VoxelIndex::new(dag);
         let mut counts = Vec::with_capacity(index.node_voxels.len());
+        // The counts only index colours: without colours they are never used, so a scene of
+        // 2^32 voxels or more (a solid 2^21 grid has 2^63) renders with zeros.
+        let colorless = match colors {
+            ColorSource::Chunked(c) => c.chunk_starts.last().map_or(true, |&n| n == 0),
+            ColorSource::Raw(raw) => raw.is_empty(),
+        };
         for (word, &n) in index.node_voxels.iter().enumerate() {
+            let n = if colorless { 0 } else { n };
             let n = u32::try_from(n).map_err(|_| {
                 invalid(format!(
                     "node at word {word} holds {n} voxels, more than a GPU u32 count"

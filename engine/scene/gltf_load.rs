@@ -13,7 +13,8 @@ use gltf::mesh::Mode;
 use gltf::texture::WrappingMode;
 
 use super::mesh::{Material, Mesh, Texture, Wrap};
-use super::{guard, SceneError};
+use super::{guard, percent_decode, texture_from_bytes, AssetRoots, SceneError};
+use crate::safety::check_memory;
 
 type Mat4 = [[f64; 4]; 4];
 
@@ -36,46 +37,6 @@ const IDENTITY: Mat4 = [
     [0.0, 0.0, 0.0, 1.0],
 ];
 
-/// Converts an image decoded by the gltf crate into an RGBA8 texture.
-fn to_texture(data: &gltf::image::Data) -> Option<Texture> {
-    use gltf::image::Format as F;
-    let px = &data.pixels;
-    let n = data.width as usize * data.height as usize;
-    let (stride, bytes): (usize, usize) = match data.format {
-        F::R8 => (1, 1),
-        F::R8G8 => (2, 1),
-        F::R8G8B8 => (3, 1),
-        F::R8G8B8A8 => (4, 1),
-        F::R16 => (1, 2),
-        F::R16G16 => (2, 2),
-        F::R16G16B16 => (3, 2),
-        F::R16G16B16A16 => (4, 2),
-        _ => return None,
-    };
-    if px.len() < n * stride * bytes {
-        return None;
-    }
-    let ch = |i: usize, c: usize| -> u8 {
-        // 16-bit: little-endian, take the high byte.
-        px[(i * stride + c) * bytes + bytes - 1]
-    };
-    let texels = (0..n)
-        .map(|i| match stride {
-            1 => {
-                let v = ch(i, 0);
-                [v, v, v, 255]
-            }
-            2 => {
-                let v = ch(i, 0);
-                [v, v, v, ch(i, 1)]
-            }
-            3 => [ch(i, 0), ch(i, 1), ch(i, 2), 255],
-            _ => [ch(i, 0), ch(i, 1), ch(i, 2), ch(i, 3)],
-        })
-        .collect();
-    Texture::new(data.width, data.height, texels)
-}
-
 /// Maps a glTF wrapping mode.
 fn wrap(m: WrappingMode) -> Wrap {
     match m {
@@ -85,23 +46,162 @@ fn wrap(m: WrappingMode) -> Wrap {
     }
 }
 
-/// Loads a .gltf or .glb file as a mesh.
-pub(crate) fn load_gltf(path: &Path) -> Result<Mesh, SceneError> {
+/// The bytes of a URI that is not a data URI, read under the asset roots (percent-decoded
+/// first; any scheme, `file:` included, is refused).
+fn read_uri(uri: &str, roots: &AssetRoots, what: &str) -> Result<Vec<u8>, String> {
+    let path_part = uri.split(['?', '#']).next().unwrap_or("");
+    if let Some(colon) = path_part.find(':') {
+        if !path_part[..colon].contains('/') {
+            return Err(format!(
+                "URI {uri:?}: the {:?} scheme is not allowed (only data: URIs and relative \
+                 paths inside the model's folder or --asset-root)",
+                &path_part[..colon]
+            ));
+        }
+    }
+    roots.read(&percent_decode(path_part)?, what)
+}
+
+/// Loads every buffer: GLB chunk, data URI or a file under the asset roots, each at least
+/// its declared length.
+fn load_buffers(
+    document: &gltf::Document,
+    mut blob: Option<Vec<u8>>,
+    roots: &AssetRoots,
+) -> Result<Vec<gltf::buffer::Data>, String> {
+    let mut buffers = Vec::new();
+    for buffer in document.buffers() {
+        let i = buffer.index();
+        check_memory(format!("glTF buffer {i}"), buffer.length() as u64)
+            .map_err(|e| e.to_string())?;
+        let data = match buffer.source() {
+            gltf::buffer::Source::Uri(uri) if !uri.starts_with("data:") => gltf::buffer::Data(
+                read_uri(uri, roots, "glTF buffer")
+                    .map_err(|e| format!("buffer {i} ({uri:?}) not opened: {e}"))?,
+            ),
+            source => gltf::buffer::Data::from_source_and_blob(source, None, &mut blob)
+                .map_err(|e| format!("buffer {i}: {e}"))?,
+        };
+        if data.len() < buffer.length() {
+            return Err(format!(
+                "buffer {i} holds {} bytes, shorter than its byteLength {}",
+                data.len(),
+                buffer.length()
+            ));
+        }
+        buffers.push(data);
+    }
+    Ok(buffers)
+}
+
+/// Checks the glTF 2.0 rules the reader relies on: views inside their buffers, accessors
+/// (and sparse parts) inside their views, and every accessor's size within the memory limit.
+fn validate_layout(document: &gltf::Document) -> Result<(), String> {
+    for view in document.views() {
+        let end = view.offset() as u64 + view.length() as u64;
+        let buffer = view.buffer();
+        if end > buffer.length() as u64 {
+            return Err(format!(
+                "buffer view {} ends at byte {end}, past buffer {} ({} bytes)",
+                view.index(),
+                buffer.index(),
+                buffer.length()
+            ));
+        }
+        if let Some(stride) = view.stride() {
+            if !(4..=252).contains(&stride) || stride % 4 != 0 {
+                return Err(format!(
+                    "buffer view {} has byteStride {stride} (glTF: 4..=252, a multiple of 4)",
+                    view.index()
+                ));
+            }
+        }
+    }
+    for accessor in document.accessors() {
+        let i = accessor.index();
+        let (count, elem) = (accessor.count() as u64, accessor.size() as u64);
+        check_memory(format!("glTF accessor {i}"), count.saturating_mul(elem))
+            .map_err(|e| e.to_string())?;
+        if let Some(view) = accessor.view() {
+            let stride = view.stride().map_or(elem, |s| s as u64);
+            if count > 0 {
+                let end = accessor.offset() as u64 + stride * (count - 1) + elem;
+                if end > view.length() as u64 {
+                    return Err(format!(
+                        "accessor {i} ({count} elements of {elem} bytes) runs to byte {end} of \
+                         buffer view {} ({} bytes)",
+                        view.index(),
+                        view.length()
+                    ));
+                }
+            }
+        }
+        if let Some(sparse) = accessor.sparse() {
+            let n = sparse.count() as u64;
+            if n > count {
+                return Err(format!(
+                    "accessor {i}: {n} sparse values for {count} elements"
+                ));
+            }
+            let (iv, vv) = (sparse.indices().view(), sparse.values().view());
+            let index_size = sparse.indices().index_type().size() as u64;
+            let ends = [
+                (sparse.indices().offset() as u64 + n * index_size, iv),
+                (sparse.values().offset() as u64 + n * elem, vv),
+            ];
+            for (end, view) in ends {
+                if end > view.length() as u64 {
+                    return Err(format!(
+                        "accessor {i}: sparse data runs to byte {end} of buffer view {} ({} \
+                         bytes)",
+                        view.index(),
+                        view.length()
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Decodes image `img` (base colour): a buffer view, a data URI, or a file under the roots.
+fn load_image(
+    img: &gltf::Image,
+    buffers: &[gltf::buffer::Data],
+    roots: &AssetRoots,
+) -> Result<Texture, String> {
+    let bytes: Vec<u8> = match img.source() {
+        gltf::image::Source::View { view, .. } => {
+            let data = &buffers[view.buffer().index()].0;
+            data[view.offset()..view.offset() + view.length()].to_vec()
+        }
+        gltf::image::Source::Uri { uri, .. } if uri.starts_with("data:") => {
+            gltf::buffer::Data::from_source(gltf::buffer::Source::Uri(uri), None)
+                .map_err(|e| e.to_string())?
+                .0
+        }
+        gltf::image::Source::Uri { uri, .. } => read_uri(uri, roots, "texture")?,
+    };
+    texture_from_bytes(&bytes)
+}
+
+/// Loads a .gltf or .glb file as a mesh; external files must lie under `roots`.
+pub(crate) fn load_gltf(path: &Path, assets: &AssetRoots) -> Result<Mesh, SceneError> {
     let parse_err = |message: String| SceneError::Parse {
         path: path.to_path_buf(),
         format: "gltf",
         message,
     };
-    let bytes = std::fs::read(path).map_err(|e| SceneError::Io {
+    std::fs::metadata(path).map_err(|e| SceneError::Io {
         path: path.to_path_buf(),
         source: e,
     })?;
-    let base = path.parent().unwrap_or(Path::new("."));
+    let bytes = super::read_bounded(path, "glTF file").map_err(parse_err)?;
     guard(path, "gltf", || {
         let gltf::Gltf { document, blob } =
             gltf::Gltf::from_slice(&bytes).map_err(|e| parse_err(e.to_string()))?;
-        let buffers = gltf::import_buffers(&document, Some(base), blob)
-            .map_err(|e| parse_err(format!("buffers: {e}")))?;
+        validate_layout(&document).map_err(parse_err)?;
+        let buffers = load_buffers(&document, blob, assets).map_err(parse_err)?;
         let get = |b: gltf::Buffer| buffers.get(b.index()).map(|d| &d.0[..]);
 
         let mut mesh = Mesh {
@@ -209,26 +309,11 @@ pub(crate) fn load_gltf(path: &Path) -> Result<Mesh, SceneError> {
                             let t = match image_tex.get(&img.index()) {
                                 Some(&t) => t,
                                 None => {
-                                    let t = match gltf::image::Data::from_source(
-                                        img.source(),
-                                        Some(base),
-                                        &buffers,
-                                    ) {
-                                        Ok(data) => match to_texture(&data) {
-                                            Some(t) => {
-                                                mesh.textures.push(t);
-                                                Some(mesh.textures.len() as u32 - 1)
-                                            }
-                                            None => {
-                                                log::warn!(
-                                                    "{}: image {} has an unsupported pixel \
-                                                     format; using the base colour factor",
-                                                    path.display(),
-                                                    img.index()
-                                                );
-                                                None
-                                            }
-                                        },
+                                    let t = match load_image(&img, &buffers, assets) {
+                                        Ok(t) => {
+                                            mesh.textures.push(t);
+                                            Some(mesh.textures.len() as u32 - 1)
+                                        }
                                         Err(e) => {
                                             log::warn!(
                                                 "{}: image {} unusable ({e}); using the base \
@@ -257,6 +342,32 @@ pub(crate) fn load_gltf(path: &Path) -> Result<Mesh, SceneError> {
                     continue;
                 };
                 let first = verts.len();
+                // Every attribute has the vertex count (glTF rule); all of them must fit.
+                let count = prim
+                    .get(&gltf::Semantic::Positions)
+                    .map_or(0, |a| a.count());
+                for (semantic, accessor) in prim.attributes() {
+                    if accessor.count() != count {
+                        return Err(parse_err(format!(
+                            "mesh {}: attribute {semantic:?} has {} elements, POSITION has \
+                             {count}",
+                            gmesh.index(),
+                            accessor.count()
+                        )));
+                    }
+                }
+                if (first + count) as u64 >= u32::MAX as u64 {
+                    return Err(SceneError::TooLarge {
+                        path: path.to_path_buf(),
+                        reason: "more than 2^32 vertices".into(),
+                    });
+                }
+                let need = crate::safety::bytes_of::<Vert>((first + count) as u64);
+                check_memory(format!("the vertices of mesh {}", gmesh.index()), need)
+                    .map_err(|e| parse_err(e.to_string()))?;
+                verts
+                    .try_reserve(count)
+                    .map_err(|e| parse_err(format!("vertices: {e}")))?;
                 let uv_set = material_texcoord[mat_id as usize];
                 let mut uvs = reader.read_tex_coords(uv_set).map(|t| t.into_f32());
                 let mut colors = reader.read_colors(0).map(|c| c.into_rgba_f32());
@@ -276,10 +387,23 @@ pub(crate) fn load_gltf(path: &Path) -> Result<Mesh, SceneError> {
                     verts.push(Vert { p: q, uv, c });
                 }
                 let nv = verts.len() - first;
+                let index_count = prim.indices().map_or(nv, |a| a.count());
+                let need = crate::safety::bytes_of::<[u32; 4]>(
+                    (mesh.triangles.len() + index_count) as u64,
+                );
+                check_memory(format!("the triangles of mesh {}", gmesh.index()), need)
+                    .map_err(|e| parse_err(e.to_string()))?;
                 let indices: Vec<u32> = match reader.read_indices() {
                     Some(ix) => ix.into_u32().collect(),
                     None => (0..nv as u32).collect(),
                 };
+                if indices.len() != index_count {
+                    return Err(parse_err(format!(
+                        "mesh {}: {} of {index_count} indices readable",
+                        gmesh.index(),
+                        indices.len()
+                    )));
+                }
                 if let Some(&bad) = indices.iter().find(|&&i| i as usize >= nv) {
                     return Err(parse_err(format!(
                         "mesh {} index {bad} out of range ({nv} vertices)",

@@ -119,9 +119,22 @@ fn extension(path: &Path) -> String {
 
 /// Imports a scene file into voxels: meshes (.obj, .gltf, .glb) are voxelized at
 /// `opts.resolution` (default 1024); .vox files are loaded natively (see [`load_vox`]).
+/// Files the model references must lie in its own folder (see [`import_in`]).
 pub fn import(
     path: &Path,
     opts: &ImportOptions,
+    progress: &ProgressBar,
+) -> Result<Voxels, SceneError> {
+    import_in(path, opts, None, progress)
+}
+
+/// [`import`] with the asset root widened to `asset_root` (`--asset-root`): a file the model
+/// references (glTF buffers and images, OBJ material libraries and textures) is opened only
+/// when its lexically normalized path lies under the model's folder or `asset_root`.
+pub fn import_in(
+    path: &Path,
+    opts: &ImportOptions,
+    asset_root: Option<&Path>,
     progress: &ProgressBar,
 ) -> Result<Voxels, SceneError> {
     match extension(path).as_str() {
@@ -129,7 +142,7 @@ pub fn import(
         "obj" | "gltf" | "glb" => {
             let resolution = opts.resolution.unwrap_or(DEFAULT_MESH_RESOLUTION);
             voxelize::check_resolution(resolution, path)?;
-            let mesh = load_mesh(path, opts)?;
+            let mesh = load_mesh_in(path, opts, asset_root)?;
             voxelize(&mesh, resolution, progress)
         }
         ext => Err(SceneError::Unsupported {
@@ -141,9 +154,19 @@ pub fn import(
 
 /// Loads a triangle mesh (.obj with .mtl, .gltf, .glb) in model space.
 pub fn load_mesh(path: &Path, opts: &ImportOptions) -> Result<Mesh, SceneError> {
+    load_mesh_in(path, opts, None)
+}
+
+/// [`load_mesh`] with the asset root widened to `asset_root` (see [`import_in`]).
+pub fn load_mesh_in(
+    path: &Path,
+    opts: &ImportOptions,
+    asset_root: Option<&Path>,
+) -> Result<Mesh, SceneError> {
+    let roots = AssetRoots::new(path, asset_root);
     let mesh = match extension(path).as_str() {
-        "obj" => obj::load_obj(path, opts)?,
-        "gltf" | "glb" => gltf_load::load_gltf(path)?,
+        "obj" => obj::load_obj(path, opts, &roots)?,
+        "gltf" | "glb" => gltf_load::load_gltf(path, &roots)?,
         ext => {
             return Err(SceneError::Unsupported {
                 path: path.to_path_buf(),
@@ -161,31 +184,158 @@ fn guard<T>(
     format: &'static str,
     f: impl FnOnce() -> Result<T, SceneError>,
 ) -> Result<T, SceneError> {
-    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)) {
+    match crate::safety::catch_quietly(f) {
         Ok(r) => r,
-        Err(e) => {
-            let msg = e
-                .downcast_ref::<&str>()
-                .map(|s| s.to_string())
-                .or_else(|| e.downcast_ref::<String>().cloned())
-                .unwrap_or_else(|| "parser panicked".to_string());
-            Err(SceneError::Parse {
-                path: path.to_path_buf(),
-                format,
-                message: msg,
-            })
-        }
+        Err(message) => Err(SceneError::Parse {
+            path: path.to_path_buf(),
+            format,
+            message,
+        }),
     }
 }
 
 /// Loads an image file as an RGBA8 texture.
 fn load_texture(path: &Path) -> Result<Texture, String> {
-    let bytes = std::fs::read(path).map_err(|e| e.to_string())?;
-    let img = image::load_from_memory(&bytes).map_err(|e| e.to_string())?;
+    texture_from_bytes(&read_bounded(path, "texture")?)
+}
+
+/// Reads a whole regular file after checking its size against the memory limit.
+fn read_bounded(path: &Path, what: &str) -> Result<Vec<u8>, String> {
+    use std::io::Read;
+    let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
+    let meta = file.metadata().map_err(|e| e.to_string())?;
+    if !meta.is_file() {
+        return Err(format!("{} is not a regular file", path.display()));
+    }
+    crate::safety::check_memory(format!("{what} {}", path.display()), meta.len())
+        .map_err(|e| e.to_string())?;
+    let mut bytes = Vec::new();
+    bytes
+        .try_reserve_exact(meta.len() as usize)
+        .map_err(|e| e.to_string())?;
+    file.take(meta.len())
+        .read_to_end(&mut bytes)
+        .map_err(|e| e.to_string())?;
+    Ok(bytes)
+}
+
+/// Decodes an encoded image (PNG, JPEG) as an RGBA8 texture, its decoded size bounded by the
+/// memory limit.
+fn texture_from_bytes(bytes: &[u8]) -> Result<Texture, String> {
+    let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| e.to_string())?;
+    let mut limits = image::Limits::default();
+    limits.max_alloc = Some(crate::safety::memory_limit());
+    reader.limits(limits);
+    let img = reader.decode().map_err(|e| e.to_string())?;
+    let (w, h) = (img.width() as u64, img.height() as u64);
+    crate::safety::check_memory("texture", w * h * 8).map_err(|e| e.to_string())?;
     let rgba = img.to_rgba8();
     let (w, h) = rgba.dimensions();
     let texels = rgba.pixels().map(|p| p.0).collect();
     Texture::new(w, h, texels).ok_or_else(|| "empty image".to_string())
+}
+
+/// The folders a model may reference files in: its own folder and `--asset-root`, both
+/// absolute and lexically normalized.
+#[derive(Clone, Debug)]
+pub(crate) struct AssetRoots {
+    /// The model's folder (relative references resolve against it).
+    pub(crate) base: PathBuf,
+    /// Every allowed root (the base first).
+    roots: Vec<PathBuf>,
+}
+
+/// `path` made absolute (against the current folder) and lexically normalized: `.` dropped,
+/// `..` removes the previous component (never above `/`). Symlinks are not resolved.
+pub(crate) fn normalize(path: &Path) -> PathBuf {
+    use std::path::Component;
+    let absolute = if path.is_absolute() {
+        path.to_path_buf()
+    } else {
+        std::env::current_dir()
+            .unwrap_or_else(|_| PathBuf::from("/"))
+            .join(path)
+    };
+    let mut out = PathBuf::new();
+    for c in absolute.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir => {
+                out.pop();
+            }
+            other => out.push(other.as_os_str()),
+        }
+    }
+    out
+}
+
+impl AssetRoots {
+    /// The roots of the model at `model`, widened by `extra`.
+    pub(crate) fn new(model: &Path, extra: Option<&Path>) -> AssetRoots {
+        let base = normalize(model.parent().unwrap_or(Path::new(".")));
+        let mut roots = vec![base.clone()];
+        roots.extend(extra.map(normalize));
+        AssetRoots { base, roots }
+    }
+
+    /// Resolves a reference (already percent-decoded for URIs) to a path under a root that
+    /// names a regular file (symlinks followed); otherwise says why it is refused.
+    pub(crate) fn resolve(&self, reference: &str) -> Result<PathBuf, String> {
+        let rule = "referenced files must lie in the model's folder or under --asset-root";
+        if reference.is_empty() {
+            return Err("an empty file reference".into());
+        }
+        let raw = Path::new(reference);
+        if raw.is_absolute() {
+            return Err(format!("{reference:?} is an absolute path ({rule})"));
+        }
+        let path = normalize(&self.base.join(raw));
+        if !self.roots.iter().any(|r| path.starts_with(r)) {
+            return Err(format!(
+                "{reference:?} resolves to {}, outside the asset root {} ({rule})",
+                path.display(),
+                self.roots
+                    .iter()
+                    .map(|r| r.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(" and ")
+            ));
+        }
+        match std::fs::metadata(&path) {
+            Ok(m) if m.is_file() => Ok(path),
+            Ok(_) => Err(format!("{} is not a regular file", path.display())),
+            Err(e) => Err(format!("{}: {e}", path.display())),
+        }
+    }
+
+    /// [`AssetRoots::resolve`] then [`read_bounded`].
+    pub(crate) fn read(&self, reference: &str, what: &str) -> Result<Vec<u8>, String> {
+        read_bounded(&self.resolve(reference)?, what)
+    }
+}
+
+/// Decodes `%XX` escapes of a URI path (RFC 3986); the result must be UTF-8.
+pub(crate) fn percent_decode(uri: &str) -> Result<String, String> {
+    let b = uri.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'%' {
+            let hex = b
+                .get(i + 1..i + 3)
+                .and_then(|h| std::str::from_utf8(h).ok())
+                .and_then(|h| u8::from_str_radix(h, 16).ok())
+                .ok_or_else(|| format!("bad percent escape in URI {uri:?}"))?;
+            out.push(hex);
+            i += 3;
+        } else {
+            out.push(b[i]);
+            i += 1;
+        }
+    }
+    String::from_utf8(out).map_err(|_| format!("URI {uri:?} is not UTF-8 once decoded"))
 }
 
 /// A set of occupied voxels in a cubic grid, sorted by Morton code, with optional colours.

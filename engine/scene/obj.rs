@@ -11,14 +11,24 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use super::mesh::{Material, Mesh, Wrap};
-use super::{guard, load_texture, ImportOptions, SceneError};
+use super::{guard, load_texture, texture_from_bytes, AssetRoots, ImportOptions, SceneError};
 
-/// Loads `path` as an OBJ mesh.
-pub(crate) fn load_obj(path: &Path, opts: &ImportOptions) -> Result<Mesh, SceneError> {
-    // tobj reports a missing file only as "OpenFileFailed": check first for a proper io error.
+/// Loads `path` as an OBJ mesh; `mtllib` and `map_Kd` files must lie under `roots` (else one
+/// warning each and the base colour).
+pub(crate) fn load_obj(
+    path: &Path,
+    opts: &ImportOptions,
+    roots: &AssetRoots,
+) -> Result<Mesh, SceneError> {
+    // A missing file is an io error (as for every format), not a parse error.
     std::fs::metadata(path).map_err(|e| SceneError::Io {
         path: path.to_path_buf(),
         source: e,
+    })?;
+    let bytes = super::read_bounded(path, "OBJ file").map_err(|e| SceneError::Parse {
+        path: path.to_path_buf(),
+        format: "obj",
+        message: e,
     })?;
     let load_opts = tobj::LoadOptions {
         single_index: true,
@@ -26,14 +36,29 @@ pub(crate) fn load_obj(path: &Path, opts: &ImportOptions) -> Result<Mesh, SceneE
         ignore_points: true,
         ignore_lines: true,
     };
+    // Material libraries are opened only inside the asset roots.
+    let load_mtl = |lib: &Path| -> tobj::MTLLoadResult {
+        let name = lib.to_string_lossy().replace('\\', "/");
+        match roots.read(&name, "material library") {
+            Ok(text) => tobj::load_mtl_buf(&mut std::io::Cursor::new(text)),
+            Err(e) => {
+                log::warn!(
+                    "{}: material library {name:?} not opened: {e}; using the base colour",
+                    path.display()
+                );
+                Err(tobj::LoadError::OpenFileFailed)
+            }
+        }
+    };
     let (models, materials) = guard(path, "obj", || {
-        tobj::load_obj(path, &load_opts).map_err(|e| SceneError::Parse {
-            path: path.to_path_buf(),
-            format: "obj",
-            message: e.to_string(),
+        tobj::load_obj_buf(&mut std::io::Cursor::new(&bytes), &load_opts, load_mtl).map_err(|e| {
+            SceneError::Parse {
+                path: path.to_path_buf(),
+                format: "obj",
+                message: e.to_string(),
+            }
         })
     })?;
-    let dir = path.parent().unwrap_or(Path::new(".")).to_path_buf();
     let mut mesh = Mesh {
         source: path.to_path_buf(),
         ..Mesh::default()
@@ -43,19 +68,33 @@ pub(crate) fn load_obj(path: &Path, opts: &ImportOptions) -> Result<Mesh, SceneE
     let obj_materials = match materials {
         Ok(m) => m,
         Err(e) => {
-            log::warn!(
-                "{}: material library unusable ({e}); no materials",
-                path.display()
-            );
+            if !matches!(e, tobj::LoadError::OpenFileFailed) {
+                log::warn!(
+                    "{}: material library unusable ({e}); no materials",
+                    path.display()
+                );
+            }
             Vec::new()
         }
     };
     let mut texture_cache: HashMap<PathBuf, Option<u32>> = HashMap::new();
-    let mut get_texture = |mesh: &mut Mesh, file: &Path| -> Option<u32> {
-        if let Some(&t) = texture_cache.get(file) {
+    // `Ok`: a file named on the command line (trusted); `Err`: a reference from the model.
+    let mut get_texture = |mesh: &mut Mesh, file: Result<&Path, &str>| -> Option<u32> {
+        let key = match file {
+            Ok(p) => p.to_path_buf(),
+            Err(r) => PathBuf::from(r),
+        };
+        if let Some(&t) = texture_cache.get(&key) {
             return t;
         }
-        let t = match load_texture(file) {
+        let loaded = match file {
+            Ok(p) => load_texture(p),
+            Err(r) => roots
+                .read(r, "texture")
+                .and_then(|bytes| texture_from_bytes(&bytes)),
+        };
+        let file = key.as_path();
+        let t = match loaded {
             Ok(tex) => {
                 mesh.textures.push(tex);
                 Some(mesh.textures.len() as u32 - 1)
@@ -69,12 +108,12 @@ pub(crate) fn load_obj(path: &Path, opts: &ImportOptions) -> Result<Mesh, SceneE
                 None
             }
         };
-        texture_cache.insert(file.to_path_buf(), t);
+        texture_cache.insert(key.clone(), t);
         t
     };
     let override_material = match &opts.texture_override {
         Some(file) => {
-            let t = get_texture(&mut mesh, file);
+            let t = get_texture(&mut mesh, Ok(file));
             if t.is_none() {
                 return Err(SceneError::Io {
                     path: file.clone(),
@@ -107,7 +146,7 @@ pub(crate) fn load_obj(path: &Path, opts: &ImportOptions) -> Result<Mesh, SceneE
                 if file.is_empty() {
                     None
                 } else {
-                    get_texture(&mut mesh, &dir.join(file))
+                    get_texture(&mut mesh, Err(file))
                 }
             });
             mesh.materials.push(Material {

@@ -188,10 +188,12 @@ pub fn load_vox(path: &Path, opts: &ImportOptions) -> Result<Voxels, SceneError>
     if let Some(r) = opts.resolution {
         check_resolution(r, path)?;
     }
-    let bytes = std::fs::read(path).map_err(|e| SceneError::Io {
+    std::fs::metadata(path).map_err(|e| SceneError::Io {
         path: path.to_path_buf(),
         source: e,
     })?;
+    // Regular files only, size checked against the memory limit first.
+    let bytes = super::read_bounded(path, ".vox file").map_err(perr)?;
     let data = guard(path, "vox", || {
         dot_vox::load_bytes(&bytes).map_err(|e| perr(e.to_string()))
     })?;

@@ -658,6 +658,18 @@ pub fn voxelize(
     let tris = grid_triangles(mesh, resolution)?;
     let colors = mesh.has_colors;
     let (est_voxels, est_bytes) = estimate_bytes(&tris, colors);
+    crate::safety::check_memory(
+        format!(
+            "voxelizing {} at resolution {resolution} (about {:.0} M voxels)",
+            mesh.source.display(),
+            est_voxels / 1e6
+        ),
+        est_bytes as u64,
+    )
+    .map_err(|e| SceneError::TooLarge {
+        path: mesh.source.clone(),
+        reason: e.to_string(),
+    })?;
     if let Some(avail) = mem_available() {
         if est_bytes > avail as f64 {
             return Err(SceneError::TooLarge {
@@ -748,6 +760,23 @@ pub fn voxelize(
             )
             .collect();
         for (c, col) in results {
+            // The estimate can be short: grow fallibly, an error rather than an abort.
+            let grown = out.codes.len() as u64 + c.len() as u64;
+            let bytes = grown * if colors { 12 } else { 8 };
+            crate::safety::check_memory("the voxel arrays", bytes).map_err(|e| {
+                SceneError::TooLarge {
+                    path: mesh.source.clone(),
+                    reason: e.to_string(),
+                }
+            })?;
+            let reserved =
+                out.codes.try_reserve(c.len()).is_ok() && out.colors.try_reserve(col.len()).is_ok();
+            if !reserved {
+                return Err(SceneError::TooLarge {
+                    path: mesh.source.clone(),
+                    reason: format!("out of memory for {grown} voxels"),
+                });
+            }
             out.codes.extend_from_slice(&c);
             out.colors.extend_from_slice(&col);
         }

@@ -1,0 +1,747 @@
+//! Hostile input and faults (docs/security.md): crafted models and `.vdag` files, generated
+//! here, for every class of the threat model. Each CLI case must end within seconds with one
+//! `error:` line (exit 1), a "not proven" line (exit 2) or a correct result; never a signal or
+//! panic text, never a file left behind or replaced, never a file opened outside the asset root.
+
+use std::io::Read;
+use std::os::unix::process::CommandExt;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use proptest::prelude::*;
+use voxdag::dag::Svdag;
+use voxdag::scene::{self, ImportOptions, Voxels};
+
+/// Runs the CLI with a deadline; `limit_as`: an RLIMIT_AS for the child.
+fn run_with(args: &[&str], limit_as: Option<u64>, seconds: u64) -> Output {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_voxdag"));
+    cmd.args(args)
+        .env("RUST_LOG", "warn")
+        .env(
+            "VK_ICD_FILENAMES",
+            "/usr/share/vulkan/icd.d/lvp_icd.x86_64.json",
+        )
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    if let Some(bytes) = limit_as {
+        // SAFETY: setrlimit is async-signal-safe; nothing else runs between fork and exec.
+        unsafe {
+            cmd.pre_exec(move || {
+                let l = libc::rlimit {
+                    rlim_cur: bytes,
+                    rlim_max: bytes,
+                };
+                if libc::setrlimit(libc::RLIMIT_AS, &l) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                Ok(())
+            });
+        }
+    }
+    let mut child = cmd.spawn().expect("run voxdag");
+    let (mut out, mut err) = (child.stdout.take().unwrap(), child.stderr.take().unwrap());
+    let t_out = std::thread::spawn(move || {
+        let mut b = Vec::new();
+        out.read_to_end(&mut b).unwrap();
+        b
+    });
+    let t_err = std::thread::spawn(move || {
+        let mut b = Vec::new();
+        err.read_to_end(&mut b).unwrap();
+        b
+    });
+    let start = Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if start.elapsed() > Duration::from_secs(seconds) {
+            child.kill().unwrap();
+            panic!("voxdag {args:?} ran longer than {seconds} s");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    Output {
+        status,
+        stdout: t_out.join().unwrap(),
+        stderr: t_err.join().unwrap(),
+    }
+}
+
+fn run(args: &[&str]) -> Output {
+    run_with(args, None, 60)
+}
+
+/// Asserts exit `code` (1: one `error:` line containing every needle; 2: the not-proven line),
+/// no signal, no panic text.
+fn expect(out: &Output, code: i32, needles: &[&str]) -> String {
+    let stderr = String::from_utf8_lossy(&out.stderr).to_string();
+    assert_eq!(out.status.code(), Some(code), "stderr: {stderr}");
+    assert!(
+        !stderr.contains("panicked") && !stderr.contains("thread '"),
+        "panic text: {stderr}"
+    );
+    if code == 1 {
+        let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error:")).collect();
+        assert_eq!(errors.len(), 1, "want one error line: {stderr}");
+    }
+    for n in needles {
+        assert!(stderr.contains(n), "stderr lacks {n:?}: {stderr}");
+    }
+    stderr
+}
+
+/// The names in a folder, sorted.
+fn names(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    v.sort();
+    v
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// A tetrahedron's buffer: 4 f32 positions then 12 u16 indices (72 bytes).
+fn tetra_buffer() -> Vec<u8> {
+    let mut b = Vec::new();
+    for v in [0f32, 0., 0., 1., 0., 0., 0., 1., 0., 0., 0., 1.] {
+        b.extend_from_slice(&v.to_le_bytes());
+    }
+    for i in [0u16, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3] {
+        b.extend_from_slice(&i.to_le_bytes());
+    }
+    b
+}
+
+/// glTF JSON of the tetrahedron with its buffer at `uri`; `patch` edits the JSON value.
+fn tetra_gltf(uri: &str, patch: impl FnOnce(&mut serde_json::Value)) -> String {
+    let mut v = serde_json::json!({
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+        "buffers": [{"uri": uri, "byteLength": 72}],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": 48},
+            {"buffer": 0, "byteOffset": 48, "byteLength": 24}
+        ],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+             "min": [0, 0, 0], "max": [1, 1, 1]},
+            {"bufferView": 1, "componentType": 5123, "count": 12, "type": "SCALAR"}
+        ]
+    });
+    patch(&mut v);
+    v.to_string()
+}
+
+/// A data: URI of the tetrahedron buffer.
+fn data_uri() -> String {
+    const ALPHABET: &[u8] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let b = tetra_buffer();
+    let mut out = String::from("data:application/octet-stream;base64,");
+    for c in b.chunks(3) {
+        let n = (c[0] as u32) << 16
+            | (*c.get(1).unwrap_or(&0) as u32) << 8
+            | *c.get(2).unwrap_or(&0) as u32;
+        for i in 0..4 {
+            if i <= c.len() {
+                out.push(ALPHABET[(n >> (18 - 6 * i) & 63) as usize] as char);
+            } else {
+                out.push('=');
+            }
+        }
+    }
+    out
+}
+
+fn mkfifo(path: &Path) {
+    let c = std::ffi::CString::new(s(path)).unwrap();
+    // SAFETY: a valid C string.
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+}
+
+/// Class 1: References outside the model's folder are never opened (the outside file is a FIFO: an
+/// open would block until the deadline); `--asset-root` widens the root; subfolders,
+/// percent-encoded names, data URIs and symlinked folders inside keep working.
+#[test]
+fn asset_references_stay_inside_the_root() {
+    let dir = tempfile::tempdir().unwrap();
+    let model_dir = dir.path().join("model");
+    std::fs::create_dir_all(model_dir.join("sub dir")).unwrap();
+    let outside = dir.path().join("secret.bin");
+    mkfifo(&outside);
+    let out = dir.path().join("out.vdag");
+    let absolute = s(&outside).to_string();
+    for uri in [
+        "../secret.bin".to_string(),
+        "%2E%2E/secret.bin".to_string(),
+        "sub%20dir/../../secret.bin".to_string(),
+        absolute.clone(),
+        format!("file://{absolute}"),
+        format!("file:{absolute}"),
+    ] {
+        let gltf = model_dir.join("m.gltf");
+        std::fs::write(&gltf, tetra_gltf(&uri, |_| {})).unwrap();
+        let o = run_with(
+            &["-q", "build", s(&gltf), "-r", "16", "-o", s(&out)],
+            None,
+            20,
+        );
+        expect(&o, 1, &["buffer 0", "not opened"]);
+        assert!(!out.exists());
+    }
+    // A FIFO inside the folder is not a regular file: refused, not opened.
+    mkfifo(&model_dir.join("fifo.bin"));
+    let gltf = model_dir.join("m.gltf");
+    std::fs::write(&gltf, tetra_gltf("fifo.bin", |_| {})).unwrap();
+    let o = run_with(
+        &["-q", "build", s(&gltf), "-r", "16", "-o", s(&out)],
+        None,
+        20,
+    );
+    expect(&o, 1, &["not a regular file"]);
+
+    // Legitimate: a subfolder with percent-encoded names, a data URI, a symlinked folder.
+    std::fs::write(model_dir.join("sub dir/base colour.bin"), tetra_buffer()).unwrap();
+    let shared = dir.path().join("shared");
+    std::fs::create_dir(&shared).unwrap();
+    std::fs::write(shared.join("t.bin"), tetra_buffer()).unwrap();
+    std::os::unix::fs::symlink(&shared, model_dir.join("linked")).unwrap();
+    for uri in [
+        "sub%20dir/base%20colour.bin".to_string(),
+        "./sub dir/../sub%20dir/base%20colour.bin".to_string(),
+        data_uri(),
+        "linked/t.bin".to_string(),
+    ] {
+        std::fs::write(&gltf, tetra_gltf(&uri, |_| {})).unwrap();
+        let o = run(&["-q", "build", s(&gltf), "-r", "16", "-o", s(&out)]);
+        assert!(
+            o.status.success(),
+            "{uri}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
+    // --asset-root widens the root to the parent folder.
+    std::fs::write(dir.path().join("buffer.bin"), tetra_buffer()).unwrap();
+    std::fs::write(&gltf, tetra_gltf("../buffer.bin", |_| {})).unwrap();
+    let o = run(&["-q", "build", s(&gltf), "-r", "16", "-o", s(&out)]);
+    expect(&o, 1, &["outside the asset root"]);
+    let o = run(&[
+        "-q",
+        "build",
+        s(&gltf),
+        "-r",
+        "16",
+        "-o",
+        s(&out),
+        "--asset-root",
+        s(dir.path()),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+/// Class 1: OBJ `mtllib` and `map_Kd` outside the folder: one warning each, base colour, a result.
+#[test]
+fn obj_references_outside_are_warnings() {
+    let dir = tempfile::tempdir().unwrap();
+    let model_dir = dir.path().join("model");
+    std::fs::create_dir(&model_dir).unwrap();
+    mkfifo(&dir.path().join("evil.mtl"));
+    mkfifo(&dir.path().join("evil.png"));
+    let obj = model_dir.join("t.obj");
+    let tetra = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n";
+    let out = dir.path().join("t.vdag");
+    std::fs::write(&obj, format!("mtllib ../evil.mtl\nusemtl a\n{tetra}")).unwrap();
+    let o = run_with(&["build", s(&obj), "-r", "16", "-o", s(&out)], None, 20);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("not opened"));
+    let evil = s(&dir.path().join("evil.png")).to_string();
+    std::fs::write(
+        model_dir.join("m.mtl"),
+        format!("newmtl a\nKd 1 0 0\nmap_Kd {evil}\n"),
+    )
+    .unwrap();
+    std::fs::write(&obj, format!("mtllib m.mtl\nusemtl a\n{tetra}")).unwrap();
+    let o = run_with(&["build", s(&obj), "-r", "16", "-o", s(&out)], None, 20);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(stderr.contains("absolute path"), "{stderr}");
+}
+
+/// Class 2: Requests sized by the input fail before allocating: a 2^32-1 vertex accessor, a `.vdag`
+/// header announcing 2^60 bytes, `/dev/zero`, and a build under an address-space limit.
+#[test]
+fn unbounded_requests_fail_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let gltf = dir.path().join("huge.gltf");
+    std::fs::write(
+        &gltf,
+        tetra_gltf(&data_uri(), |v| {
+            // Sparse, no buffer view: zeros plus one stored value.
+            v["accessors"][0] = serde_json::json!({"componentType": 5126,
+                "count": 4294967295u64, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 1],
+                "sparse": {"count": 1, "indices": {"bufferView": 1, "componentType": 5123},
+                           "values": {"bufferView": 0}}});
+            v["meshes"][0]["primitives"][0]
+                .as_object_mut()
+                .unwrap()
+                .remove("indices");
+        }),
+    )
+    .unwrap();
+    let out = dir.path().join("o.vdag");
+    let o = run(&["--memory-limit", "1536M", "build", s(&gltf), "-o", s(&out)]);
+    expect(
+        &o,
+        1,
+        &["glTF accessor 0 needs 48.0 GiB, the memory limit is 1.5 GiB (--memory-limit)"],
+    );
+    // Without the flag the default limit (at most physical RAM) still refuses it.
+    expect(
+        &run(&["build", s(&gltf), "-o", s(&out)]),
+        1,
+        &["memory limit"],
+    );
+
+    let mut header = voxdag::dag::MAGIC.to_vec();
+    header.extend_from_slice(&1u32.to_le_bytes());
+    header.resize(32, 0);
+    header.extend_from_slice(&(1u64 << 60).to_le_bytes());
+    header.resize(64, 0);
+    let big = dir.path().join("big.vdag");
+    std::fs::write(&big, &header).unwrap();
+    expect(&run(&["verify", s(&big)]), 1, &["memory limit"]);
+    expect(&run(&["verify", "/dev/zero"]), 1, &["bad magic"]);
+    // Models that are devices: refused, not read without end.
+    for name in ["z.vox", "z.obj", "z.gltf"] {
+        let link = dir.path().join(name);
+        std::os::unix::fs::symlink("/dev/zero", &link).unwrap();
+        let o = run(&["build", s(&link), "-r", "16", "-o", s(&out)]);
+        expect(&o, 1, &["not a regular file"]);
+    }
+    // A FIFO that never ends: the header is all that is read.
+    let fifo = dir.path().join("in.vdag");
+    mkfifo(&fifo);
+    let writer = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || {
+            let mut f = std::fs::OpenOptions::new().write(true).open(fifo).unwrap();
+            let zeros = vec![0u8; 1 << 16];
+            while std::io::Write::write_all(&mut f, &zeros).is_ok() {}
+        })
+    };
+    expect(&run(&["verify", s(&fifo)]), 1, &["bad magic"]);
+    writer.join().unwrap();
+
+    // Under a small address space: one out-of-memory line, exit 1, no temporary file left.
+    let work = dir.path().join("work");
+    std::fs::create_dir(&work).unwrap();
+    let obj = dir.path().join("t.obj");
+    std::fs::write(
+        &obj,
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n",
+    )
+    .unwrap();
+    let out = work.join("t.vdag");
+    let o = run_with(
+        &["-q", "build", s(&obj), "-r", "4096", "-o", s(&out)],
+        Some(384 << 20),
+        60,
+    );
+    expect(&o, 1, &["memory"]);
+    assert!(names(&work).is_empty(), "{:?}", names(&work));
+}
+
+/// A solid grid of side `n` as an SVDAG (one node per level: 2^63 voxels for n = 2^21).
+fn solid(n: u32) -> Svdag {
+    let root_level = n.trailing_zeros() - 2;
+    let mut words = Vec::new();
+    let mut level_starts = vec![0u64; root_level as usize + 1];
+    for level in (1..=root_level).rev() {
+        level_starts[level as usize] = words.len() as u64;
+        let child = words.len() as u32 + 9;
+        words.push(0xff);
+        words.extend(std::iter::repeat(child).take(8));
+    }
+    level_starts[0] = words.len() as u64;
+    words.extend([u32::MAX, u32::MAX]);
+    let dag = Svdag {
+        resolution: n,
+        words,
+        level_starts,
+        colors: Vec::new(),
+    };
+    dag.validate().unwrap();
+    dag
+}
+
+/// Class 3: A 1 KB file of 2^63 voxels: verify in seconds, export refused before writing; a solid
+/// 65536^3 grid (2^48 voxels) renders on the CPU and the GPU.
+#[test]
+fn huge_valid_scene() {
+    let dir = tempfile::tempdir().unwrap();
+    let dag = solid(1 << 21);
+    assert_eq!(dag.voxel_count(), 1 << 63);
+    let file = dir.path().join("solid.vdag");
+    dag.save(&file).unwrap();
+    assert!(std::fs::metadata(&file).unwrap().len() < 2048);
+    let o = run_with(&["verify", s(&file)], None, 20);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("9223372036854775808 voxels"));
+    let o = run_with(&["stats", s(&file), "--quick"], None, 20);
+    assert!(o.status.success());
+    let before = names(dir.path());
+    let xyz = dir.path().join("all.xyz");
+    let o = run_with(
+        &[
+            "export-voxels",
+            s(&file),
+            "--format",
+            "xyz-u32",
+            "-o",
+            s(&xyz),
+        ],
+        None,
+        20,
+    );
+    expect(&o, 1, &["free on its filesystem"]);
+    let o = run_with(
+        &[
+            "export-voxels",
+            s(&file),
+            "--format",
+            "xyz-u32",
+            "-o",
+            "-",
+            "--max-output",
+            "1G",
+        ],
+        None,
+        20,
+    );
+    expect(&o, 1, &["more than --max-output 1.0 GiB"]);
+    assert!(o.stdout.is_empty());
+    assert_eq!(names(dir.path()), before, "nothing written");
+    // The renderers stop at 65536^3 (docs/rendering.md); a solid one has 2^48 voxels, more
+    // than any u32 count (without colours none is needed).
+    let file64k = dir.path().join("solid64k.vdag");
+    solid(1 << 16).save(&file64k).unwrap();
+    for extra in [&["--cpu"][..], &[][..]] {
+        let png = dir.path().join("solid.png");
+        let mut args = vec!["render", s(&file64k), "--size", "16x16", "--out", s(&png)];
+        args.extend(extra);
+        let o = run_with(&args, None, 60);
+        assert!(
+            o.status.success(),
+            "{extra:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        std::fs::remove_file(&png).unwrap();
+    }
+    std::fs::remove_file(&file64k).unwrap();
+    // The same scene without the content digest: checked, but not proven.
+    let old = dir.path().join("old.vdag");
+    std::fs::write(&old, dag.to_bytes()).unwrap();
+    let o = run_with(&["verify", s(&old)], None, 20);
+    expect(&o, 2, &["no digest: the voxels are not proven"]);
+}
+
+/// A coloured 16^3 scene.
+fn colored() -> Svdag {
+    let mut coords = Vec::new();
+    for x in 0..16u32 {
+        for y in 0..16u32 {
+            if (x * 7 + y * 3) % 5 < 2 {
+                coords.push([x, y, (x + y) % 16]);
+            }
+        }
+    }
+    let mut v = Voxels::from_coords(16, coords);
+    v.colors = (0..v.codes.len() as u32)
+        .map(|i| 0xff00_0000 | i.wrapping_mul(2654435761) & 0xffffff)
+        .collect();
+    Svdag::from_voxels(&v).unwrap()
+}
+
+fn fix_crc(b: &mut [u8]) {
+    let n = b.len();
+    let crc = crc32fast::hash(&b[..n - 4]);
+    b[n - 4..].copy_from_slice(&crc.to_le_bytes());
+}
+
+/// Class 4: `verify` proves colours too: a colour changed under a repaired checksum fails; a file
+/// without the digest section exits 2.
+#[test]
+fn verify_is_honest() {
+    let dir = tempfile::tempdir().unwrap();
+    let dag = colored();
+    let good = dir.path().join("good.vdag");
+    dag.save(&good).unwrap();
+    let o = run(&["verify", s(&good)]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // The colour section is section 3; change its first colour and repair the checksum.
+    let mut b = std::fs::read(&good).unwrap();
+    let colors_at = u64::from_le_bytes(b[64 + 2 * 24 + 8..64 + 2 * 24 + 16].try_into().unwrap());
+    b[colors_at as usize] ^= 0x5a;
+    fix_crc(&mut b);
+    let bad = dir.path().join("bad.vdag");
+    std::fs::write(&bad, &b).unwrap();
+    expect(&run(&["verify", s(&bad)]), 1, &["colours", "differ"]);
+    // No digest section (the bare to_bytes form).
+    let bare = dir.path().join("bare.vdag");
+    std::fs::write(&bare, dag.to_bytes()).unwrap();
+    expect(
+        &run(&["verify", s(&bare)]),
+        2,
+        &["no digest: the voxels are not proven"],
+    );
+}
+
+/// Class 5: Output files: SIGTERM mid-export leaves nothing; FIFOs are written in place; `-o -`;
+/// a symlink at the output is replaced, not followed; bad `--report` fails before the build.
+#[test]
+fn output_files_are_clean() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("solid512.vdag");
+    solid(512).save(&scene).unwrap();
+    let work = dir.path().join("work");
+    std::fs::create_dir(&work).unwrap();
+    let out = work.join("all.xyz");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_voxdag"))
+        .args([
+            "export-voxels",
+            s(&scene),
+            "--format",
+            "xyz-u32",
+            "-o",
+            s(&out),
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while names(&work).is_empty() {
+        assert!(
+            start.elapsed() < Duration::from_secs(20),
+            "no temporary file"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    // SAFETY: signalling our own child.
+    unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
+    let status = child.wait().unwrap();
+    use std::os::unix::process::ExitStatusExt;
+    assert!(
+        status.signal() == Some(libc::SIGTERM) || status.success(),
+        "{status:?}"
+    );
+    if status.signal().is_some() {
+        assert!(names(&work).is_empty(), "left behind: {:?}", names(&work));
+    }
+
+    // A small scene for the rest.
+    let small = dir.path().join("small.vdag");
+    colored().save(&small).unwrap();
+    let voxels = colored().voxel_count() as usize;
+    let o = run(&["export-voxels", s(&small), "--format", "xyz-u32", "-o", "-"]);
+    assert!(o.status.success());
+    assert_eq!(o.stdout.len(), 12 * voxels);
+
+    let fifo = work.join("pipe");
+    mkfifo(&fifo);
+    let reader = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || std::fs::read(fifo).unwrap().len())
+    };
+    let o = run(&[
+        "export-voxels",
+        s(&small),
+        "--format",
+        "xyz-u32",
+        "-o",
+        s(&fifo),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(reader.join().unwrap(), 12 * voxels);
+    use std::os::unix::fs::FileTypeExt;
+    assert!(std::fs::metadata(&fifo).unwrap().file_type().is_fifo());
+
+    let victim = dir.path().join("victim");
+    std::fs::write(&victim, b"precious").unwrap();
+    let link = work.join("link.xyz");
+    std::os::unix::fs::symlink(&victim, &link).unwrap();
+    let o = run(&[
+        "export-voxels",
+        s(&small),
+        "--format",
+        "xyz-u32",
+        "-o",
+        s(&link),
+    ]);
+    assert!(o.status.success());
+    assert_eq!(std::fs::read(&victim).unwrap(), b"precious");
+
+    let obj = dir.path().join("t.obj");
+    std::fs::write(
+        &obj,
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n",
+    )
+    .unwrap();
+    let vdag = work.join("t.vdag");
+    let o = run(&[
+        "-q",
+        "build",
+        s(&obj),
+        "-r",
+        "16",
+        "-o",
+        s(&vdag),
+        "--report",
+        s(&work),
+    ]);
+    expect(&o, 1, &["is a directory"]);
+    assert!(
+        !vdag.exists(),
+        "nothing built before the report path is checked"
+    );
+    let o = run(&[
+        "render",
+        s(&small),
+        "--cpu",
+        "--out",
+        s(&work.join("x.png")),
+        "--trace",
+        s(&dir.path().join("missing/t.json")),
+    ]);
+    expect(&o, 1, &["does not exist"]);
+}
+
+/// An edit of the glTF JSON.
+type Patch = Box<dyn FnOnce(&mut serde_json::Value)>;
+
+/// Class 6: Messages: malformed glTF is one error line without panic text; OS errors print once.
+#[test]
+fn malformed_models_give_one_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("o.vdag");
+    let o = run(&["-q", "build", "/no/such/model.obj", "-o", s(&out)]);
+    let stderr = expect(&o, 1, &["os error 2"]);
+    assert_eq!(stderr.matches("os error 2").count(), 1, "{stderr}");
+    let cases: Vec<(&str, Patch)> = vec![
+        (
+            "",
+            Box::new(|v| v["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = 99.into()),
+        ),
+        (
+            "runs to byte",
+            Box::new(|v| v["accessors"][1]["count"] = 15.into()),
+        ),
+        (
+            "past buffer",
+            Box::new(|v| v["bufferViews"][1]["byteLength"] = 64.into()),
+        ),
+        (
+            "out of range",
+            Box::new(|v| v["accessors"][0]["count"] = 2.into()),
+        ),
+        (
+            "reached twice",
+            Box::new(|v| {
+                v["nodes"] = serde_json::json!([{"mesh": 0, "children": [1]}, {"children": [0]}])
+            }),
+        ),
+    ];
+    for (needle, patch) in cases {
+        let gltf = dir.path().join("bad.gltf");
+        std::fs::write(&gltf, tetra_gltf(&data_uri(), patch)).unwrap();
+        let o = run(&["-q", "build", s(&gltf), "-r", "16", "-o", s(&out)]);
+        expect(&o, 1, &[needle]);
+        assert!(!out.exists());
+    }
+}
+
+/// Panics raised in this crate's own code (not a third-party parser) while fuzzing.
+static OWN_PANICS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+fn count_own_panics() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        let default = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if info
+                .location()
+                .is_some_and(|l| l.file().starts_with("engine/"))
+            {
+                OWN_PANICS.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+                default(info);
+            }
+        }));
+    });
+}
+
+/// Loads a mutated model: an error or a mesh that validates; no panic from our code.
+fn load_mutated(dir: &Path, name: &str, bytes: &[u8]) -> Result<(), TestCaseError> {
+    count_own_panics();
+    voxdag::safety::set_memory_limit(256 << 20);
+    let path = dir.join(name);
+    std::fs::write(&path, bytes).unwrap();
+    let before = OWN_PANICS.load(std::sync::atomic::Ordering::SeqCst);
+    if let Ok(mesh) = scene::load_mesh(&path, &ImportOptions::default()) {
+        prop_assert!(mesh.validate().is_ok());
+        let _ = voxdag::scene::voxelize(&mesh, 16, &indicatif::ProgressBar::hidden());
+    }
+    prop_assert_eq!(OWN_PANICS.load(std::sync::atomic::Ordering::SeqCst), before);
+    Ok(())
+}
+
+fn fuzz_dir() -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("voxdag-hostile-fuzz-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(256))]
+
+    /// Mutated glTF (bytes flipped, digits replaced): an error or a valid mesh.
+    #[test]
+    fn mutated_gltf_never_panics(
+        flips in prop::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..4),
+        digits in prop::collection::vec((any::<prop::sample::Index>(), 0u8..10), 0..3),
+    ) {
+        let mut b = tetra_gltf(&data_uri(), |_| {}).into_bytes();
+        for (at, v) in &flips {
+            let i = at.index(b.len());
+            b[i] ^= v;
+        }
+        for (at, d) in &digits {
+            let i = at.index(b.len());
+            if b[i].is_ascii_digit() {
+                b[i] = b'0' + d;
+            }
+        }
+        load_mutated(&fuzz_dir(), "f.gltf", &b)?;
+    }
+
+    /// Mutated OBJ text: an error or a valid mesh.
+    #[test]
+    fn mutated_obj_never_panics(
+        flips in prop::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..4),
+    ) {
+        let mut b = b"mtllib m.mtl\nusemtl a\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nvt 0 0\nvt 1 0\n\
+            f 1/1 3/2 2/1\nf 1 2 4\nf 1 4 3\nf -1 -2 -3\n".to_vec();
+        for (at, v) in &flips {
+            let i = at.index(b.len());
+            b[i] ^= v;
+        }
+        load_mutated(&fuzz_dir(), "f.obj", &b)?;
+    }
+}
