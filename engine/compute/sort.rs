@@ -1,11 +1,13 @@
 //! Stable LSD radix sort of key/value pairs: 32- or 64-bit keys, `u32` values.
 //!
-//! Each pass sorts by one digit (`radix_bits`, 8 by default: 4 passes for 32-bit keys, 8 for
-//! 64-bit) in three dispatches: `radix_hist` counts each tile's digits into a digit-major
+//! Each pass sorts by one digit (`radix_bits`: 4 by default, 8 passes for 32-bit keys and 16
+//! for 64-bit) in three dispatches: `radix_hist` counts each tile's digits into a digit-major
 //! histogram `[digit * tiles + tile]`, the exclusive scan of that histogram (the scan
-//! primitive) gives every (digit, tile) its first output position, and `radix_scatter` sorts
-//! each tile by the digit in shared memory (one stable split per bit) and writes every element
-//! to its position. Passes alternate between the caller's buffers and the scratch copies; the
+//! primitive) gives every (digit, tile) its first output position, and the scatter pass ranks
+//! each key among the equal digits of its tile and writes it to its position: `radix_rank`
+//! (4-bit digits) from a per-invocation digit count table and one workgroup scan,
+//! `radix_scatter` (8-bit digits) by sorting the tile in shared memory with one stable split
+//! per bit. Passes alternate between the caller's buffers and the scratch copies; the
 //! pass count is even, so the result ends in the caller's buffers.
 
 use super::scan::ScanScratch;
