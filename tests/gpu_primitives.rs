@@ -496,6 +496,7 @@ fn primitives_at_every_forced_subgroup_size() {
     let ctx = context();
     let on_lavapipe = ctx.info().driver_name.contains("llvmpipe");
     let native = ctx.info().subgroup_size;
+    assert_clean(&ctx);
     drop(ctx);
     let forced: Vec<(Option<u32>, u32)> = if on_lavapipe {
         [128, 256, 512].map(|w| (Some(w), w / 32)).to_vec()
@@ -528,81 +529,4 @@ fn primitives_at_every_forced_subgroup_size() {
         assert!(stdout.contains(&marker), "child did not run: {stdout}");
         assert!(stdout.contains("1 passed"), "{stdout}");
     }
-}
-
-/// Throughput on this device vs the CPU reference in the same run, for docs/gpu-primitives.md
-/// (numbers, not assertions; results are still checked). Run with
-/// `cargo test --release --test gpu_primitives -- --ignored --nocapture`.
-#[test]
-#[ignore = "measurement for docs/gpu-primitives.md"]
-fn measure_throughput() {
-    let ctx = context();
-    {
-        let mut rng = Rng(8);
-        let log2: u32 = std::env::var("VOXDAG_PRIMITIVES_LOG2")
-            .ok()
-            .and_then(|s| s.parse().ok())
-            .unwrap_or(22);
-        let n = 1usize << log2;
-        let data = random_words(&mut rng, n);
-        let flags: Vec<u32> = (0..n).map(|_| rng.below(2) as u32).collect();
-        let keys64: Vec<u64> = (0..n).map(|_| rng.next()).collect();
-        let keys32: Vec<u32> = keys64.iter().map(|&k| k as u32).collect();
-        let values: Vec<u32> = (0..n as u32).collect();
-        let gpu_ms = |profiler: &mut Profiler| -> f64 {
-            let passes = profiler.resolve().unwrap();
-            // Top-level passes only (they do not nest here).
-            passes.iter().map(|p| p.gpu_ms).sum()
-        };
-        let cpu = |f: &mut dyn FnMut()| {
-            let t = std::time::Instant::now();
-            f();
-            t.elapsed().as_secs_f64() * 1e3
-        };
-        for bits in [4, 8] {
-            let options = PrimitiveOptions {
-                radix_bits: bits,
-                ..PrimitiveOptions::default()
-            };
-            let prims = Primitives::with_options(&ctx, options).unwrap();
-            let mut p = Profiler::new(&ctx).unwrap();
-            let mut rows = Vec::new();
-            if bits == 4 {
-                let got = prims.exclusive_scan(&data, Some(&mut p)).unwrap();
-                let g = gpu_ms(&mut p);
-                let mut want = Default::default();
-                let c = cpu(&mut || want = reference::exclusive_scan(&data));
-                assert!(got == want);
-                rows.push(("exclusive scan u32", g, c));
-                let got = prims.compact(&data, &flags, 64, Some(&mut p)).unwrap();
-                let g = gpu_ms(&mut p);
-                let mut want = Vec::new();
-                let c = cpu(&mut || want = reference::compact(&data, &flags));
-                assert!(got.0 == want);
-                rows.push(("compaction (50% kept)", g, c));
-            }
-            let got = prims.sort_u32(&keys32, &values, Some(&mut p)).unwrap();
-            let g = gpu_ms(&mut p);
-            let mut want = Default::default();
-            let c = cpu(&mut || want = reference::sort_pairs(&keys32, &values));
-            assert!(got == want);
-            rows.push(("radix sort u32 keys + u32 values", g, c));
-            let got = prims.sort_u64(&keys64, &values, Some(&mut p)).unwrap();
-            let g = gpu_ms(&mut p);
-            let mut want = Default::default();
-            let c = cpu(&mut || want = reference::sort_pairs(&keys64, &values));
-            assert!(got == want);
-            rows.push(("radix sort u64 keys + u32 values", g, c));
-            // Per-pass GPU times (where the time goes), for the doc.
-            println!("{}", p.table());
-            for (what, g, c) in rows {
-                println!(
-                    "| {what} ({bits}-bit digits) | 2^{log2} | {g:.1} | {:.1} | {c:.1} | {:.1} |",
-                    n as f64 / g / 1e3,
-                    n as f64 / c / 1e3
-                );
-            }
-        }
-    }
-    assert_clean(&ctx);
 }

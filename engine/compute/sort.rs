@@ -112,7 +112,8 @@ impl Primitives {
 
     /// Records a stable sort of the first `n` (key, value) pairs in `keys` (`width` keys) and
     /// `values` (`u32`), in place. Barriers before and after are included; passes are profiled
-    /// as "radix histogram", the scan's, and "radix scatter", each with the digit's shift.
+    /// as "radix histogram", the scan's, and "radix rank" (4-bit digits) or "radix split"
+    /// (8-bit), each with the digit's shift (`@8`).
     #[allow(clippy::too_many_arguments)]
     pub fn record_sort<'a>(
         &'a self,
@@ -146,6 +147,12 @@ impl Primitives {
             (scratch.keys.address(), scratch.values.address()),
         ];
         let hist = scratch.hist.address();
+        // The two scatter variants (see the module docs) under their own pass names.
+        let scatter = if bits == 4 {
+            "radix rank"
+        } else {
+            "radix split"
+        };
         for pass in 0..width.bits() / bits {
             let shift = pass * bits;
             let (src, dst) = (buffers[pass as usize % 2], buffers[1 - pass as usize % 2]);
@@ -168,7 +175,7 @@ impl Primitives {
             end(&mut profiler, cmd);
             cmd.barrier();
             self.record_scan_in_place(cmd, hist, hist_len as u32, &scratch.scan, &mut profiler)?;
-            begin(&mut profiler, cmd, &format!("radix scatter @{shift}"));
+            begin(&mut profiler, cmd, &format!("{scatter} @{shift}"));
             cmd.dispatch(
                 &self.radix_scatter[w],
                 grid(tiles),
