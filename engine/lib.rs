@@ -5,6 +5,8 @@
 //! -> `attr` (per-voxel colours in chunks, colour codecs) -> `gpu` (Vulkan device layer)
 //! -> `render` (GPU traversal, CPU reference renderer), `attr_gpu` (colour codec passes) and
 //! `hash` (GPU slab hash tables, allocator and garbage collection for editing).
+//! `compute` holds the GPU primitives (prefix sum, stream compaction, radix sort) that
+//! GPU-driven passes build on.
 
 #![warn(missing_docs)]
 
@@ -16,6 +18,7 @@ pub mod atomic_file;
 pub mod attr;
 pub mod attr_gpu;
 pub mod color;
+pub mod compute;
 pub mod dag;
 pub mod gpu;
 pub mod hash;

@@ -3,6 +3,7 @@
 mod colors;
 mod compress;
 mod hash;
+mod primitives;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -34,6 +35,8 @@ pub enum BenchCommand {
     Hash(hash::BenchHashArgs),
     /// Table 5.1 / Figure 5.6: colour codecs' size, RMSE and encode time; GPU lossless throughput.
     Colors(colors::BenchColorsArgs),
+    /// GPU primitives (scan, compaction, radix sort) vs their CPU references in the same run.
+    Primitives(primitives::BenchPrimitivesArgs),
 }
 
 /// Arguments of `voxdag bench build`.
@@ -91,6 +94,7 @@ pub fn run(command: BenchCommand, quiet: bool) -> Result<()> {
         BenchCommand::Compress(args) => compress::bench_compress(&args),
         BenchCommand::Hash(args) => hash::bench_hash(&args, quiet),
         BenchCommand::Colors(args) => colors::bench_colors(&args),
+        BenchCommand::Primitives(args) => primitives::bench_primitives(&args),
     }
 }
 

@@ -199,6 +199,54 @@ impl<'a> Commands<'a> {
         Ok(())
     }
 
+    /// Records an indirect compute dispatch: the workgroup counts are the three `u32`s at byte
+    /// `offset` of `args`, written by earlier passes (e.g. `voxdag::compute`'s indirect
+    /// arguments), so a pass can be sized on the GPU. The counts must not exceed the device's
+    /// `maxComputeWorkGroupCount` (the GPU cannot check this; a zero count dispatches nothing).
+    /// Records its own barrier making earlier compute/transfer writes visible to the
+    /// indirect-argument read.
+    pub fn dispatch_indirect(
+        &mut self,
+        pipeline: &'a ComputePipeline,
+        args: &'a Buffer,
+        offset: u64,
+        push_constants: &[u8],
+        image: Option<&'a Image>,
+    ) -> Result<(), GpuError> {
+        if offset % 4 != 0 || offset.checked_add(12).map_or(true, |end| end > args.size()) {
+            return Err(GpuError::InvalidArgument(format!(
+                "pipeline '{}': indirect arguments at byte {offset} of '{}' ({} bytes) must be \
+                 4-byte aligned and hold three u32s",
+                pipeline.name(),
+                args.name(),
+                args.size()
+            )));
+        }
+        // Zero workgroups: binds the pipeline, descriptor set and push constants (all checked)
+        // without dispatching.
+        self.dispatch(pipeline, [0, 0, 0], push_constants, image)?;
+        let barrier = vk::MemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
+            .dst_access_mask(vk::AccessFlags::INDIRECT_COMMAND_READ);
+        // SAFETY: recording into our command buffer; `args` has INDIRECT_BUFFER usage and the
+        // range was checked above.
+        unsafe {
+            self.ctx.device.cmd_pipeline_barrier(
+                self.raw,
+                vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::DRAW_INDIRECT,
+                vk::DependencyFlags::empty(),
+                &[barrier],
+                &[],
+                &[],
+            );
+            self.ctx
+                .device
+                .cmd_dispatch_indirect(self.raw, args.raw, offset);
+        }
+        Ok(())
+    }
+
     /// Allocates and writes a descriptor set binding `image` (pool created lazily, freed on drop).
     fn image_set(
         &mut self,

@@ -32,7 +32,8 @@ impl MemLocation {
     }
 }
 
-/// A named storage buffer with a device address; usable as storage, transfer source and destination.
+/// A named storage buffer with a device address; usable as storage, transfer source and
+/// destination, and indirect-dispatch arguments.
 ///
 /// Shaders reach it through its device address (`GL_EXT_buffer_reference`), so it may exceed
 /// `maxStorageBufferRange`. Destroyed on drop; drop it only after the GPU is done with it (all
@@ -194,7 +195,8 @@ impl GpuContext {
         let usage = vk::BufferUsageFlags::STORAGE_BUFFER
             | vk::BufferUsageFlags::TRANSFER_SRC
             | vk::BufferUsageFlags::TRANSFER_DST
-            | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS;
+            | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS
+            | vk::BufferUsageFlags::INDIRECT_BUFFER;
         let info = vk::BufferCreateInfo::default()
             .size(size)
             .usage(usage)
