@@ -183,7 +183,7 @@ macro_rules! glsl_decl {
 
 /// Writes `gen/<room>.glsl` for every room's `gpu_shared.rs` (only when the text changed).
 fn write_shared_layouts(manifest: &Path, gen_dir: &Path) {
-    let rooms: [(&str, &str, Vec<SharedStruct>); 4] = [
+    let rooms: [(&str, &str, Vec<SharedStruct>); 5] = [
         (
             "render",
             "engine/render/gpu_shared.rs",
@@ -198,6 +198,11 @@ fn write_shared_layouts(manifest: &Path, gen_dir: &Path) {
             "attr",
             "engine/attr_gpu/gpu_shared.rs",
             include!("engine/attr_gpu/gpu_shared.rs"),
+        ),
+        (
+            "compute",
+            "engine/compute/gpu_shared.rs",
+            include!("engine/compute/gpu_shared.rs"),
         ),
         (
             "test",

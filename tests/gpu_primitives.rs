@@ -12,6 +12,7 @@ use std::sync::Arc;
 
 use common::Rng;
 use voxdag::compute::{reference, PrimitiveOptions, Primitives, COUNT_ARGS_BYTES, GRID_X};
+use voxdag::gpu::test_layouts::IndirectConsumePush;
 use voxdag::gpu::{shaders, ComputePipelineDesc, GpuContext, GpuError, MemLocation, Profiler};
 
 /// Set in the child processes: the subgroup size the child must see.
@@ -264,7 +265,7 @@ fn compaction_sizes_an_indirect_dispatch_over_exactly_the_survivors() {
                     name: "indirect consume",
                     spirv: shaders::TEST_INDIRECT_CONSUME,
                     spec_constants: &[group],
-                    push_constant_size: 32,
+                    push_constant_size: std::mem::size_of::<IndirectConsumePush>() as u32,
                     storage_image: false,
                 })
                 .unwrap();
@@ -296,10 +297,13 @@ fn compaction_sizes_an_indirect_dispatch_over_exactly_the_survivors() {
                     None,
                 )
                 .unwrap();
-            let mut push = Vec::new();
-            for a in [&count_args, &survivors, &out, &stats] {
-                push.extend_from_slice(&a.address().to_le_bytes());
-            }
+            let push = bytemuck::bytes_of(&IndirectConsumePush {
+                count_args: count_args.address(),
+                input_words: survivors.address(),
+                output_words: out.address(),
+                stats: stats.address(),
+            })
+            .to_vec();
             cmd.dispatch_indirect(&consume, &count_args, 4, &push, None)
                 .unwrap();
             cmd.submit().unwrap();
@@ -337,7 +341,7 @@ fn dispatch_indirect_checks_its_arguments() {
                 name: "indirect consume",
                 spirv: shaders::TEST_INDIRECT_CONSUME,
                 spec_constants: &[64],
-                push_constant_size: 32,
+                push_constant_size: std::mem::size_of::<IndirectConsumePush>() as u32,
                 storage_image: false,
             })
             .unwrap();

@@ -5,6 +5,7 @@
 //! convenience wrapper. Shaders: `shaders/glsl/compute/`; they work for any subgroup size.
 //! See `docs/gpu-primitives.md`.
 
+mod gpu_shared;
 pub mod reference;
 mod scan;
 mod sort;

@@ -8,40 +8,9 @@
 //! 2^31 elements need three levels. Compaction is the same scan over "flag != 0" whose last
 //! pass scatters the surviving values instead of writing positions.
 
+use super::gpu_shared::{ArgsPush, BlockPush, ReducePush};
 use super::{begin, check_count, check_len, end, grid, Primitives};
 use crate::gpu::{Buffer, Commands, GpuError, MemLocation, Profiler};
-
-/// Push constants of `compute/scan_reduce.comp`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-struct ReducePush {
-    input: u64,
-    partials: u64,
-    n: u32,
-    predicate: u32,
-}
-
-/// Push constants of `compute/scan_block.comp`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-struct BlockPush {
-    input: u64,
-    output: u64,
-    offsets: u64,
-    total: u64,
-    values: u64,
-    n: u32,
-    mode: u32,
-}
-
-/// Push constants of `compute/indirect_args.comp`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-struct ArgsPush {
-    count_args: u64,
-    group_size: u32,
-    pad: u32,
-}
 
 /// Size of [`ReducePush`].
 pub(super) const REDUCE_PUSH_SIZE: usize = std::mem::size_of::<ReducePush>();
@@ -49,13 +18,6 @@ pub(super) const REDUCE_PUSH_SIZE: usize = std::mem::size_of::<ReducePush>();
 pub(super) const BLOCK_PUSH_SIZE: usize = std::mem::size_of::<BlockPush>();
 /// Size of [`ArgsPush`].
 pub(super) const ARGS_PUSH_SIZE: usize = std::mem::size_of::<ArgsPush>();
-
-const _: () = {
-    assert!(REDUCE_PUSH_SIZE == 24);
-    assert!(BLOCK_PUSH_SIZE == 48);
-    assert!(std::mem::offset_of!(BlockPush, n) == 40);
-    assert!(ARGS_PUSH_SIZE == 16);
-};
 
 /// `scan_block.comp` mode: write the exclusive scan.
 const MODE_SCAN: u32 = 0;
@@ -276,7 +238,7 @@ impl Primitives {
                 GpuError::InvalidArgument("scan scratch has too few levels".into())
             })?;
             let push = ReducePush {
-                input,
+                input_words: input,
                 partials: partials.address(),
                 n,
                 predicate: (mode == MODE_COMPACT) as u32,
@@ -304,8 +266,8 @@ impl Primitives {
             offsets = p;
         }
         let push = BlockPush {
-            input,
-            output,
+            input_words: input,
+            output_words: output,
             offsets,
             total: if groups == 1 { total } else { 0 },
             values,

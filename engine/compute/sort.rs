@@ -10,30 +10,13 @@
 //! per bit. Passes alternate between the caller's buffers and the scratch copies; the
 //! pass count is even, so the result ends in the caller's buffers.
 
+use super::gpu_shared::RadixPush;
 use super::scan::ScanScratch;
 use super::{begin, check_count, check_len, end, grid, Primitives};
 use crate::gpu::{Buffer, Commands, GpuError, MemLocation, Profiler};
 
-/// Push constants of `compute/radix_hist_*.comp` and `compute/radix_scatter_*.comp`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
-struct RadixPush {
-    keys_in: u64,
-    values_in: u64,
-    keys_out: u64,
-    values_out: u64,
-    offsets: u64,
-    n: u32,
-    shift: u32,
-}
-
 /// Size of [`RadixPush`].
 pub(super) const PUSH_SIZE: usize = std::mem::size_of::<RadixPush>();
-
-const _: () = {
-    assert!(PUSH_SIZE == 48);
-    assert!(std::mem::offset_of!(RadixPush, n) == 40);
-};
 
 /// Width of radix sort keys.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

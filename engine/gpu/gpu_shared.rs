@@ -35,4 +35,16 @@ gpu_shared! {
         /// Padding to 8 bytes.
         pub pad: uint,
     }
+
+    /// Push constants of `test/indirect_consume.comp`.
+    pub struct IndirectConsumePush {
+        /// `[count, x, y, z]` written by the compaction.
+        pub count_args: uint64_t,
+        /// The compacted words.
+        pub input_words: uint64_t,
+        /// One output word per survivor.
+        pub output_words: uint64_t,
+        /// Counters: invocations launched, invocations that did work.
+        pub stats: uint64_t,
+    }
 }

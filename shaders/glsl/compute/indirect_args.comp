@@ -14,11 +14,9 @@ layout(buffer_reference, std430, buffer_reference_align = 4) buffer CountArgs {
 };
 
 // Mirror of `ArgsPush` in engine/compute/scan.rs (16 bytes).
-layout(push_constant, std430) uniform Push {
-    uint64_t count_args;
-    uint group_size;
-    uint pad;
-} push;
+#include "gen/compute.glsl"
+// Members: `ArgsPush` in engine/compute/gpu_shared.rs.
+layout(push_constant, std430) uniform Push { ARGS_PUSH_MEMBERS } push;
 
 void main() {
     CountArgs b = CountArgs(push.count_args);

@@ -18,15 +18,9 @@ const uint BINS = 1u << BITS;
 
 // Mirror of `RadixPush` in engine/compute/sort.rs (56 bytes). `offsets` is the histogram
 // (hist pass output) or its exclusive scan (scatter pass input), digit-major: [digit * tiles + tile].
-layout(push_constant, std430) uniform Push {
-    uint64_t keys_in;
-    uint64_t values_in;
-    uint64_t keys_out;
-    uint64_t values_out;
-    uint64_t offsets;
-    uint n;
-    uint shift;
-} push;
+#include "gen/compute.glsl"
+// Members: `RadixPush` in engine/compute/gpu_shared.rs.
+layout(push_constant, std430) uniform Push { RADIX_PUSH_MEMBERS } push;
 
 uint digit_of(KEY_T key) {
     return uint(key >> push.shift) & (BINS - 1u);

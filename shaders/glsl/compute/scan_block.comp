@@ -8,15 +8,9 @@
 #include "compute/common.glsl"
 
 // Mirror of `BlockPush` in engine/compute/scan.rs (48 bytes).
-layout(push_constant, std430) uniform Push {
-    uint64_t input_words;
-    uint64_t output_words;
-    uint64_t offsets;
-    uint64_t total;
-    uint64_t values;
-    uint n;
-    uint mode;
-} push;
+#include "gen/compute.glsl"
+// Members: `BlockPush` in engine/compute/gpu_shared.rs.
+layout(push_constant, std430) uniform Push { BLOCK_PUSH_MEMBERS } push;
 
 void main() {
     uint w = workgroup_linear();

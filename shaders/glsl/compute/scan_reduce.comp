@@ -5,12 +5,9 @@
 #include "compute/common.glsl"
 
 // Mirror of `ReducePush` in engine/compute/scan.rs (24 bytes).
-layout(push_constant, std430) uniform Push {
-    uint64_t input_words;
-    uint64_t partials;
-    uint n;
-    uint predicate;
-} push;
+#include "gen/compute.glsl"
+// Members: `ReducePush` in engine/compute/gpu_shared.rs.
+layout(push_constant, std430) uniform Push { REDUCE_PUSH_MEMBERS } push;
 
 void main() {
     uint w = workgroup_linear();

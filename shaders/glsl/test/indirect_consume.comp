@@ -12,12 +12,8 @@ layout(buffer_reference, std430, buffer_reference_align = 4) buffer Words {
     uint w[];
 };
 
-layout(push_constant, std430) uniform Push {
-    uint64_t count_args;
-    uint64_t input_words;
-    uint64_t output_words;
-    uint64_t stats;
-} push;
+#include "gen/test.glsl"
+layout(push_constant, std430) uniform Push { INDIRECT_CONSUME_PUSH_MEMBERS } push;
 
 void main() {
     uint group = gl_WorkGroupID.x + gl_WorkGroupID.y * gl_NumWorkGroups.x;
