@@ -24,8 +24,8 @@ use rustc_hash::FxHashMap;
 use super::layout::murmur_words;
 use super::TeamMode;
 use crate::gpu::{
-    shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, MemLocation,
-    Profiler,
+    shaders, Buffer, ComputePipeline, ComputePipelineDesc, DeviceType, GpuContext, GpuError,
+    MemLocation, Profiler,
 };
 
 /// Most workgroups one dedup dispatch launches (the passes loop over the rest).
@@ -192,7 +192,7 @@ impl GpuDedup {
         }
         let subgroup = ctx.info().subgroup_size.max(1);
         let single_lane = match team {
-            TeamMode::Auto => ctx.info().device_type == "cpu",
+            TeamMode::Auto => ctx.info().device_type == DeviceType::Cpu,
             TeamMode::Subgroup => false,
             TeamMode::SingleLane => true,
         };

@@ -18,8 +18,8 @@ use super::layout::{
 use super::reference::TableImage;
 use super::HashError;
 use crate::gpu::{
-    shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, GpuContext, MemLocation,
-    Profiler,
+    shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, DeviceType, GpuContext,
+    MemLocation, Profiler,
 };
 
 /// How a table is built.
@@ -130,7 +130,7 @@ impl GpuHashTable {
         }
         let workgroup = subgroup.max(64);
         let single_lane = match config.team {
-            TeamMode::Auto => ctx.info().device_type == "cpu",
+            TeamMode::Auto => ctx.info().device_type == DeviceType::Cpu,
             TeamMode::Subgroup => false,
             TeamMode::SingleLane => true,
         };
