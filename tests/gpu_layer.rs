@@ -23,6 +23,8 @@ fn context() -> Arc<GpuContext> {
 
 /// Drops nothing itself: call after every resource is gone.
 fn assert_clean(ctx: &Arc<GpuContext>) {
+    // Deferred releases wait for the GPU: drain them first.
+    ctx.wait_idle().unwrap();
     assert_eq!(ctx.live_allocations(), 0, "leaked GPU allocations");
     assert_eq!(ctx.allocated_bytes(), 0);
     assert_eq!(ctx.validation_errors(), 0, "validation messages (see log)");
