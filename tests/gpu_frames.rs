@@ -367,7 +367,10 @@ fn submissions_and_host_waits_per_operation() {
         });
         assert_eq!(c, one);
         let lossless = LosslessGpu::new(&ctx).unwrap();
-        let colors: Vec<u32> = (0..5_000u32).map(|i| i.wrapping_mul(0x0101_0307)).collect();
+        // RGB888 keeps alpha 255.
+        let colors: Vec<u32> = (0..5_000u32)
+            .map(|i| i.wrapping_mul(0x0001_0307) & 0x00ff_ffff | 0xff00_0000)
+            .collect();
         let mut words = Vec::new();
         measure("lossless encode_vec", &mut || {
             words = lossless

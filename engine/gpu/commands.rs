@@ -358,8 +358,15 @@ impl<'a> Commands<'a> {
         // submission completed.
         unsafe {
             let set = loop {
+                let capacity = |i: usize| FIRST_DESCRIPTOR_POOL << i.min(10);
+                if recorder.current_pool < recorder.descriptor_pools.len()
+                    && recorder.current_sets >= capacity(recorder.current_pool)
+                {
+                    recorder.current_pool += 1;
+                    recorder.current_sets = 0;
+                }
                 if recorder.current_pool == recorder.descriptor_pools.len() {
-                    let sets = FIRST_DESCRIPTOR_POOL << recorder.descriptor_pools.len().min(10);
+                    let sets = capacity(recorder.descriptor_pools.len());
                     let sizes = [vk::DescriptorPoolSize {
                         ty: vk::DescriptorType::STORAGE_IMAGE,
                         descriptor_count: sets,
@@ -382,9 +389,15 @@ impl<'a> Commands<'a> {
                         .descriptor_pool(pool)
                         .set_layouts(&layouts),
                 ) {
-                    Ok(sets) => break sets[0],
+                    Ok(sets) => {
+                        recorder.current_sets += 1;
+                        break sets[0];
+                    }
                     Err(vk::Result::ERROR_OUT_OF_POOL_MEMORY)
-                    | Err(vk::Result::ERROR_FRAGMENTED_POOL) => recorder.current_pool += 1,
+                    | Err(vk::Result::ERROR_FRAGMENTED_POOL) => {
+                        recorder.current_pool += 1;
+                        recorder.current_sets = 0;
+                    }
                     Err(e) => return Err(vk_err("vkAllocateDescriptorSets")(e)),
                 }
             };

@@ -987,6 +987,7 @@ impl GpuContext {
                 buffer,
                 descriptor_pools: Vec::new(),
                 current_pool: 0,
+                current_sets: 0,
             })
         }
     }
@@ -1007,6 +1008,7 @@ impl GpuContext {
                         .is_ok()
                 });
             recorder.current_pool = 0;
+            recorder.current_sets = 0;
             let mut free = self.free_recorders();
             if ok && free.len() < MAX_FREE_RECORDERS {
                 free.push(recorder);

@@ -16,6 +16,9 @@ pub(crate) struct Recorder {
     pub(crate) descriptor_pools: Vec<vk::DescriptorPool>,
     /// Index of the pool new sets come from.
     pub(crate) current_pool: usize,
+    /// Sets allocated from the current pool (a pool of index `i` holds `64 << i`; counted here
+    /// because drivers may allocate beyond `maxSets` instead of failing).
+    pub(crate) current_sets: u32,
 }
 
 /// Something whose destruction waits for the GPU.
