@@ -340,7 +340,7 @@ impl GpuGarbageCollector {
             bytemuck::bytes_of(&push),
             None,
         )?;
-        if let Some(p) = profiler.as_deref_mut() {
+        if let Some(p) = profiler {
             p.end_pass(cmd);
         }
         cmd.barrier();
