@@ -390,3 +390,70 @@ fn submissions_and_host_waits_per_operation() {
     }
     assert_clean(&ctx);
 }
+
+/// The recorded forms compose: an upload, a find-or-insert, a read pass and the readbacks in a
+/// caller's one recording (one submission, one wait), then a recorded GC.
+#[test]
+fn hash_passes_record_into_a_callers_commands() {
+    let ctx = common::gpu();
+    {
+        let mut table =
+            GpuHashTable::new(&ctx, &HashTableConfig::new(HashVariant::AccelHash8, 3, 32)).unwrap();
+        let count = 1_500u32;
+        let items: Vec<u32> = (1..=count).flat_map(|i| [i, i ^ 0x55, i * 3]).collect();
+        let item_buf = ctx
+            .create_buffer("items", items.len() as u64 * 4, MemLocation::GpuOnly)
+            .unwrap();
+        let handles = ctx
+            .create_buffer("handles", count as u64 * 4, MemLocation::GpuOnly)
+            .unwrap();
+        let out = ctx
+            .create_buffer(
+                "read back items",
+                items.len() as u64 * 4,
+                MemLocation::GpuOnly,
+            )
+            .unwrap();
+        table.reserve(count).unwrap();
+        let before = ctx.stats();
+        let mut cmd = ctx.begin_commands("caller frame").unwrap();
+        cmd.upload(&item_buf, 0, &items).unwrap();
+        let pending = table
+            .record_insert(&mut cmd, &item_buf, &handles, count, true, None)
+            .unwrap();
+        table
+            .record_read_items(&mut cmd, &handles, &out, count, None)
+            .unwrap();
+        let words: Readback<u32> = cmd.readback(&out, 0, items.len()).unwrap();
+        let raw: Readback<u32> = cmd.readback(&handles, 0, count as usize).unwrap();
+        cmd.submit_async().unwrap();
+        let report = table
+            .finish_insert(pending, &item_buf, &handles, count, None)
+            .unwrap();
+        assert_eq!(report.rounds, 1);
+        assert_eq!(words.read().unwrap(), items);
+        let raw = raw.read().unwrap();
+        assert_eq!(
+            ctx.stats().since(before),
+            GpuStats {
+                submissions: 1,
+                host_waits: 1
+            }
+        );
+        // GC recorded by the caller: keep the first half.
+        let gc = GpuGarbageCollector::new(&ctx, &table).unwrap();
+        let live = ctx.upload("live", &raw[..750]).unwrap();
+        let mut cmd = ctx.begin_commands("caller gc").unwrap();
+        let pending = gc
+            .record_collect(&mut cmd, &table, &live, 750, None)
+            .unwrap();
+        cmd.submit_async().unwrap();
+        let gc_report = gc.finish_collect(pending).unwrap();
+        assert_eq!(gc_report.freed_items, count - 750);
+        assert_eq!(gc_report.bad_handles, 0);
+        let found = table.search(&items, None).unwrap();
+        assert!(found[..750].iter().all(Option::is_some));
+        assert!(found[750..].iter().all(Option::is_none));
+    }
+    assert_clean(&ctx);
+}

@@ -808,6 +808,7 @@ impl<'a> Commands<'a> {
                 .defer_until(value, Garbage::RingRegion(RingKind::Upload, id));
         }
         // Dedicated staging buffers drop with `self`, deferred to this (the last) submission.
+        self.ctx.maintain();
         Ok(Submission {
             value,
             ctx: Arc::clone(&self.ctx),

@@ -185,7 +185,9 @@ impl std::fmt::Display for DeviceType {
 pub struct GpuStats {
     /// Queue submissions (`vkQueueSubmit` calls).
     pub submissions: u64,
-    /// Times the host blocked until the GPU reached a timeline value (or went idle).
+    /// Host synchronisation points: waits for a timeline value beyond every value waited for
+    /// before (counted whether or not the GPU had already finished, so the count depends on the
+    /// code path, not on timing).
     pub host_waits: u64,
 }
 
@@ -272,6 +274,16 @@ pub struct GpuContext {
     readback_ring: Mutex<Ring>,
     submissions: AtomicU64,
     host_waits: AtomicU64,
+    /// Highest value the host has waited for (host waits count values beyond it).
+    waited: AtomicU64,
+}
+
+impl std::fmt::Debug for GpuContext {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GpuContext")
+            .field("device", &self.info().name)
+            .finish()
+    }
 }
 
 /// A physical device candidate during selection.
@@ -684,6 +696,7 @@ impl GpuContext {
             readback_ring: Mutex::new(readback_ring),
             submissions: AtomicU64::new(0),
             host_waits: AtomicU64::new(0),
+            waited: AtomicU64::new(0),
         };
         ctx.set_name(queue, "main queue");
         ctx.set_name(timeline, "main queue timeline");
@@ -818,8 +831,9 @@ impl GpuContext {
         Ok(v)
     }
 
-    /// Blocks until the GPU has completed submission `value` (counted in [`GpuStats::host_waits`]
-    /// unless it already had), then releases the garbage it held.
+    /// Blocks until the GPU has completed submission `value`, then releases the garbage it
+    /// held. Counted in [`GpuStats::host_waits`] when `value` is beyond every value waited for
+    /// before.
     pub fn wait_for(&self, value: u64) -> Result<(), GpuError> {
         if value > self.last_submitted() {
             return Err(GpuError::InvalidArgument(format!(
@@ -827,10 +841,14 @@ impl GpuContext {
                 self.last_submitted()
             )));
         }
+        // A synchronisation point: the first time the host needs this value (deterministic,
+        // whether or not the GPU happens to be done already).
+        if value > 0 && self.waited.fetch_max(value, Ordering::AcqRel) < value {
+            self.host_waits.fetch_add(1, Ordering::Relaxed);
+        }
         if value <= self.completed.load(Ordering::Acquire) {
             return Ok(());
         }
-        self.host_waits.fetch_add(1, Ordering::Relaxed);
         let semaphores = [self.timeline];
         let values = [value];
         let info = vk::SemaphoreWaitInfo::default()

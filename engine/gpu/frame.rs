@@ -19,14 +19,6 @@ pub struct FrameRing {
     frame: u64,
 }
 
-impl std::fmt::Debug for GpuContext {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("GpuContext")
-            .field("device", &self.info().name)
-            .finish()
-    }
-}
-
 impl FrameRing {
     /// A ring of `frames_in_flight` slots (at least 1; 2 or 3 is usual).
     pub fn new(ctx: &Arc<GpuContext>, frames_in_flight: usize) -> Result<FrameRing, GpuError> {

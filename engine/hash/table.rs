@@ -2,11 +2,14 @@
 //!
 //! Passes (each one dispatch, `shaders/glsl/hash/*.comp`): `search` (items -> handles or
 //! [`HANDLE_MISS`]), `insert` (places every item whose handle is still `HANDLE_MISS`), `read`
-//! (handles -> items). `insert` of a batch = fill the handles with `HANDLE_MISS`, then insert
-//! rounds; `find_or_insert` = search, then insert rounds over the misses (no compaction: items
-//! already found are skipped by their handle). After each insert round the host reads the status
-//! block; items left out for lack of a slab are counted there, the pool grows and the round
-//! repeats for them only. Data stays on the GPU; the `&[u32]` helpers upload and read back.
+//! (handles -> items). Each has a recorded form (`record_*`) that records into a caller's
+//! [`Commands`]; the `*_buffers` and host-slice calls are wrappers that record everything (the
+//! upload, the passes, the status and the result readbacks through the staging rings) into one
+//! submission and wait once. `find_or_insert` = search, then an insert round over the misses (no
+//! compaction: items already found are skipped by their handle), after a conservative pool
+//! reservation; the status block is read back before and after the round in the same
+//! submission. Only if a round reports items left out for lack of a slab does
+//! [`GpuHashTable::finish_insert`] grow the pool and run another round for them.
 
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::Arc;
