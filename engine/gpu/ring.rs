@@ -102,13 +102,11 @@ pub(crate) struct Ring {
 impl Ring {
     /// Mapped pointer to byte `offset` (the ring's allocation is persistently mapped).
     pub(crate) fn ptr(&self, offset: u64) -> *mut u8 {
-        let base = self
-            .allocation
-            .as_ref()
-            .and_then(|a| a.mapped_ptr())
-            .map_or(std::ptr::null_mut(), |p| p.as_ptr() as *mut u8);
-        // SAFETY: offsets come from `alloc`, inside the buffer; callers check for null.
-        unsafe { base.add(offset as usize) }
+        match self.allocation.as_ref().and_then(|a| a.mapped_ptr()) {
+            // SAFETY: offsets come from `alloc`, inside the mapped buffer.
+            Some(p) => unsafe { (p.as_ptr() as *mut u8).add(offset as usize) },
+            None => std::ptr::null_mut(),
+        }
     }
 }
 
