@@ -304,6 +304,8 @@ fn gpu_round_trip_on_a_textured_scene() {
 }
 
 fn assert_clean(ctx: &std::sync::Arc<voxdag::gpu::GpuContext>) {
+    // Deferred releases wait for the GPU: drain them first.
+    ctx.wait_idle().unwrap();
     assert_eq!(ctx.live_allocations(), 0, "leaked GPU allocations");
     assert_eq!(ctx.validation_errors(), 0, "validation messages (see log)");
 }

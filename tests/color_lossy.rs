@@ -191,6 +191,8 @@ fn decode_on_gpu(ctx: &Arc<GpuContext>, spirv: &[u32], words: &[u32], count: usi
 }
 
 fn assert_clean(ctx: &Arc<GpuContext>) {
+    // Deferred releases wait for the GPU: drain them first.
+    ctx.wait_idle().unwrap();
     assert_eq!(ctx.live_allocations(), 0, "leaked GPU allocations");
     assert_eq!(ctx.validation_errors(), 0, "validation messages (see log)");
 }

@@ -24,6 +24,8 @@ fn context() -> Arc<GpuContext> {
 
 /// Drops nothing itself: call after every resource is gone.
 fn assert_clean(ctx: &Arc<GpuContext>) {
+    // Deferred releases wait for the GPU: drain them first.
+    ctx.wait_idle().unwrap();
     assert_eq!(ctx.live_allocations(), 0, "leaked GPU allocations");
     assert_eq!(ctx.allocated_bytes(), 0);
     assert_eq!(ctx.validation_errors(), 0, "validation messages (see log)");
@@ -81,6 +83,7 @@ fn device_override_that_matches_nothing_lists_devices() {
     let options = GpuOptions {
         validation: false,
         device: Some("no such gpu 1234".into()),
+        ..GpuOptions::default()
     };
     match GpuContext::new(&options) {
         Err(GpuError::DeviceNotFound { wanted, available }) => {

@@ -127,6 +127,7 @@ fn gpu_matches_cpu_on_random_batches() {
     }
     drop(ctx.wait_idle());
     assert_eq!(ctx.validation_errors(), 0, "validation messages (see log)");
+    ctx.wait_idle().unwrap();
     assert_eq!(ctx.live_allocations(), 0, "leaked GPU allocations");
 }
 
@@ -154,6 +155,7 @@ fn a_too_small_pool_grows_and_the_answer_stays_exact() {
         );
     }
     assert_eq!(ctx.validation_errors(), 0, "validation messages (see log)");
+    ctx.wait_idle().unwrap();
     assert_eq!(ctx.live_allocations(), 0, "leaked GPU allocations");
 }
 
@@ -205,5 +207,6 @@ fn team_modes_agree_on_distinct_keys_and_report_their_times() {
         );
     }
     assert_eq!(ctx.validation_errors(), 0, "validation messages (see log)");
+    ctx.wait_idle().unwrap();
     assert_eq!(ctx.live_allocations(), 0, "leaked GPU allocations");
 }

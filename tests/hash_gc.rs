@@ -55,6 +55,8 @@ fn flat(items: &[Vec<u32>]) -> Vec<u32> {
 }
 
 fn assert_clean(ctx: &Arc<GpuContext>) {
+    // Deferred releases wait for the GPU: drain them first.
+    ctx.wait_idle().unwrap();
     assert_eq!(ctx.validation_errors(), 0, "validation messages (see log)");
     assert_eq!(ctx.live_allocations(), 0, "leaked GPU allocations");
 }

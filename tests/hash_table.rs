@@ -17,6 +17,8 @@ use voxdag::hash::{
 };
 
 fn assert_clean(ctx: &Arc<GpuContext>) {
+    // Deferred releases wait for the GPU: drain them first.
+    ctx.wait_idle().unwrap();
     assert_eq!(ctx.live_allocations(), 0, "leaked GPU allocations");
     assert_eq!(ctx.validation_errors(), 0, "validation messages (see log)");
 }

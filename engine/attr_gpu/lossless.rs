@@ -14,8 +14,8 @@ use std::sync::Arc;
 use super::gpu_shared::{DecodePush, PlanPush, ScanPush, WritePush};
 use crate::attr::lossless::{self, LosslessVariant, BLOCK_COLORS, EXTRA_SHIFTS};
 use crate::gpu::{
-    shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, MemLocation,
-    Profiler,
+    shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError,
+    MemLocation, Profiler, Readback,
 };
 
 /// Invocations per workgroup of the per-block and the decode passes.
@@ -34,15 +34,23 @@ pub struct LosslessGpu {
     decode: ComputePipeline,
 }
 
+/// Per-block scratch of one encode: block plans and the 64-bit offset table.
+#[derive(Debug)]
+pub struct EncodeScratch {
+    plans: Buffer,
+    offsets: Buffer,
+    blocks: u32,
+}
+
 /// Opens a profiled pass, or just a debug label without a profiler.
-fn begin(profiler: &mut Option<&mut Profiler>, cmd: &mut crate::gpu::Commands<'_>, name: &str) {
+fn begin(profiler: &mut Option<&mut Profiler>, cmd: &mut Commands<'_>, name: &str) {
     match profiler {
         Some(p) => p.begin_pass(cmd, name),
         None => cmd.begin_label(name),
     }
 }
 
-fn end(profiler: &mut Option<&mut Profiler>, cmd: &mut crate::gpu::Commands<'_>) {
+fn end(profiler: &mut Option<&mut Profiler>, cmd: &mut Commands<'_>) {
     match profiler {
         Some(p) => p.end_pass(cmd),
         None => cmd.end_label(),
@@ -96,17 +104,148 @@ impl LosslessGpu {
         })
     }
 
+    /// Scratch for encoding `count` (≥ 1) colours.
+    pub fn encode_scratch(&self, count: u32) -> Result<EncodeScratch, GpuError> {
+        let blocks = count.max(1).div_ceil(BLOCK_COLORS as u32);
+        Ok(EncodeScratch {
+            plans: self.ctx.create_buffer(
+                "lossless plans",
+                blocks as u64 * PLAN_WORDS * 4,
+                MemLocation::GpuOnly,
+            )?,
+            offsets: self.ctx.create_buffer(
+                "lossless block offsets",
+                (blocks as u64 + 1) * 8,
+                MemLocation::GpuOnly,
+            )?,
+            blocks,
+        })
+    }
+
+    /// Records the first encode step into `cmd`: the plan and scan passes (profiled as
+    /// "lossless plan" and "lossless scan") and a readback of the encoded size in words, which
+    /// the host needs to allocate the output of [`LosslessGpu::record_write`].
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_plan<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        colors: &'a Buffer,
+        count: u32,
+        variant: LosslessVariant,
+        scratch: &'a EncodeScratch,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<Readback<u64>, GpuError> {
+        self.check_colors(colors, count, scratch)?;
+        let blocks = scratch.blocks;
+        begin(&mut profiler, cmd, "lossless plan");
+        let push = PlanPush {
+            colors: colors.address(),
+            plans: scratch.plans.address(),
+            count,
+            variant: variant.id(),
+        };
+        cmd.dispatch(
+            &self.plan,
+            [blocks.div_ceil(WORKGROUP), 1, 1],
+            bytemuck::bytes_of(&push),
+            None,
+        )?;
+        end(&mut profiler, cmd);
+        cmd.barrier();
+        begin(&mut profiler, cmd, "lossless scan");
+        let push = ScanPush {
+            plans: scratch.plans.address(),
+            offsets: scratch.offsets.address(),
+            blocks,
+            pad: 0,
+        };
+        cmd.dispatch(&self.scan, [1, 1, 1], bytemuck::bytes_of(&push), None)?;
+        end(&mut profiler, cmd);
+        cmd.barrier();
+        cmd.readback::<u64>(&scratch.offsets, blocks as u64 * 8, 1)
+    }
+
+    /// Records the write pass (profiled as "lossless write") into `cmd`: the encoded words into
+    /// `out`, which holds at least the size [`LosslessGpu::record_plan`] read back.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_write<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        colors: &'a Buffer,
+        count: u32,
+        variant: LosslessVariant,
+        scratch: &'a EncodeScratch,
+        out: &'a Buffer,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<(), GpuError> {
+        self.check_colors(colors, count, scratch)?;
+        begin(&mut profiler, cmd, "lossless write");
+        let push = WritePush {
+            colors: colors.address(),
+            plans: scratch.plans.address(),
+            offsets: scratch.offsets.address(),
+            out_words: out.address(),
+            count,
+            variant: variant.id(),
+        };
+        cmd.dispatch(
+            &self.write,
+            [scratch.blocks.div_ceil(WORKGROUP), 1, 1],
+            bytemuck::bytes_of(&push),
+            None,
+        )?;
+        end(&mut profiler, cmd);
+        cmd.barrier();
+        Ok(())
+    }
+
+    fn check_colors(
+        &self,
+        colors: &Buffer,
+        count: u32,
+        scratch: &EncodeScratch,
+    ) -> Result<(), GpuError> {
+        if count == 0 || colors.size() < count as u64 * 4 {
+            return Err(GpuError::InvalidArgument(format!(
+                "buffer '{}' of {} bytes cannot hold {count} (≥ 1) colours",
+                colors.name(),
+                colors.size()
+            )));
+        }
+        if count.div_ceil(BLOCK_COLORS as u32) != scratch.blocks {
+            return Err(GpuError::InvalidArgument(format!(
+                "encode scratch for {} blocks used for {count} colours",
+                scratch.blocks
+            )));
+        }
+        Ok(())
+    }
+
     /// Encodes the first `count` RGBA8 words of `colors` into a new GPU buffer holding the words
     /// [`lossless::encode`] returns (exactly; one unused word when `count` is 0) and returns
-    /// their number. Passes are profiled
-    /// as "lossless plan", "lossless scan" and "lossless write".
+    /// their number. Passes are profiled as "lossless plan", "lossless scan" and "lossless
+    /// write". Two submissions; one host wait (for the size), two with a profiler.
     pub fn encode(
         &self,
         colors: &Buffer,
         count: u32,
         variant: LosslessVariant,
-        mut profiler: Option<&mut Profiler>,
+        profiler: Option<&mut Profiler>,
     ) -> Result<(Buffer, usize), GpuError> {
+        self.encode_flow(colors, count, variant, None, profiler)
+            .map(|(b, n, _)| (b, n))
+    }
+
+    /// Encode with an optional upload of the colours (first submission) and readback of the
+    /// words (second submission).
+    fn encode_flow(
+        &self,
+        colors: &Buffer,
+        count: u32,
+        variant: LosslessVariant,
+        upload: Option<&[u32]>,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<(Buffer, usize, Option<Vec<u32>>), GpuError> {
         let ctx = &self.ctx;
         if colors.size() < count as u64 * 4 {
             return Err(GpuError::InvalidArgument(format!(
@@ -118,67 +257,85 @@ impl LosslessGpu {
         if count == 0 {
             // No colours encode to no words; Vulkan has no empty buffers.
             let out = ctx.create_buffer("lossless chunk (empty)", 4, MemLocation::GpuOnly)?;
-            return Ok((out, 0));
+            return Ok((out, 0, upload.map(|_| Vec::new())));
         }
-        let blocks = count.div_ceil(BLOCK_COLORS as u32);
-        let groups = [blocks.div_ceil(WORKGROUP), 1, 1];
-        let plans = ctx.create_buffer(
-            "lossless plans",
-            blocks as u64 * PLAN_WORDS * 4,
-            MemLocation::GpuOnly,
-        )?;
-        let offsets = ctx.create_buffer(
-            "lossless block offsets",
-            (blocks as u64 + 1) * 8,
-            MemLocation::GpuOnly,
-        )?;
-
+        let scratch = self.encode_scratch(count)?;
         let mut cmd = ctx.begin_commands("lossless encode: plan + scan")?;
-        begin(&mut profiler, &mut cmd, "lossless plan");
-        let push = PlanPush {
-            colors: colors.address(),
-            plans: plans.address(),
+        if let Some(data) = upload {
+            cmd.upload(colors, 0, data)?;
+        }
+        let total = self.record_plan(
+            &mut cmd,
+            colors,
             count,
-            variant: variant.id(),
-        };
-        cmd.dispatch(&self.plan, groups, bytemuck::bytes_of(&push), None)?;
-        end(&mut profiler, &mut cmd);
-        cmd.barrier();
-        begin(&mut profiler, &mut cmd, "lossless scan");
-        let push = ScanPush {
-            plans: plans.address(),
-            offsets: offsets.address(),
-            blocks,
-            pad: 0,
-        };
-        cmd.dispatch(&self.scan, [1, 1, 1], bytemuck::bytes_of(&push), None)?;
-        end(&mut profiler, &mut cmd);
-        cmd.submit()?;
-
-        let total = ctx.read_buffer::<u64>(&offsets, blocks as u64 * 8, 1)?[0];
-        let out = ctx.create_buffer("lossless chunk", total * 4, MemLocation::GpuOnly)?;
+            variant,
+            &scratch,
+            profiler.as_deref_mut(),
+        )?;
+        cmd.submit_async()?;
+        let total = total.read()?[0];
+        let out = ctx.create_buffer("lossless chunk", total.max(1) * 4, MemLocation::GpuOnly)?;
         let mut cmd = ctx.begin_commands("lossless encode: write")?;
-        begin(&mut profiler, &mut cmd, "lossless write");
-        let push = WritePush {
-            colors: colors.address(),
-            plans: plans.address(),
-            offsets: offsets.address(),
-            out_words: out.address(),
+        self.record_write(
+            &mut cmd,
+            colors,
             count,
-            variant: variant.id(),
+            variant,
+            &scratch,
+            &out,
+            profiler.as_deref_mut(),
+        )?;
+        let back = match upload {
+            Some(_) => Some(cmd.readback::<u32>(&out, 0, total as usize)?),
+            None => None,
         };
-        cmd.dispatch(&self.write, groups, bytemuck::bytes_of(&push), None)?;
-        end(&mut profiler, &mut cmd);
-        cmd.submit()?;
+        cmd.submit_async()?;
         if let Some(p) = profiler {
             p.resolve()?;
         }
-        Ok((out, total as usize))
+        let words = match back {
+            Some(b) => Some(b.read()?),
+            None => None,
+        };
+        Ok((out, total as usize, words))
+    }
+
+    /// Records the decode pass (profiled as "lossless decode") into `cmd`: `count` (≥ 1)
+    /// colours of the encoded chunk in `chunk` into `out` (RGBA8 words). The GPU does not
+    /// validate: pass only chunks that [`lossless::validate`] accepted.
+    pub fn record_decode<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        chunk: &'a Buffer,
+        count: u32,
+        out: &'a Buffer,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<(), GpuError> {
+        if count == 0 || out.size() < count as u64 * 4 {
+            return Err(GpuError::InvalidArgument(format!(
+                "lossless decode of {count} colours into '{}' of {} bytes",
+                out.name(),
+                out.size()
+            )));
+        }
+        let max_groups = self.ctx.info().max_compute_workgroup_count[0];
+        let groups = [count.div_ceil(WORKGROUP).min(max_groups), 1, 1];
+        begin(&mut profiler, cmd, "lossless decode");
+        let push = DecodePush {
+            chunk: chunk.address(),
+            out_colors: out.address(),
+            count,
+            pad: 0,
+        };
+        cmd.dispatch(&self.decode, groups, bytemuck::bytes_of(&push), None)?;
+        end(&mut profiler, cmd);
+        cmd.barrier();
+        Ok(())
     }
 
     /// Decodes `count` (≥ 1) colours of the encoded chunk in `chunk` into a new buffer of RGBA8
     /// words (profiled as "lossless decode"). The GPU does not validate: pass only chunks that
-    /// [`lossless::validate`] accepted.
+    /// [`lossless::validate`] accepted. One submission, waited for only with a profiler.
     pub fn decode_all(
         &self,
         chunk: &Buffer,
@@ -196,19 +353,9 @@ impl LosslessGpu {
             count as u64 * 4,
             MemLocation::GpuOnly,
         )?;
-        let max_groups = ctx.info().max_compute_workgroup_count[0];
-        let groups = [count.div_ceil(WORKGROUP).min(max_groups), 1, 1];
         let mut cmd = ctx.begin_commands("lossless decode")?;
-        begin(&mut profiler, &mut cmd, "lossless decode");
-        let push = DecodePush {
-            chunk: chunk.address(),
-            out_colors: out.address(),
-            count,
-            pad: 0,
-        };
-        cmd.dispatch(&self.decode, groups, bytemuck::bytes_of(&push), None)?;
-        end(&mut profiler, &mut cmd);
-        cmd.submit()?;
+        self.record_decode(&mut cmd, chunk, count, &out, profiler.as_deref_mut())?;
+        cmd.submit_async()?;
         if let Some(p) = profiler {
             p.resolve()?;
         }
@@ -226,9 +373,13 @@ impl LosslessGpu {
         if count == 0 {
             return Ok(Vec::new());
         }
-        let input = self.ctx.upload("lossless input colours", colors)?;
-        let (out, words) = self.encode(&input, count, variant, profiler)?;
-        self.ctx.read_buffer(&out, 0, words)
+        let input = self.ctx.create_buffer(
+            "lossless input colours",
+            count as u64 * 4,
+            MemLocation::GpuOnly,
+        )?;
+        let (_, _, words) = self.encode_flow(&input, count, variant, Some(colors), profiler)?;
+        Ok(words.unwrap_or_default())
     }
 
     /// Validates `words` on the CPU ([`lossless::validate`]), then decodes them with
@@ -237,7 +388,7 @@ impl LosslessGpu {
         &self,
         words: &[u32],
         count: usize,
-        profiler: Option<&mut Profiler>,
+        mut profiler: Option<&mut Profiler>,
     ) -> Result<Vec<u32>, GpuError> {
         lossless::validate(words, count)
             .map_err(|e| GpuError::InvalidArgument(format!("lossless chunk: {e}")))?;
@@ -245,9 +396,26 @@ impl LosslessGpu {
         if count == 0 {
             return Ok(Vec::new());
         }
-        let chunk = self.ctx.upload("lossless chunk", words)?;
-        let out = self.decode_all(&chunk, count, profiler)?;
-        self.ctx.download(&out)
+        // Upload, decode and readback in one submission, one host wait.
+        let chunk = self.ctx.create_buffer(
+            "lossless chunk",
+            words.len().max(1) as u64 * 4,
+            MemLocation::GpuOnly,
+        )?;
+        let out = self.ctx.create_buffer(
+            "lossless decoded colours",
+            count as u64 * 4,
+            MemLocation::GpuOnly,
+        )?;
+        let mut cmd = self.ctx.begin_commands("lossless decode")?;
+        cmd.upload(&chunk, 0, words)?;
+        self.record_decode(&mut cmd, &chunk, count, &out, profiler.as_deref_mut())?;
+        let back = cmd.readback::<u32>(&out, 0, count as usize)?;
+        cmd.submit_async()?;
+        if let Some(p) = profiler {
+            p.resolve()?;
+        }
+        back.read()
     }
 }
 

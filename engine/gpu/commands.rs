@@ -1,114 +1,253 @@
-//! One-shot command buffers: record dispatches, copies and barriers, submit and wait on a fence.
+//! The command recorder: any number of passes recorded into one pooled command buffer with the
+//! barriers between them, submitted once; its completion is a timeline value ([`Submission`]).
 
 use std::ffi::CString;
 use std::marker::PhantomData;
-use std::sync::atomic::{AtomicU8, Ordering};
-use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 
 use ash::vk;
 
 use super::memory::color_range;
-use super::{vk_err, Buffer, ComputePipeline, GpuContext, GpuError, Image};
+use super::release::{Garbage, Recorder};
+use super::ring::RingKind;
+use super::{vk_err, Buffer, ComputePipeline, GpuContext, GpuError, Image, MemLocation};
 
-/// Where a [`Commands`] is in its life; shared with the [`super::Profiler`], which discards the
-/// passes of a command buffer that was dropped without a successful submit instead of waiting
-/// for timestamps that will never be written.
+/// Transfers up to this size go through a staging ring; larger ones (or ones that find the ring
+/// full) get a dedicated staging buffer, released after their submission.
+pub(crate) const RING_MAX_TRANSFER: u64 = 1 << 20;
+/// Descriptor sets in a recorder's first descriptor pool; each further pool doubles.
+const FIRST_DESCRIPTOR_POOL: u32 = 64;
+
+/// Lifecycle value of a recorder still recording.
+const RECORDING: u64 = 0;
+/// Lifecycle value of a recorder dropped without a submission.
+const ABANDONED: u64 = u64::MAX;
+
+/// Where a [`Commands`] is in its life; shared with the [`super::Profiler`] and with
+/// [`Readback`]s, which need its submission's timeline value (or to know that it never ran).
 #[derive(Debug, Default)]
-pub(crate) struct Lifecycle(AtomicU8);
+pub(crate) struct Lifecycle {
+    /// [`RECORDING`], [`ABANDONED`] or the submission's timeline value.
+    state: AtomicU64,
+    /// Staging of readbacks dropped while the recorder still records: released with it.
+    orphans: Mutex<Vec<Staging>>,
+}
 
-/// States stored in a [`Lifecycle`].
+/// States of a [`Lifecycle`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum CommandsState {
-    /// Being recorded (or submitted and not yet waited on).
+    /// Being recorded.
     Recording,
-    /// Submitted, and the GPU has finished it.
-    Finished,
-    /// Dropped without a completed submission: nothing it recorded ran (or will be read).
+    /// Submitted; the GPU finishes it at this timeline value.
+    Submitted(u64),
+    /// Dropped without a submission: nothing it recorded ran (or will be read).
     Abandoned,
 }
 
 impl Lifecycle {
     /// The current state.
     pub(crate) fn get(&self) -> CommandsState {
-        match self.0.load(Ordering::Acquire) {
-            0 => CommandsState::Recording,
-            1 => CommandsState::Finished,
-            _ => CommandsState::Abandoned,
+        match self.state.load(Ordering::Acquire) {
+            RECORDING => CommandsState::Recording,
+            ABANDONED => CommandsState::Abandoned,
+            v => CommandsState::Submitted(v),
         }
     }
 
-    fn set(&self, state: CommandsState) {
-        let v = match state {
-            CommandsState::Recording => 0,
-            CommandsState::Finished => 1,
-            CommandsState::Abandoned => 2,
+    /// Sets the final state and releases the orphaned staging accordingly.
+    fn finish(&self, ctx: &GpuContext, state: u64) {
+        let orphans = {
+            let mut o = self.orphans.lock().unwrap_or_else(|p| p.into_inner());
+            self.state.store(state, Ordering::Release);
+            std::mem::take(&mut *o)
         };
-        self.0.store(v, Ordering::Release);
+        for staging in orphans {
+            staging.release(ctx, state);
+        }
     }
 }
 
-/// A command buffer being recorded. Resources passed by reference must outlive it (`'a`);
-/// buffers reached only through device addresses must be kept alive by the caller until
-/// [`Commands::submit`] returns. Dropping it unsubmitted frees it without running anything.
+/// Host-visible memory a readback lands in.
+#[derive(Debug)]
+enum Staging {
+    /// A region of the readback ring: (id, offset).
+    Ring(u64, u64),
+    /// A dedicated buffer.
+    Buffer(Buffer),
+}
+
+impl Staging {
+    /// Releases the staging once the submission with lifecycle value `state` is done with it.
+    fn release(self, ctx: &GpuContext, state: u64) {
+        match self {
+            Staging::Ring(id, _) => {
+                let value = if state == ABANDONED { 0 } else { state };
+                ctx.defer_until(value, Garbage::RingRegion(RingKind::Readback, id));
+            }
+            // A buffer's drop defers it to the last submission, which is at least `state`.
+            Staging::Buffer(b) => drop(b),
+        }
+    }
+}
+
+/// A command recorder: passes recorded into one command buffer, submitted once.
 ///
-/// Thread safety: Vulkan requires a command pool to be externally synchronised while any of its
-/// command buffers is allocated, recorded, ended or freed. Rather than one pool in the shared
-/// [`GpuContext`] whose mutex would have to stay locked for the whole life of every recorder
-/// (serialising all threads, and deadlocking a thread that starts an upload while it records),
-/// each `Commands` creates its own transient pool and destroys it on drop. Nothing else ever
-/// touches that pool, so recorders on different threads need no lock at all; only the queue is
-/// locked, for the submit itself. A pool per one-shot submission costs far less than the fence
-/// wait that follows it.
+/// Resources passed by reference must outlive it (`'a`); buffers reached only through device
+/// addresses must be kept alive by the caller until [`Commands::submit_async`] returns (after
+/// that, dropping them is safe: their release waits for the submission). Dropping it unsubmitted
+/// runs nothing.
+///
+/// Thread safety: a command pool must be externally synchronised while any of its buffers is
+/// recorded. Each `Commands` takes a whole pooled recorder (command pool + command buffer +
+/// descriptor pools) from the context's free list for itself, so recorders on different threads
+/// need no lock; the recorder goes back to the list, reset, once its submission has completed.
+/// Only the submit itself locks the queue.
 pub struct Commands<'a> {
     pub(crate) raw: vk::CommandBuffer,
-    pool: vk::CommandPool,
-    fence: vk::Fence,
-    descriptor_pool: vk::DescriptorPool,
+    recorder: Option<Recorder>,
     name: String,
-    /// Submitted and not yet known to be finished.
-    pending: bool,
-    /// Shared with the profiler's passes recorded here.
+    /// Upload-ring regions this recording copies from.
+    upload_regions: Vec<u64>,
+    /// Dedicated staging buffers this recording copies from (released after the submission).
+    staging: Vec<Buffer>,
+    /// Shared with the profiler's passes and the readbacks recorded here.
     pub(crate) lifecycle: Arc<Lifecycle>,
     pub(crate) ctx: Arc<GpuContext>,
     _resources: PhantomData<&'a ()>,
 }
 
+impl std::fmt::Debug for Commands<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Commands")
+            .field("name", &self.name)
+            .finish()
+    }
+}
+
+/// A submitted recording: completes when the queue's timeline semaphore reaches `value`.
+#[derive(Clone, Debug)]
+pub struct Submission {
+    value: u64,
+    ctx: Arc<GpuContext>,
+}
+
+impl Submission {
+    /// The timeline value the submission signals.
+    pub fn value(&self) -> u64 {
+        self.value
+    }
+
+    /// Whether the GPU has finished it (does not block).
+    pub fn is_done(&self) -> Result<bool, GpuError> {
+        Ok(self.ctx.completed_value()? >= self.value)
+    }
+
+    /// Blocks until the GPU has finished it.
+    pub fn wait(&self) -> Result<(), GpuError> {
+        self.ctx.wait_for(self.value)
+    }
+}
+
+/// Data a recording copies into host-visible staging (a readback-ring region, or a dedicated
+/// buffer when large); [`Readback::read`] returns it once the submission has completed.
+#[derive(Debug)]
+pub struct Readback<T: bytemuck::Pod> {
+    staging: Option<Staging>,
+    count: usize,
+    lifecycle: Arc<Lifecycle>,
+    ctx: Arc<GpuContext>,
+    _t: PhantomData<T>,
+}
+
+impl<T: bytemuck::Pod> Readback<T> {
+    /// Waits for the submission (if it has not completed yet) and returns the data. Errors if
+    /// the recorder was not submitted, or was dropped without a submission.
+    pub fn read(mut self) -> Result<Vec<T>, GpuError> {
+        let value = match self.lifecycle.get() {
+            CommandsState::Submitted(v) => v,
+            CommandsState::Recording => {
+                return Err(GpuError::InvalidArgument(
+                    "Readback::read before its commands were submitted".into(),
+                ))
+            }
+            CommandsState::Abandoned => {
+                return Err(GpuError::InvalidArgument(
+                    "Readback::read of commands dropped unsubmitted".into(),
+                ))
+            }
+        };
+        self.ctx.wait_for(value)?;
+        let mut out = vec![T::zeroed(); self.count];
+        let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut out);
+        match &self.staging {
+            Some(Staging::Ring(_, offset)) => {
+                let ring = self.ctx.readback_ring();
+                let p = ring.ptr(*offset);
+                if p.is_null() {
+                    return Err(GpuError::InvalidArgument(
+                        "readback ring is not mapped".into(),
+                    ));
+                }
+                // SAFETY: the region [offset, offset + len) belongs to this readback, the ring
+                // is persistently mapped and coherent, and the GPU finished writing it.
+                unsafe { std::ptr::copy_nonoverlapping(p, bytes.as_mut_ptr(), bytes.len()) };
+            }
+            Some(Staging::Buffer(b)) => {
+                let m = b.mapped().ok_or_else(|| {
+                    GpuError::InvalidArgument("staging buffer is not mapped".into())
+                })?;
+                bytes.copy_from_slice(&m[..bytes.len()]);
+            }
+            None => {}
+        }
+        if let Some(s) = self.staging.take() {
+            s.release(&self.ctx, value);
+        }
+        Ok(out)
+    }
+}
+
+impl<T: bytemuck::Pod> Drop for Readback<T> {
+    fn drop(&mut self) {
+        let Some(staging) = self.staging.take() else {
+            return;
+        };
+        let mut orphans = self
+            .lifecycle
+            .orphans
+            .lock()
+            .unwrap_or_else(|p| p.into_inner());
+        match self.lifecycle.state.load(Ordering::Acquire) {
+            // The copy may still be submitted: release with the recorder.
+            RECORDING => orphans.push(staging),
+            state => {
+                drop(orphans);
+                staging.release(&self.ctx, state);
+            }
+        }
+    }
+}
+
 impl GpuContext {
-    /// Starts recording a named one-shot command buffer (any thread may record its own at once).
+    /// Starts recording a named command buffer (any thread may record its own at once). Also
+    /// releases garbage whose submission has completed.
     pub fn begin_commands<'a>(self: &Arc<Self>, name: &str) -> Result<Commands<'a>, GpuError> {
-        let device = &self.device;
-        // Null handles until created: `Drop` destroys whatever exists if a step below fails.
+        self.maintain();
+        let recorder = self.acquire_recorder()?;
         let mut cmd = Commands {
-            raw: vk::CommandBuffer::null(),
-            pool: vk::CommandPool::null(),
-            fence: vk::Fence::null(),
-            descriptor_pool: vk::DescriptorPool::null(),
+            raw: recorder.buffer,
+            recorder: Some(recorder),
             name: name.to_string(),
-            pending: false,
+            upload_regions: Vec::new(),
+            staging: Vec::new(),
             lifecycle: Arc::new(Lifecycle::default()),
             ctx: Arc::clone(self),
             _resources: PhantomData,
         };
-        // SAFETY: the pool, its command buffer and the fence are created here and owned by `cmd`
-        // alone (see the type's docs), so no other thread can use them.
+        // SAFETY: the recorder is reset and owned by `cmd` alone (see the type's docs).
         unsafe {
-            let pool_info = vk::CommandPoolCreateInfo::default()
-                .queue_family_index(self.queue_family)
-                .flags(vk::CommandPoolCreateFlags::TRANSIENT);
-            cmd.pool = device
-                .create_command_pool(&pool_info, None)
-                .map_err(vk_err("vkCreateCommandPool"))?;
-            let info = vk::CommandBufferAllocateInfo::default()
-                .command_pool(cmd.pool)
-                .level(vk::CommandBufferLevel::PRIMARY)
-                .command_buffer_count(1);
-            cmd.raw = device
-                .allocate_command_buffers(&info)
-                .map_err(vk_err("vkAllocateCommandBuffers"))?[0];
-            cmd.fence = device
-                .create_fence(&vk::FenceCreateInfo::default(), None)
-                .map_err(vk_err("vkCreateFence"))?;
-            device
+            self.device
                 .begin_command_buffer(
                     cmd.raw,
                     &vk::CommandBufferBeginInfo::default()
@@ -116,9 +255,12 @@ impl GpuContext {
                 )
                 .map_err(vk_err("vkBeginCommandBuffer"))?;
         }
-        self.set_name(cmd.pool, &format!("{name} (pool)"));
+        if let Some(r) = &cmd.recorder {
+            self.set_name(r.pool, &format!("{name} (pool)"));
+        }
         self.set_name(cmd.raw, name);
-        self.set_name(cmd.fence, &format!("{name} (fence)"));
+        // Earlier submissions' writes become visible to this one (same queue, submission order).
+        cmd.barrier();
         Ok(cmd)
     }
 }
@@ -247,41 +389,66 @@ impl<'a> Commands<'a> {
         Ok(())
     }
 
-    /// Allocates and writes a descriptor set binding `image` (pool created lazily, freed on drop).
+    /// Allocates and writes a descriptor set binding `image`, from the recorder's descriptor
+    /// pools (a new pool, twice the previous, when they are full: no fixed cap per recording).
     fn image_set(
         &mut self,
         layout: vk::DescriptorSetLayout,
         image: &Image,
     ) -> Result<vk::DescriptorSet, GpuError> {
         let device = &self.ctx.device;
-        // SAFETY: the pool belongs to this command buffer and lives until it is dropped.
+        let recorder = self
+            .recorder
+            .as_mut()
+            .ok_or_else(|| GpuError::InvalidArgument("recording after submit".into()))?;
+        let layouts = [layout];
+        // SAFETY: the pools belong to this recorder alone and are reset only after its
+        // submission completed.
         unsafe {
-            if self.descriptor_pool == vk::DescriptorPool::null() {
-                let sizes = [vk::DescriptorPoolSize {
-                    ty: vk::DescriptorType::STORAGE_IMAGE,
-                    descriptor_count: 64,
-                }];
-                self.descriptor_pool = device
-                    .create_descriptor_pool(
-                        &vk::DescriptorPoolCreateInfo::default()
-                            .max_sets(64)
-                            .pool_sizes(&sizes),
-                        None,
-                    )
-                    .map_err(vk_err("vkCreateDescriptorPool"))?;
-                self.ctx.set_name(
-                    self.descriptor_pool,
-                    &format!("{} (descriptors)", self.name),
-                );
-            }
-            let layouts = [layout];
-            let set = device
-                .allocate_descriptor_sets(
+            let set = loop {
+                let capacity = |i: usize| FIRST_DESCRIPTOR_POOL << i.min(10);
+                if recorder.current_pool < recorder.descriptor_pools.len()
+                    && recorder.current_sets >= capacity(recorder.current_pool)
+                {
+                    recorder.current_pool += 1;
+                    recorder.current_sets = 0;
+                }
+                if recorder.current_pool == recorder.descriptor_pools.len() {
+                    let sets = capacity(recorder.descriptor_pools.len());
+                    let sizes = [vk::DescriptorPoolSize {
+                        ty: vk::DescriptorType::STORAGE_IMAGE,
+                        descriptor_count: sets,
+                    }];
+                    let pool = device
+                        .create_descriptor_pool(
+                            &vk::DescriptorPoolCreateInfo::default()
+                                .max_sets(sets)
+                                .pool_sizes(&sizes),
+                            None,
+                        )
+                        .map_err(vk_err("vkCreateDescriptorPool"))?;
+                    self.ctx
+                        .set_name(pool, &format!("{} (descriptors)", self.name));
+                    recorder.descriptor_pools.push(pool);
+                }
+                let pool = recorder.descriptor_pools[recorder.current_pool];
+                match device.allocate_descriptor_sets(
                     &vk::DescriptorSetAllocateInfo::default()
-                        .descriptor_pool(self.descriptor_pool)
+                        .descriptor_pool(pool)
                         .set_layouts(&layouts),
-                )
-                .map_err(vk_err("vkAllocateDescriptorSets"))?[0];
+                ) {
+                    Ok(sets) => {
+                        recorder.current_sets += 1;
+                        break sets[0];
+                    }
+                    Err(vk::Result::ERROR_OUT_OF_POOL_MEMORY)
+                    | Err(vk::Result::ERROR_FRAGMENTED_POOL) => {
+                        recorder.current_pool += 1;
+                        recorder.current_sets = 0;
+                    }
+                    Err(e) => return Err(vk_err("vkAllocateDescriptorSets")(e)),
+                }
+            };
             let image_info = [vk::DescriptorImageInfo {
                 sampler: vk::Sampler::null(),
                 image_view: image.view,
@@ -295,6 +462,13 @@ impl<'a> Commands<'a> {
             device.update_descriptor_sets(&[write], &[]);
             Ok(set)
         }
+    }
+
+    /// Descriptor pools this recorder has (grown on demand; for tests of the growth).
+    pub fn descriptor_pool_count(&self) -> usize {
+        self.recorder
+            .as_ref()
+            .map_or(0, |r| r.descriptor_pools.len())
     }
 
     /// Full memory barrier: compute and transfer writes become visible to later compute,
@@ -342,20 +516,123 @@ impl<'a> Commands<'a> {
                 });
             }
         }
+        self.copy_raw(src.raw, src_offset, dst.raw, dst_offset, size);
+        Ok(())
+    }
+
+    /// Records a copy between raw buffers with barriers before and after (ranges checked by
+    /// the caller).
+    fn copy_raw(
+        &mut self,
+        src: vk::Buffer,
+        src_offset: u64,
+        dst: vk::Buffer,
+        dst_offset: u64,
+        size: u64,
+    ) {
         self.barrier();
         let region = vk::BufferCopy {
             src_offset,
             dst_offset,
             size,
         };
-        // SAFETY: ranges checked above; both buffers have TRANSFER usage.
+        // SAFETY: ranges checked by the caller; every buffer has TRANSFER usage.
         unsafe {
             self.ctx
                 .device
-                .cmd_copy_buffer(self.raw, src.raw, dst.raw, &[region]);
+                .cmd_copy_buffer(self.raw, src, dst, &[region]);
         }
         self.barrier();
+    }
+
+    /// Records an upload of `data` to byte `offset` of `dst`: the bytes are staged now (in the
+    /// upload ring when small and there is room, else in a dedicated staging buffer) and copied
+    /// when the recording runs.
+    pub fn upload<T: bytemuck::Pod>(
+        &mut self,
+        dst: &'a Buffer,
+        offset: u64,
+        data: &[T],
+    ) -> Result<(), GpuError> {
+        let bytes: &[u8] = bytemuck::cast_slice(data);
+        let len = bytes.len() as u64;
+        dst.check_range(offset, len)?;
+        if len == 0 {
+            return Ok(());
+        }
+        if len <= RING_MAX_TRANSFER {
+            let mut ring = self.ctx.upload_ring();
+            if let Some((id, at)) = ring.alloc.alloc(len) {
+                let p = ring.ptr(at);
+                if !p.is_null() {
+                    // SAFETY: the region [at, at + len) was just reserved for this upload and the
+                    // ring is persistently mapped.
+                    unsafe { std::ptr::copy_nonoverlapping(bytes.as_ptr(), p, bytes.len()) };
+                    let raw = ring.raw;
+                    drop(ring);
+                    self.upload_regions.push(id);
+                    self.copy_raw(raw, at, dst.raw, offset, len);
+                    return Ok(());
+                }
+                ring.alloc.free(id);
+            }
+        }
+        let mut staging = self.ctx.create_buffer(
+            &format!("{} (upload staging)", dst.name()),
+            len,
+            MemLocation::CpuToGpu,
+        )?;
+        staging
+            .mapped_mut()
+            .ok_or_else(|| GpuError::InvalidArgument("staging buffer is not mapped".into()))?
+            [..bytes.len()]
+            .copy_from_slice(bytes);
+        self.copy_raw(staging.raw, 0, dst.raw, offset, len);
+        self.staging.push(staging);
         Ok(())
+    }
+
+    /// Records a copy of `count` `T`s at byte `offset` of `src` into host-visible staging (the
+    /// readback ring when small and there is room); read them with [`Readback::read`] after the
+    /// submission.
+    pub fn readback<T: bytemuck::Pod>(
+        &mut self,
+        src: &'a Buffer,
+        offset: u64,
+        count: usize,
+    ) -> Result<Readback<T>, GpuError> {
+        let len = (count as u64)
+            .checked_mul(std::mem::size_of::<T>() as u64)
+            .ok_or_else(|| GpuError::InvalidArgument("read size overflows".into()))?;
+        src.check_range(offset, len)?;
+        let mut staging = None;
+        if len == 0 {
+            // Nothing to copy.
+        } else if len <= RING_MAX_TRANSFER {
+            let mut ring = self.ctx.readback_ring();
+            if let Some((id, at)) = ring.alloc.alloc(len) {
+                let raw = ring.raw;
+                drop(ring);
+                self.copy_raw(src.raw, offset, raw, at, len);
+                staging = Some(Staging::Ring(id, at));
+            }
+        }
+        if staging.is_none() && len > 0 {
+            let buffer = self.ctx.create_buffer(
+                &format!("{} (readback staging)", src.name()),
+                len,
+                MemLocation::GpuToCpu,
+            )?;
+            self.copy_raw(src.raw, offset, buffer.raw, 0, len);
+            staging = Some(Staging::Buffer(buffer));
+        }
+        Ok(Readback {
+            staging,
+            count,
+            lifecycle: Arc::clone(&self.lifecycle),
+            ctx: Arc::clone(&self.ctx),
+            _t: PhantomData,
+        })
     }
 
     /// Fills a whole buffer with a repeated `u32` (size rounded down to 4 bytes).
@@ -508,15 +785,33 @@ impl<'a> Commands<'a> {
         }
     }
 
-    /// Ends recording, submits, and waits for the GPU to finish (all writes visible to the host).
-    pub fn submit(mut self) -> Result<(), GpuError> {
+    /// Ends recording, submits, and waits for the GPU to finish (all writes visible to the
+    /// host): [`Commands::submit_async`] + [`Submission::wait`].
+    pub fn submit(self) -> Result<(), GpuError> {
+        self.submit_async()?.wait()
+    }
+
+    /// Ends recording and submits without waiting; returns the submission (its timeline value).
+    /// The recorder's command buffer, command pool and descriptor pools are reused once the GPU
+    /// has passed that value.
+    pub fn submit_async(self) -> Result<Submission, GpuError> {
+        self.submit_async_with(&[], &[])
+    }
+
+    /// [`Commands::submit_async`] that also waits for binary semaphores (each at its stage) and
+    /// signals binary semaphores (for the swapchain: image acquired / ready to present).
+    pub(crate) fn submit_async_with(
+        mut self,
+        waits: &[(vk::Semaphore, vk::PipelineStageFlags)],
+        signals: &[vk::Semaphore],
+    ) -> Result<Submission, GpuError> {
         let device = &self.ctx.device;
         let host_barrier = vk::MemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
             .dst_access_mask(vk::AccessFlags::HOST_READ);
-        // SAFETY: the command buffer and fence are ours; the queue is locked while submitting,
-        // and we wait for the fence before anything referenced may be dropped.
-        unsafe {
+        // SAFETY: the command buffer is ours; the queue is locked while submitting; everything
+        // it uses stays alive until the timeline passes its value (deferred release).
+        let value = unsafe {
             device.cmd_pipeline_barrier(
                 self.raw,
                 vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
@@ -529,44 +824,58 @@ impl<'a> Commands<'a> {
             device
                 .end_command_buffer(self.raw)
                 .map_err(vk_err("vkEndCommandBuffer"))?;
+            let wait_semaphores: Vec<vk::Semaphore> = waits.iter().map(|w| w.0).collect();
+            let wait_stages: Vec<vk::PipelineStageFlags> = waits.iter().map(|w| w.1).collect();
+            let wait_values = vec![0u64; waits.len()];
+            let mut signal_semaphores: Vec<vk::Semaphore> = signals.to_vec();
+            signal_semaphores.push(self.ctx.timeline());
             let buffers = [self.raw];
-            let submit = vk::SubmitInfo::default().command_buffers(&buffers);
-            {
-                let queue = self.ctx.queue();
+            self.ctx.submit_next(|queue, value| {
+                let mut signal_values = vec![0u64; signals.len()];
+                signal_values.push(value);
+                let mut timeline = vk::TimelineSemaphoreSubmitInfo::default()
+                    .wait_semaphore_values(&wait_values)
+                    .signal_semaphore_values(&signal_values);
+                let submit = vk::SubmitInfo::default()
+                    .wait_semaphores(&wait_semaphores)
+                    .wait_dst_stage_mask(&wait_stages)
+                    .command_buffers(&buffers)
+                    .signal_semaphores(&signal_semaphores)
+                    .push_next(&mut timeline);
                 device
-                    .queue_submit(*queue, &[submit], self.fence)
-                    .map_err(vk_err("vkQueueSubmit"))?;
-            }
-            self.pending = true;
-            device
-                .wait_for_fences(&[self.fence], true, u64::MAX)
-                .map_err(vk_err("vkWaitForFences"))?;
-            self.pending = false;
+                    .queue_submit(queue, &[submit], vk::Fence::null())
+                    .map_err(vk_err("vkQueueSubmit"))
+            })?
+        };
+        self.lifecycle.finish(&self.ctx, value);
+        if let Some(r) = self.recorder.take() {
+            self.ctx.defer_until(value, Garbage::Recorder(r));
         }
-        self.lifecycle.set(CommandsState::Finished);
-        Ok(())
+        for id in self.upload_regions.drain(..) {
+            self.ctx
+                .defer_until(value, Garbage::RingRegion(RingKind::Upload, id));
+        }
+        // Dedicated staging buffers drop with `self`, deferred to this (the last) submission.
+        self.ctx.maintain();
+        Ok(Submission {
+            value,
+            ctx: Arc::clone(&self.ctx),
+        })
     }
 }
 
 impl Drop for Commands<'_> {
     fn drop(&mut self) {
-        if self.lifecycle.get() != CommandsState::Finished {
-            self.lifecycle.set(CommandsState::Abandoned);
+        if self.lifecycle.get() == CommandsState::Recording {
+            self.lifecycle.finish(&self.ctx, ABANDONED);
         }
-        let device = &self.ctx.device;
-        // SAFETY: either never submitted, or submitted and waited on (submit returns only after
-        // the fence signalled; on a failed wait we wait for the whole device before destroying).
-        // Null handles (creation failed half-way) are valid arguments to the destroy calls, and
-        // destroying the pool frees its command buffer.
-        unsafe {
-            if self.pending {
-                // Submitted but the wait failed (device lost?): make sure nothing runs any more.
-                let _queue = self.ctx.queue();
-                let _ = device.device_wait_idle();
-            }
-            device.destroy_fence(self.fence, None);
-            device.destroy_descriptor_pool(self.descriptor_pool, None);
-            device.destroy_command_pool(self.pool, None);
+        // Never submitted (or the submit failed): nothing of it is in flight.
+        if let Some(r) = self.recorder.take() {
+            self.ctx.recycle(r);
+        }
+        for id in self.upload_regions.drain(..) {
+            self.ctx
+                .defer_until(0, Garbage::RingRegion(RingKind::Upload, id));
         }
     }
 }

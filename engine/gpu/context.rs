@@ -1,15 +1,47 @@
-//! Instance, device selection, logical device, allocator and validation messenger.
+//! Instance, device selection (with a check of every feature the shaders use), logical device,
+//! allocator, validation messenger, the queue's timeline semaphore, the deferred-release queue,
+//! the staging rings and submission statistics.
 
 use std::ffi::{c_void, CStr, CString};
 use std::mem::ManuallyDrop;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
-use gpu_allocator::{AllocationSizes, AllocatorDebugSettings};
+use gpu_allocator::{AllocationSizes, AllocatorDebugSettings, MemoryLocation};
 
+use super::release::{Garbage, Recorder};
+use super::ring::{Ring, RingAlloc, RingKind};
 use super::{vk_err, GpuError};
+
+/// Bytes of each staging ring (upload and readback).
+const RING_BYTES: u64 = 4 << 20;
+/// Name prefix of the context's own allocations (the rings), left out of
+/// [`GpuContext::live_allocations`] and [`GpuContext::allocated_bytes`].
+const INTERNAL_PREFIX: &str = "voxdag internal:";
+/// Recorders kept for reuse; more are destroyed when released.
+const MAX_FREE_RECORDERS: usize = 32;
+
+/// Every device feature voxdag requires, by its Vulkan name: the shaders'
+/// `#extension`s (`GL_EXT_buffer_reference` -> `bufferDeviceAddress`,
+/// `GL_EXT_shader_explicit_arithmetic_types_int64` -> `shaderInt64`,
+/// `GL_EXT_shader_atomic_int64` -> `shaderBufferInt64Atomics`, `GL_KHR_shader_subgroup_*` ->
+/// the subgroup operations in compute shaders) and the host's (`timelineSemaphore`). A device
+/// missing any is refused with [`GpuError::Unsupported`].
+pub const REQUIRED_FEATURES: &[&str] = &[
+    "Vulkan 1.2",
+    "compute queue",
+    "shaderInt64",
+    "bufferDeviceAddress",
+    "shaderBufferInt64Atomics",
+    "timelineSemaphore",
+    "subgroupComputeStage",
+    "VK_SUBGROUP_FEATURE_BASIC_BIT",
+    "VK_SUBGROUP_FEATURE_VOTE_BIT",
+    "VK_SUBGROUP_FEATURE_BALLOT_BIT",
+    "VK_SUBGROUP_FEATURE_ARITHMETIC_BIT",
+];
 
 /// Options for [`GpuContext::new`].
 #[derive(Clone, Debug)]
@@ -20,6 +52,12 @@ pub struct GpuOptions {
     /// Pick the first device whose name contains this (case-insensitive) substring
     /// (default: env `VOXDAG_DEVICE`).
     pub device: Option<String>,
+    /// With validation: also enable synchronization validation (default: env
+    /// `VOXDAG_SYNC_VALIDATION`, else on).
+    pub sync_validation: bool,
+    /// Test-only: treat these [`REQUIRED_FEATURES`] as missing on every device, to prove the
+    /// refusal (default: env `VOXDAG_MASK_FEATURES`, comma-separated; normally empty).
+    pub mask_features: Vec<String>,
 }
 
 impl Default for GpuOptions {
@@ -32,7 +70,24 @@ impl Default for GpuOptions {
         let device = std::env::var("VOXDAG_DEVICE")
             .ok()
             .filter(|s| !s.trim().is_empty());
-        GpuOptions { validation, device }
+        let sync_validation = !matches!(
+            std::env::var("VOXDAG_SYNC_VALIDATION").ok().as_deref(),
+            Some("0") | Some("false") | Some("off")
+        );
+        let mask_features = std::env::var("VOXDAG_MASK_FEATURES")
+            .map(|s| {
+                s.split(',')
+                    .map(|f| f.trim().to_string())
+                    .filter(|f| !f.is_empty())
+                    .collect()
+            })
+            .unwrap_or_default();
+        GpuOptions {
+            validation,
+            device,
+            sync_validation,
+            mask_features,
+        }
     }
 }
 
@@ -41,8 +96,8 @@ impl Default for GpuOptions {
 pub struct DeviceInfo {
     /// Device name, e.g. `llvmpipe (LLVM 15.0.6, 256 bits)`.
     pub name: String,
-    /// Device type: `discrete`, `integrated`, `virtual`, `cpu` or `other`.
-    pub device_type: String,
+    /// Device type.
+    pub device_type: DeviceType,
     /// Driver name, e.g. `llvmpipe`.
     pub driver_name: String,
     /// Driver info string, e.g. `Mesa 22.3.6 (LLVM 15.0.6)`.
@@ -73,6 +128,77 @@ pub struct DeviceInfo {
     pub scalar_block_layout: bool,
     /// Whether timeline semaphores were enabled.
     pub timeline_semaphores: bool,
+}
+
+/// Kind of physical device.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum DeviceType {
+    /// A discrete GPU.
+    Discrete,
+    /// A GPU integrated with the CPU.
+    Integrated,
+    /// A virtualised GPU.
+    Virtual,
+    /// A CPU implementation (lavapipe, SwiftShader).
+    Cpu,
+    /// Anything else.
+    Other,
+}
+
+impl DeviceType {
+    fn from_vk(t: vk::PhysicalDeviceType) -> DeviceType {
+        match t {
+            vk::PhysicalDeviceType::DISCRETE_GPU => DeviceType::Discrete,
+            vk::PhysicalDeviceType::INTEGRATED_GPU => DeviceType::Integrated,
+            vk::PhysicalDeviceType::VIRTUAL_GPU => DeviceType::Virtual,
+            vk::PhysicalDeviceType::CPU => DeviceType::Cpu,
+            _ => DeviceType::Other,
+        }
+    }
+
+    /// Preference when choosing a device (lower is better).
+    fn rank(self) -> u32 {
+        match self {
+            DeviceType::Discrete => 0,
+            DeviceType::Integrated => 1,
+            DeviceType::Virtual => 2,
+            DeviceType::Other => 3,
+            DeviceType::Cpu => 4,
+        }
+    }
+}
+
+impl std::fmt::Display for DeviceType {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            DeviceType::Discrete => "discrete",
+            DeviceType::Integrated => "integrated",
+            DeviceType::Virtual => "virtual",
+            DeviceType::Cpu => "cpu",
+            DeviceType::Other => "other",
+        })
+    }
+}
+
+/// Submissions and host waits so far (see [`GpuContext::stats`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct GpuStats {
+    /// Queue submissions (`vkQueueSubmit` calls).
+    pub submissions: u64,
+    /// Host synchronisation points: waits for a timeline value beyond every value waited for
+    /// before (counted whether or not the GPU had already finished, so the count depends on the
+    /// code path, not on timing).
+    pub host_waits: u64,
+}
+
+impl GpuStats {
+    /// What happened since `earlier`.
+    pub fn since(self, earlier: GpuStats) -> GpuStats {
+        GpuStats {
+            submissions: self.submissions - earlier.submissions,
+            host_waits: self.host_waits - earlier.host_waits,
+        }
+    }
 }
 
 /// Counts validation warnings and errors reported through `VK_EXT_debug_utils`.
@@ -129,30 +255,44 @@ pub struct GpuContext {
     pub(crate) device: ash::Device,
     pub(crate) debug_device: Option<ash::ext::debug_utils::Device>,
     queue: Mutex<vk::Queue>,
-    /// Family of `queue`; every [`super::Commands`] creates its own command pool for it.
+    /// Family of `queue`; every command recorder's pool is created for it.
     pub(crate) queue_family: u32,
     allocator: ManuallyDrop<Mutex<Allocator>>,
     info: DeviceInfo,
     validation: bool,
+    /// The queue's timeline semaphore: submission `n` signals value `n`.
+    timeline: vk::Semaphore,
+    /// Value of the last submission (written with the queue locked).
+    last_submitted: AtomicU64,
+    /// Highest value known to be completed (a cache of the semaphore's counter).
+    completed: AtomicU64,
+    /// Garbage waiting for the GPU, with the timeline value it waits for.
+    deferred: Mutex<Vec<(u64, Garbage)>>,
+    /// Reset recorders ready for reuse.
+    free_recorders: Mutex<Vec<Recorder>>,
+    upload_ring: Mutex<Ring>,
+    readback_ring: Mutex<Ring>,
+    submissions: AtomicU64,
+    host_waits: AtomicU64,
+    /// Highest value the host has waited for (host waits count values beyond it).
+    waited: AtomicU64,
+}
+
+impl std::fmt::Debug for GpuContext {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GpuContext")
+            .field("device", &self.info().name)
+            .finish()
+    }
 }
 
 /// A physical device candidate during selection.
 struct Candidate {
     physical: vk::PhysicalDevice,
     name: String,
-    rank: u32,
-    type_name: &'static str,
-    api: u32,
-}
-
-fn type_rank(t: vk::PhysicalDeviceType) -> (u32, &'static str) {
-    match t {
-        vk::PhysicalDeviceType::DISCRETE_GPU => (0, "discrete"),
-        vk::PhysicalDeviceType::INTEGRATED_GPU => (1, "integrated"),
-        vk::PhysicalDeviceType::VIRTUAL_GPU => (2, "virtual"),
-        vk::PhysicalDeviceType::CPU => (4, "cpu"),
-        _ => (3, "other"),
-    }
+    device_type: DeviceType,
+    /// Required features it lacks (or that are masked), in [`REQUIRED_FEATURES`] order.
+    missing: Vec<&'static str>,
 }
 
 fn cstr_field(r: Result<&CStr, std::ffi::FromBytesUntilNulError>) -> String {
@@ -221,11 +361,26 @@ impl GpuContext {
         } else {
             Vec::new()
         };
-        let ext_ptrs: Vec<*const std::ffi::c_char> = if has_debug_utils {
-            vec![ash::ext::debug_utils::NAME.as_ptr()]
-        } else {
-            Vec::new()
-        };
+        // Synchronization validation comes with the layer's VK_EXT_validation_features.
+        let sync_validation = validation
+            && options.sync_validation
+            && entry
+                .enumerate_instance_extension_properties(Some(validation_name))
+                .map_err(vk_err("vkEnumerateInstanceExtensionProperties"))?
+                .iter()
+                .any(|e| {
+                    e.extension_name_as_c_str().ok() == Some(ash::ext::validation_features::NAME)
+                });
+        let mut ext_ptrs: Vec<*const std::ffi::c_char> = Vec::new();
+        if has_debug_utils {
+            ext_ptrs.push(ash::ext::debug_utils::NAME.as_ptr());
+        }
+        if sync_validation {
+            ext_ptrs.push(ash::ext::validation_features::NAME.as_ptr());
+        }
+        let enabled_checks = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
+        let mut validation_features =
+            vk::ValidationFeaturesEXT::default().enabled_validation_features(&enabled_checks);
         let messenger_state = Box::<MessengerState>::default();
         let user_ptr = &*messenger_state as *const MessengerState as *mut c_void;
         let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
@@ -248,6 +403,9 @@ impl GpuContext {
         if has_debug_utils {
             // Also catches messages from vkCreateInstance / vkDestroyInstance.
             instance_info = instance_info.push_next(&mut messenger_info);
+        }
+        if sync_validation {
+            instance_info = instance_info.push_next(&mut validation_features);
         }
         let instance = entry
             .create_instance(&instance_info, None)
@@ -277,53 +435,56 @@ impl GpuContext {
         let mut candidates = Vec::new();
         for &pd in &physical_devices {
             let props = instance.get_physical_device_properties(pd);
-            let (rank, type_name) = type_rank(props.device_type);
             candidates.push(Candidate {
                 physical: pd,
                 name: cstr_field(props.device_name_as_c_str()),
-                rank,
-                type_name,
-                api: props.api_version,
+                device_type: DeviceType::from_vk(props.device_type),
+                missing: Self::missing_features(&instance, pd, &options.mask_features),
             });
         }
         let listing = candidates
             .iter()
-            .map(|c| format!("\"{}\" ({})", c.name, c.type_name))
+            .map(|c| format!("\"{}\" ({})", c.name, c.device_type))
             .collect::<Vec<_>>()
             .join(", ");
-        // Keep only devices that can run voxdag.
-        let mut usable: Vec<&Candidate> = candidates
-            .iter()
-            .filter(|c| {
-                c.api >= vk::API_VERSION_1_2 && Self::supports_required(&instance, c.physical)
-            })
-            .collect();
-        usable.sort_by_key(|c| c.rank);
+        candidates.sort_by_key(|c| c.device_type.rank());
+        let unsupported = |c: &Candidate| GpuError::Unsupported {
+            device: c.name.clone(),
+            feature: c.missing[0].to_string(),
+        };
         let chosen = match &options.device {
             Some(wanted) => {
                 let w = wanted.to_lowercase();
-                *usable
+                let matching: Vec<&Candidate> = candidates
                     .iter()
-                    .find(|c| c.name.to_lowercase().contains(&w))
-                    .ok_or_else(|| GpuError::DeviceNotFound {
-                        wanted: wanted.clone(),
-                        available: if listing.is_empty() {
-                            "none".into()
-                        } else {
-                            listing.clone()
-                        },
-                    })?
+                    .filter(|c| c.name.to_lowercase().contains(&w))
+                    .collect();
+                match matching.iter().find(|c| c.missing.is_empty()) {
+                    Some(c) => *c,
+                    None => {
+                        return Err(match matching.first() {
+                            Some(c) => unsupported(c),
+                            None => GpuError::DeviceNotFound {
+                                wanted: wanted.clone(),
+                                available: if listing.is_empty() {
+                                    "none".into()
+                                } else {
+                                    listing.clone()
+                                },
+                            },
+                        })
+                    }
+                }
             }
-            None => *usable.first().ok_or_else(|| {
-                GpuError::NoDevice(if listing.is_empty() {
-                    "no Vulkan devices found".into()
-                } else {
-                    format!(
-                        "none of {listing} supports Vulkan 1.2 with bufferDeviceAddress, \
-                         shaderInt64 and a compute queue"
-                    )
-                })
-            })?,
+            None => match candidates.iter().find(|c| c.missing.is_empty()) {
+                Some(c) => c,
+                None => {
+                    return Err(match candidates.first() {
+                        Some(c) => unsupported(c),
+                        None => GpuError::NoDevice("no Vulkan devices found".into()),
+                    })
+                }
+            },
         };
         let physical = chosen.physical;
 
@@ -340,8 +501,10 @@ impl GpuContext {
                     .iter()
                     .position(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE))
             })
-            .ok_or_else(|| GpuError::NoDevice(format!("{} has no compute queue", chosen.name)))?
-            as u32;
+            .ok_or_else(|| GpuError::Unsupported {
+                device: chosen.name.clone(),
+                feature: "compute queue".into(),
+            })? as u32;
         let timestamp_valid_bits = families[queue_family as usize].timestamp_valid_bits;
 
         // Properties.
@@ -369,11 +532,11 @@ impl GpuContext {
             .storage_buffer8_bit_access(have12.storage_buffer8_bit_access == vk::TRUE)
             .shader_int8(have12.shader_int8 == vk::TRUE)
             .scalar_block_layout(have12.scalar_block_layout == vk::TRUE)
-            .timeline_semaphore(have12.timeline_semaphore == vk::TRUE)
+            .timeline_semaphore(true)
             .host_query_reset(have12.host_query_reset == vk::TRUE)
             .vulkan_memory_model(have12.vulkan_memory_model == vk::TRUE)
             .vulkan_memory_model_device_scope(have12.vulkan_memory_model_device_scope == vk::TRUE)
-            .shader_buffer_int64_atomics(have12.shader_buffer_int64_atomics == vk::TRUE)
+            .shader_buffer_int64_atomics(true)
             .shader_shared_int64_atomics(have12.shader_shared_int64_atomics == vk::TRUE);
         let mut features2 = vk::PhysicalDeviceFeatures2::default()
             .features(features10)
@@ -407,16 +570,13 @@ impl GpuContext {
             Ok(a) => a,
             Err(e) => {
                 device.destroy_device(None);
-                return Err(GpuError::Allocation {
-                    name: "allocator".into(),
-                    message: e.to_string(),
-                });
+                return Err(GpuError::from_allocation("allocator", e));
             }
         };
 
         let info = DeviceInfo {
             name: chosen.name.clone(),
-            device_type: chosen.type_name.to_string(),
+            device_type: chosen.device_type,
             driver_name: cstr_field(driver.driver_name_as_c_str()),
             driver_info: cstr_field(driver.driver_info_as_c_str()),
             api_version: (
@@ -435,10 +595,10 @@ impl GpuContext {
             max_push_constants_size: limits.max_push_constants_size,
             storage_buffer_8bit: have12.storage_buffer8_bit_access == vk::TRUE,
             scalar_block_layout: have12.scalar_block_layout == vk::TRUE,
-            timeline_semaphores: have12.timeline_semaphore == vk::TRUE,
+            timeline_semaphores: true,
         };
         log::info!(
-            "GPU: {} ({}), driver {} {}, Vulkan {}.{}.{}, subgroup size {}, validation {}",
+            "GPU: {} ({}), driver {} {}, Vulkan {}.{}.{}, subgroup size {}, validation {}{}",
             info.name,
             info.device_type,
             info.driver_name,
@@ -447,7 +607,12 @@ impl GpuContext {
             info.api_version.1,
             info.api_version.2,
             info.subgroup_size,
-            if validation { "on" } else { "off" }
+            if validation { "on" } else { "off" },
+            if sync_validation {
+                " (with synchronization validation)"
+            } else {
+                ""
+            }
         );
         log::info!(
             "GPU limits: max storage buffer range {} MiB, max allocation {} MiB, timestamp period {} ns \
@@ -462,6 +627,52 @@ impl GpuContext {
         let debug_device = debug_instance
             .as_ref()
             .map(|_| ash::ext::debug_utils::Device::new(&instance, &device));
+        let mut timeline_type = vk::SemaphoreTypeCreateInfo::default()
+            .semaphore_type(vk::SemaphoreType::TIMELINE)
+            .initial_value(0);
+        let timeline = match device.create_semaphore(
+            &vk::SemaphoreCreateInfo::default().push_next(&mut timeline_type),
+            None,
+        ) {
+            Ok(t) => t,
+            Err(e) => {
+                drop(allocator);
+                device.destroy_device(None);
+                return Err(vk_err("vkCreateSemaphore")(e));
+            }
+        };
+        let allocator = ManuallyDrop::new(Mutex::new(allocator));
+        let ring = |name: &str, location| {
+            Self::raw_buffer_with(&device, &allocator, name, RING_BYTES, location).map(
+                |(raw, allocation, _)| Ring {
+                    raw,
+                    allocation: Some(allocation),
+                    alloc: RingAlloc::new(RING_BYTES),
+                },
+            )
+        };
+        let rings = ring(
+            &format!("{INTERNAL_PREFIX} upload ring"),
+            MemoryLocation::CpuToGpu,
+        )
+        .and_then(|u| {
+            ring(
+                &format!("{INTERNAL_PREFIX} readback ring"),
+                MemoryLocation::GpuToCpu,
+            )
+            .map(|r| (u, r))
+        });
+        let (upload_ring, readback_ring) = match rings {
+            Ok(r) => r,
+            Err(e) => {
+                // Only the rings can have been allocated; the allocator frees its blocks.
+                let mut allocator = allocator;
+                ManuallyDrop::drop(&mut allocator);
+                device.destroy_semaphore(timeline, None);
+                device.destroy_device(None);
+                return Err(e);
+            }
+        };
         guard.instance = None; // ownership moves into the context
         let ctx = GpuContext {
             _entry: entry,
@@ -473,23 +684,77 @@ impl GpuContext {
             debug_device,
             queue: Mutex::new(queue),
             queue_family,
-            allocator: ManuallyDrop::new(Mutex::new(allocator)),
+            allocator,
             info,
             validation,
+            timeline,
+            last_submitted: AtomicU64::new(0),
+            completed: AtomicU64::new(0),
+            deferred: Mutex::new(Vec::new()),
+            free_recorders: Mutex::new(Vec::new()),
+            upload_ring: Mutex::new(upload_ring),
+            readback_ring: Mutex::new(readback_ring),
+            submissions: AtomicU64::new(0),
+            host_waits: AtomicU64::new(0),
+            waited: AtomicU64::new(0),
         };
         ctx.set_name(queue, "main queue");
+        ctx.set_name(timeline, "main queue timeline");
+        {
+            let u = ctx.upload_ring();
+            ctx.set_name(u.raw, "upload ring");
+        }
+        {
+            let r = ctx.readback_ring();
+            ctx.set_name(r.raw, "readback ring");
+        }
         Ok(Arc::new(ctx))
     }
 
-    unsafe fn supports_required(instance: &ash::Instance, pd: vk::PhysicalDevice) -> bool {
+    /// The required features `pd` lacks (plus those masked by `mask`), in
+    /// [`REQUIRED_FEATURES`] order.
+    unsafe fn missing_features(
+        instance: &ash::Instance,
+        pd: vk::PhysicalDevice,
+        mask: &[String],
+    ) -> Vec<&'static str> {
+        let props = instance.get_physical_device_properties(pd);
+        let api12 = props.api_version >= vk::API_VERSION_1_2;
         let mut f12 = vk::PhysicalDeviceVulkan12Features::default();
-        let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut f12);
-        instance.get_physical_device_features2(pd, &mut f2);
+        let mut subgroup = vk::PhysicalDeviceSubgroupProperties::default();
+        if api12 {
+            let mut f2 = vk::PhysicalDeviceFeatures2::default().push_next(&mut f12);
+            instance.get_physical_device_features2(pd, &mut f2);
+            let mut p2 = vk::PhysicalDeviceProperties2::default().push_next(&mut subgroup);
+            instance.get_physical_device_properties2(pd, &mut p2);
+        }
+        let f10 = instance.get_physical_device_features(pd);
         let has_compute = instance
             .get_physical_device_queue_family_properties(pd)
             .iter()
             .any(|f| f.queue_flags.contains(vk::QueueFlags::COMPUTE));
-        f2.features.shader_int64 == vk::TRUE && f12.buffer_device_address == vk::TRUE && has_compute
+        let ops = subgroup.supported_operations;
+        let have = [
+            api12,
+            has_compute,
+            f10.shader_int64 == vk::TRUE,
+            f12.buffer_device_address == vk::TRUE,
+            f12.shader_buffer_int64_atomics == vk::TRUE,
+            f12.timeline_semaphore == vk::TRUE,
+            subgroup
+                .supported_stages
+                .contains(vk::ShaderStageFlags::COMPUTE),
+            ops.contains(vk::SubgroupFeatureFlags::BASIC),
+            ops.contains(vk::SubgroupFeatureFlags::VOTE),
+            ops.contains(vk::SubgroupFeatureFlags::BALLOT),
+            ops.contains(vk::SubgroupFeatureFlags::ARITHMETIC),
+        ];
+        REQUIRED_FEATURES
+            .iter()
+            .zip(have)
+            .filter(|(name, ok)| !ok || mask.iter().any(|m| m == **name))
+            .map(|(name, _)| *name)
+            .collect()
     }
 
     /// The chosen device and its limits.
@@ -507,21 +772,352 @@ impl GpuContext {
         self.messenger_state.problems.load(Ordering::SeqCst)
     }
 
-    /// Number of live gpu-allocator allocations (0 once every buffer and image is dropped).
+    /// Number of live gpu-allocator allocations of buffers and images (the context's own
+    /// staging rings left out). Releases whatever the GPU has finished with first, so it is 0
+    /// once every buffer and image is dropped and their last submission has completed (call
+    /// [`GpuContext::wait_idle`] first to be sure of the latter).
     pub fn live_allocations(&self) -> usize {
-        self.allocator().generate_report().allocations.len()
+        self.maintain();
+        self.allocator()
+            .generate_report()
+            .allocations
+            .iter()
+            .filter(|a| !a.name.starts_with(INTERNAL_PREFIX))
+            .count()
     }
 
-    /// Bytes currently allocated through gpu-allocator.
+    /// Bytes allocated through gpu-allocator for buffers and images (rings left out; releases
+    /// finished garbage first, as [`GpuContext::live_allocations`]).
     pub fn allocated_bytes(&self) -> u64 {
-        self.allocator().generate_report().total_allocated_bytes
+        self.maintain();
+        self.allocator()
+            .generate_report()
+            .allocations
+            .iter()
+            .filter(|a| !a.name.starts_with(INTERNAL_PREFIX))
+            .map(|a| a.size)
+            .sum()
     }
 
-    /// Waits until the device has finished all submitted work.
+    /// Objects dropped by their owners and still waiting for the GPU (deferred release queue).
+    pub fn pending_releases(&self) -> usize {
+        self.maintain();
+        self.deferred().len()
+    }
+
+    /// Waits until the GPU has finished every submission, then releases all deferred garbage.
     pub fn wait_idle(&self) -> Result<(), GpuError> {
-        let _q = self.queue();
-        // SAFETY: the queue lock is held, so no submission races with the wait.
-        unsafe { self.device.device_wait_idle() }.map_err(vk_err("vkDeviceWaitIdle"))
+        self.wait_for(self.last_submitted())?;
+        {
+            let _q = self.queue();
+            // SAFETY: the queue lock is held, so no submission races with the wait.
+            unsafe { self.device.device_wait_idle() }.map_err(vk_err("vkDeviceWaitIdle"))?;
+        }
+        self.maintain();
+        Ok(())
+    }
+
+    /// Timeline value of the last submission (0 before the first).
+    pub fn last_submitted(&self) -> u64 {
+        self.last_submitted.load(Ordering::Acquire)
+    }
+
+    /// Highest timeline value the GPU has completed (asks the semaphore).
+    pub fn completed_value(&self) -> Result<u64, GpuError> {
+        // SAFETY: the semaphore belongs to this device.
+        let v = unsafe { self.device.get_semaphore_counter_value(self.timeline) }
+            .map_err(vk_err("vkGetSemaphoreCounterValue"))?;
+        self.completed.fetch_max(v, Ordering::AcqRel);
+        Ok(v)
+    }
+
+    /// Blocks until the GPU has completed submission `value`, then releases the garbage it
+    /// held. Counted in [`GpuStats::host_waits`] when `value` is beyond every value waited for
+    /// before.
+    pub fn wait_for(&self, value: u64) -> Result<(), GpuError> {
+        if value > self.last_submitted() {
+            return Err(GpuError::InvalidArgument(format!(
+                "wait for timeline value {value}, but only {} were submitted",
+                self.last_submitted()
+            )));
+        }
+        // A synchronisation point: the first time the host needs this value (deterministic,
+        // whether or not the GPU happens to be done already).
+        if value > 0 && self.waited.fetch_max(value, Ordering::AcqRel) < value {
+            self.host_waits.fetch_add(1, Ordering::Relaxed);
+        }
+        if value <= self.completed.load(Ordering::Acquire) {
+            return Ok(());
+        }
+        let semaphores = [self.timeline];
+        let values = [value];
+        let info = vk::SemaphoreWaitInfo::default()
+            .semaphores(&semaphores)
+            .values(&values);
+        // SAFETY: waiting on our own timeline semaphore for a submitted value.
+        unsafe { self.device.wait_semaphores(&info, u64::MAX) }
+            .map_err(vk_err("vkWaitSemaphores"))?;
+        self.completed.fetch_max(value, Ordering::AcqRel);
+        self.maintain();
+        Ok(())
+    }
+
+    /// Submissions and host waits so far.
+    pub fn stats(&self) -> GpuStats {
+        GpuStats {
+            submissions: self.submissions.load(Ordering::Relaxed),
+            host_waits: self.host_waits.load(Ordering::Relaxed),
+        }
+    }
+
+    /// The timeline semaphore submissions signal.
+    pub(crate) fn timeline(&self) -> vk::Semaphore {
+        self.timeline
+    }
+
+    /// Submits `submit` (whose timeline signal value the closure fills in) as the next timeline
+    /// value; returns it. The queue stays locked across the value choice and the submit, so
+    /// values signal in submission order.
+    pub(crate) fn submit_next(
+        &self,
+        submit: impl FnOnce(vk::Queue, u64) -> Result<(), GpuError>,
+    ) -> Result<u64, GpuError> {
+        let queue = self.queue();
+        let value = self.last_submitted.load(Ordering::Acquire) + 1;
+        submit(*queue, value)?;
+        self.last_submitted.store(value, Ordering::Release);
+        self.submissions.fetch_add(1, Ordering::Relaxed);
+        drop(queue);
+        Ok(value)
+    }
+
+    /// Queues `garbage` until the last submission so far has completed (or destroys it now if
+    /// it has).
+    pub(crate) fn defer(&self, garbage: Garbage) {
+        let value = self.last_submitted();
+        if value <= self.completed.load(Ordering::Acquire) {
+            self.destroy(garbage);
+        } else {
+            self.deferred().push((value, garbage));
+        }
+    }
+
+    /// Queues `garbage` until timeline value `value` has completed.
+    pub(crate) fn defer_until(&self, value: u64, garbage: Garbage) {
+        if value <= self.completed.load(Ordering::Acquire) {
+            self.destroy(garbage);
+        } else {
+            self.deferred().push((value, garbage));
+        }
+    }
+
+    /// Releases every deferred object whose submission has completed (called on each begin,
+    /// submit and wait).
+    pub(crate) fn maintain(&self) {
+        let done = self
+            .completed_value()
+            .unwrap_or_else(|_| self.completed.load(Ordering::Acquire));
+        let ready: Vec<Garbage> = {
+            let mut deferred = self.deferred();
+            if deferred.iter().all(|(v, _)| *v > done) {
+                return;
+            }
+            let (ready, keep): (Vec<_>, Vec<_>) = deferred.drain(..).partition(|(v, _)| *v <= done);
+            *deferred = keep;
+            ready.into_iter().map(|(_, g)| g).collect()
+        };
+        for g in ready {
+            self.destroy(g);
+        }
+    }
+
+    fn deferred(&self) -> MutexGuard<'_, Vec<(u64, Garbage)>> {
+        self.deferred.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Destroys (or recycles) one object the GPU no longer uses.
+    fn destroy(&self, garbage: Garbage) {
+        let device = &self.device;
+        // SAFETY: the GPU has passed the last submission that could use the object, which is
+        // owned by the garbage entry alone; each is destroyed exactly once.
+        unsafe {
+            match garbage {
+                Garbage::Buffer(raw, allocation) => {
+                    device.destroy_buffer(raw, None);
+                    if let Err(e) = self.allocator().free(allocation) {
+                        log::error!("freeing a buffer: {e}");
+                    }
+                }
+                Garbage::Image(raw, view, allocation) => {
+                    device.destroy_image_view(view, None);
+                    device.destroy_image(raw, None);
+                    if let Err(e) = self.allocator().free(allocation) {
+                        log::error!("freeing an image: {e}");
+                    }
+                }
+                Garbage::Pipeline(raw, layout, set_layout) => {
+                    device.destroy_pipeline(raw, None);
+                    device.destroy_pipeline_layout(layout, None);
+                    if let Some(s) = set_layout {
+                        device.destroy_descriptor_set_layout(s, None);
+                    }
+                }
+                Garbage::QueryPool(pool) => device.destroy_query_pool(pool, None),
+                Garbage::Recorder(recorder) => self.recycle(recorder),
+                Garbage::RingRegion(kind, id) => match kind {
+                    RingKind::Upload => self.upload_ring().alloc.free(id),
+                    RingKind::Readback => self.readback_ring().alloc.free(id),
+                },
+            }
+        }
+    }
+
+    /// A reset recorder from the free list, or a new one.
+    pub(crate) fn acquire_recorder(&self) -> Result<Recorder, GpuError> {
+        if let Some(r) = self.free_recorders().pop() {
+            return Ok(r);
+        }
+        // SAFETY: a new pool and its command buffer, owned by the returned recorder alone.
+        unsafe {
+            let pool = self
+                .device
+                .create_command_pool(
+                    &vk::CommandPoolCreateInfo::default()
+                        .queue_family_index(self.queue_family)
+                        .flags(vk::CommandPoolCreateFlags::TRANSIENT),
+                    None,
+                )
+                .map_err(vk_err("vkCreateCommandPool"))?;
+            let buffer = match self.device.allocate_command_buffers(
+                &vk::CommandBufferAllocateInfo::default()
+                    .command_pool(pool)
+                    .level(vk::CommandBufferLevel::PRIMARY)
+                    .command_buffer_count(1),
+            ) {
+                Ok(b) => b[0],
+                Err(e) => {
+                    self.device.destroy_command_pool(pool, None);
+                    return Err(vk_err("vkAllocateCommandBuffers")(e));
+                }
+            };
+            Ok(Recorder {
+                pool,
+                buffer,
+                descriptor_pools: Vec::new(),
+                current_pool: 0,
+                current_sets: 0,
+            })
+        }
+    }
+
+    /// Resets a recorder whose submission completed (or that was never submitted) and keeps it
+    /// for reuse; beyond [`MAX_FREE_RECORDERS`] it is destroyed.
+    pub(crate) fn recycle(&self, mut recorder: Recorder) {
+        let device = &self.device;
+        // SAFETY: nothing uses the recorder any more (its submission completed, or it was never
+        // submitted); resetting the pool returns its command buffer to the initial state.
+        unsafe {
+            let ok = device
+                .reset_command_pool(recorder.pool, vk::CommandPoolResetFlags::empty())
+                .is_ok()
+                && recorder.descriptor_pools.iter().all(|&p| {
+                    device
+                        .reset_descriptor_pool(p, vk::DescriptorPoolResetFlags::empty())
+                        .is_ok()
+                });
+            recorder.current_pool = 0;
+            recorder.current_sets = 0;
+            let mut free = self.free_recorders();
+            if ok && free.len() < MAX_FREE_RECORDERS {
+                free.push(recorder);
+            } else {
+                drop(free);
+                Self::destroy_recorder(device, recorder);
+            }
+        }
+    }
+
+    unsafe fn destroy_recorder(device: &ash::Device, recorder: Recorder) {
+        for p in recorder.descriptor_pools {
+            device.destroy_descriptor_pool(p, None);
+        }
+        device.destroy_command_pool(recorder.pool, None);
+    }
+
+    fn free_recorders(&self) -> MutexGuard<'_, Vec<Recorder>> {
+        self.free_recorders
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+    }
+
+    pub(crate) fn upload_ring(&self) -> MutexGuard<'_, Ring> {
+        self.upload_ring.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    pub(crate) fn readback_ring(&self) -> MutexGuard<'_, Ring> {
+        self.readback_ring.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Creates a buffer with memory from the context's allocator; returns it, its allocation and
+    /// its device address.
+    pub(crate) fn raw_buffer(
+        &self,
+        name: &str,
+        size: u64,
+        location: MemoryLocation,
+    ) -> Result<(vk::Buffer, gpu_allocator::vulkan::Allocation, u64), GpuError> {
+        Self::raw_buffer_with(&self.device, &self.allocator, name, size, location)
+    }
+
+    /// Creates a buffer and binds memory from `allocator` (before the context exists, for the
+    /// rings, and for every [`super::Buffer`]); returns it, its allocation and its address.
+    pub(crate) fn raw_buffer_with(
+        device: &ash::Device,
+        allocator: &Mutex<Allocator>,
+        name: &str,
+        size: u64,
+        location: MemoryLocation,
+    ) -> Result<(vk::Buffer, gpu_allocator::vulkan::Allocation, u64), GpuError> {
+        use gpu_allocator::vulkan::{AllocationCreateDesc, AllocationScheme};
+        let usage = vk::BufferUsageFlags::STORAGE_BUFFER
+            | vk::BufferUsageFlags::TRANSFER_SRC
+            | vk::BufferUsageFlags::TRANSFER_DST
+            | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS
+            | vk::BufferUsageFlags::INDIRECT_BUFFER;
+        let info = vk::BufferCreateInfo::default()
+            .size(size)
+            .usage(usage)
+            .sharing_mode(vk::SharingMode::EXCLUSIVE);
+        let lock = || allocator.lock().unwrap_or_else(|p| p.into_inner());
+        // SAFETY: valid create info on our device; every error path destroys the buffer.
+        unsafe {
+            let raw = device
+                .create_buffer(&info, None)
+                .map_err(vk_err("vkCreateBuffer"))?;
+            let requirements = device.get_buffer_memory_requirements(raw);
+            let allocation = match lock().allocate(&AllocationCreateDesc {
+                name,
+                requirements,
+                location,
+                linear: true,
+                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+            }) {
+                Ok(a) => a,
+                Err(e) => {
+                    device.destroy_buffer(raw, None);
+                    return Err(GpuError::from_allocation(name, e));
+                }
+            };
+            if let Err(e) = device.bind_buffer_memory(raw, allocation.memory(), allocation.offset())
+            {
+                device.destroy_buffer(raw, None);
+                let _ = lock().free(allocation);
+                return Err(vk_err("vkBindBufferMemory")(e));
+            }
+            let address = device
+                .get_buffer_device_address(&vk::BufferDeviceAddressInfo::default().buffer(raw));
+            Ok((raw, allocation, address))
+        }
     }
 
     pub(crate) fn allocator(&self) -> MutexGuard<'_, Allocator> {
@@ -554,6 +1150,22 @@ impl Drop for GpuContext {
         // the GPU, then destroy in reverse creation order, each object exactly once.
         unsafe {
             let _ = self.device.device_wait_idle();
+            self.completed.store(u64::MAX, Ordering::Release);
+            let garbage: Vec<Garbage> = self.deferred().drain(..).map(|(_, g)| g).collect();
+            for g in garbage {
+                self.destroy(g);
+            }
+            for r in self.free_recorders().drain(..) {
+                Self::destroy_recorder(&self.device, r);
+            }
+            for ring in [&self.upload_ring, &self.readback_ring] {
+                let mut ring = ring.lock().unwrap_or_else(|p| p.into_inner());
+                self.device.destroy_buffer(ring.raw, None);
+                if let Some(a) = ring.allocation.take() {
+                    let _ = self.allocator().free(a);
+                }
+            }
+            self.device.destroy_semaphore(self.timeline, None);
             {
                 let allocator = self.allocator();
                 let report = allocator.generate_report();

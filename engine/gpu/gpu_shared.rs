@@ -47,4 +47,16 @@ gpu_shared! {
         /// Counters: invocations launched, invocations that did work.
         pub stats: uint64_t,
     }
+
+    /// Push constants of `test/chain.comp`.
+    pub struct ChainPush {
+        /// The previous pass's words.
+        pub src_addr: uint64_t,
+        /// This pass's words.
+        pub dst_addr: uint64_t,
+        /// Words.
+        pub count: uint,
+        /// Index of the pass in the chain.
+        pub pass_index: uint,
+    }
 }

@@ -6,6 +6,7 @@ use ash::vk;
 use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
 use gpu_allocator::MemoryLocation;
 
+use super::release::Garbage;
 use super::{vk_err, GpuContext, GpuError};
 
 /// Largest staging buffer used by uploads and readbacks; bigger transfers go in chunks.
@@ -36,8 +37,9 @@ impl MemLocation {
 /// destination, and indirect-dispatch arguments.
 ///
 /// Shaders reach it through its device address (`GL_EXT_buffer_reference`), so it may exceed
-/// `maxStorageBufferRange`. Destroyed on drop; drop it only after the GPU is done with it (all
-/// submissions in this layer wait for their fence, so that holds once `submit` returned).
+/// `maxStorageBufferRange`. Dropping it queues it for release once the last submission so far
+/// has completed (deferred release), so it may be dropped right after the submission that uses
+/// it returned.
 pub struct Buffer {
     pub(crate) raw: vk::Buffer,
     allocation: Option<Allocation>,
@@ -80,7 +82,7 @@ impl Buffer {
         self.location
     }
 
-    fn check_range(&self, offset: u64, len: u64) -> Result<(), GpuError> {
+    pub(crate) fn check_range(&self, offset: u64, len: u64) -> Result<(), GpuError> {
         if offset.checked_add(len).map_or(true, |end| end > self.size) {
             return Err(GpuError::OutOfRange {
                 name: self.name.clone(),
@@ -93,24 +95,19 @@ impl Buffer {
     }
 
     /// Mapped bytes of a host-visible buffer.
-    fn mapped(&self) -> Option<&[u8]> {
+    pub(crate) fn mapped(&self) -> Option<&[u8]> {
         self.allocation.as_ref().and_then(|a| a.mapped_slice())
     }
 
-    fn mapped_mut(&mut self) -> Option<&mut [u8]> {
+    pub(crate) fn mapped_mut(&mut self) -> Option<&mut [u8]> {
         self.allocation.as_mut().and_then(|a| a.mapped_slice_mut())
     }
 }
 
 impl Drop for Buffer {
     fn drop(&mut self) {
-        // SAFETY: the buffer was created by this device and is no longer in use (submissions
-        // wait for their fences); destroyed once, then its memory is freed.
-        unsafe { self.ctx.device.destroy_buffer(self.raw, None) };
         if let Some(a) = self.allocation.take() {
-            if let Err(e) = self.ctx.allocator().free(a) {
-                log::error!("freeing buffer '{}': {e}", self.name);
-            }
+            self.ctx.defer(Garbage::Buffer(self.raw, a));
         }
     }
 }
@@ -155,15 +152,8 @@ impl Image {
 
 impl Drop for Image {
     fn drop(&mut self) {
-        // SAFETY: created by this device, idle (submissions wait), destroyed exactly once.
-        unsafe {
-            self.ctx.device.destroy_image_view(self.view, None);
-            self.ctx.device.destroy_image(self.raw, None);
-        }
         if let Some(a) = self.allocation.take() {
-            if let Err(e) = self.ctx.allocator().free(a) {
-                log::error!("freeing image '{}': {e}", self.name);
-            }
+            self.ctx.defer(Garbage::Image(self.raw, self.view, a));
         }
     }
 }
@@ -192,61 +182,17 @@ impl GpuContext {
                 max,
             });
         }
-        let usage = vk::BufferUsageFlags::STORAGE_BUFFER
-            | vk::BufferUsageFlags::TRANSFER_SRC
-            | vk::BufferUsageFlags::TRANSFER_DST
-            | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS
-            | vk::BufferUsageFlags::INDIRECT_BUFFER;
-        let info = vk::BufferCreateInfo::default()
-            .size(size)
-            .usage(usage)
-            .sharing_mode(vk::SharingMode::EXCLUSIVE);
-        // SAFETY: valid create info on our device; every error path below destroys the buffer.
-        unsafe {
-            let raw = self
-                .device
-                .create_buffer(&info, None)
-                .map_err(vk_err("vkCreateBuffer"))?;
-            let requirements = self.device.get_buffer_memory_requirements(raw);
-            let allocation = self.allocator().allocate(&AllocationCreateDesc {
-                name,
-                requirements,
-                location: location.to_allocator(),
-                linear: true,
-                allocation_scheme: AllocationScheme::GpuAllocatorManaged,
-            });
-            let allocation = match allocation {
-                Ok(a) => a,
-                Err(e) => {
-                    self.device.destroy_buffer(raw, None);
-                    return Err(GpuError::Allocation {
-                        name: name.to_string(),
-                        message: format!("{size} bytes: {e}"),
-                    });
-                }
-            };
-            if let Err(e) =
-                self.device
-                    .bind_buffer_memory(raw, allocation.memory(), allocation.offset())
-            {
-                self.device.destroy_buffer(raw, None);
-                let _ = self.allocator().free(allocation);
-                return Err(vk_err("vkBindBufferMemory")(e));
-            }
-            let address = self
-                .device
-                .get_buffer_device_address(&vk::BufferDeviceAddressInfo::default().buffer(raw));
-            self.set_name(raw, name);
-            Ok(Buffer {
-                raw,
-                allocation: Some(allocation),
-                size,
-                address,
-                name: name.to_string(),
-                location,
-                ctx: Arc::clone(self),
-            })
-        }
+        let (raw, allocation, address) = self.raw_buffer(name, size, location.to_allocator())?;
+        self.set_name(raw, name);
+        Ok(Buffer {
+            raw,
+            allocation: Some(allocation),
+            size,
+            address,
+            name: name.to_string(),
+            location,
+            ctx: Arc::clone(self),
+        })
     }
 
     /// Creates a device-local buffer holding `data` (through a staging buffer).
@@ -273,23 +219,12 @@ impl GpuContext {
         if bytes.is_empty() {
             return Ok(());
         }
-        let chunk = STAGING_CHUNK.min(bytes.len() as u64);
-        let mut staging = self.create_buffer(
-            &format!("{} (upload staging)", dst.name),
-            chunk,
-            MemLocation::CpuToGpu,
-        )?;
-        let mut done = 0u64;
-        while done < bytes.len() as u64 {
-            let n = chunk.min(bytes.len() as u64 - done);
-            let src = &bytes[done as usize..(done + n) as usize];
-            staging
-                .mapped_mut()
-                .ok_or_else(|| GpuError::InvalidArgument("staging buffer is not mapped".into()))?
-                [..n as usize]
-                .copy_from_slice(src);
+        // Small writes go through the upload ring; large ones in chunks of dedicated staging.
+        let mut done = 0usize;
+        while done < bytes.len() {
+            let n = (STAGING_CHUNK as usize).min(bytes.len() - done);
             let mut cmd = self.begin_commands(&format!("upload {}", dst.name))?;
-            cmd.copy_buffer(&staging, 0, dst, offset + done, n)?;
+            cmd.upload(dst, offset + done as u64, &bytes[done..done + n])?;
             cmd.submit()?;
             done += n;
         }
@@ -345,22 +280,15 @@ impl GpuContext {
             out_bytes.copy_from_slice(&m[offset as usize..(offset + len) as usize]);
             return Ok(out);
         }
-        let chunk = STAGING_CHUNK.min(len);
-        let staging = self.create_buffer(
-            &format!("{} (readback staging)", src.name),
-            chunk,
-            MemLocation::GpuToCpu,
-        )?;
+        // Small reads land in the readback ring; large ones in chunks of dedicated staging.
         let mut done = 0u64;
         while done < len {
-            let n = chunk.min(len - done);
+            let n = STAGING_CHUNK.min(len - done);
             let mut cmd = self.begin_commands(&format!("readback {}", src.name))?;
-            cmd.copy_buffer(src, offset + done, &staging, 0, n)?;
-            cmd.submit()?;
-            let m = staging
-                .mapped()
-                .ok_or_else(|| GpuError::InvalidArgument("staging buffer is not mapped".into()))?;
-            out_bytes[done as usize..(done + n) as usize].copy_from_slice(&m[..n as usize]);
+            let readback = cmd.readback::<u8>(src, offset + done, n as usize)?;
+            cmd.submit_async()?;
+            let bytes = readback.read()?;
+            out_bytes[done as usize..(done + n) as usize].copy_from_slice(&bytes);
             done += n;
         }
         Ok(out)
@@ -400,15 +328,10 @@ impl GpuContext {
             .initial_layout(vk::ImageLayout::UNDEFINED);
         // SAFETY: valid create infos; every error path destroys what was created before it.
         let image = unsafe {
-            let raw = self.device.create_image(&info, None).map_err(|e| match e {
-                vk::Result::ERROR_OUT_OF_DEVICE_MEMORY | vk::Result::ERROR_OUT_OF_HOST_MEMORY => {
-                    GpuError::Allocation {
-                        name: name.to_string(),
-                        message: format!("{width}x{height} image: {e:?}"),
-                    }
-                }
-                e => vk_err("vkCreateImage")(e),
-            })?;
+            let raw = self
+                .device
+                .create_image(&info, None)
+                .map_err(vk_err("vkCreateImage"))?;
             let requirements = self.device.get_image_memory_requirements(raw);
             let allocation = match self.allocator().allocate(&AllocationCreateDesc {
                 name,
@@ -420,10 +343,7 @@ impl GpuContext {
                 Ok(a) => a,
                 Err(e) => {
                     self.device.destroy_image(raw, None);
-                    return Err(GpuError::Allocation {
-                        name: name.to_string(),
-                        message: e.to_string(),
-                    });
+                    return Err(GpuError::from_allocation(name, e));
                 }
             };
             if let Err(e) =

@@ -1,33 +1,41 @@
 //! The Vulkan device layer: the only module that uses `ash`.
 //!
 //! - [`GpuContext`]: instance, device selection (discrete > integrated > virtual > other > CPU;
-//!   `VOXDAG_DEVICE=<substring>` overrides), validation messenger, gpu-allocator.
+//!   `VOXDAG_DEVICE=<substring>` overrides; every feature the shaders use is checked), validation
+//!   (with synchronization validation) messenger, gpu-allocator, the queue's timeline semaphore,
+//!   the deferred-release queue, the staging rings and submission statistics.
 //! - [`Buffer`] (device addresses, may exceed `maxStorageBufferRange`), [`Image`] (RGBA8 storage),
 //!   uploads and readbacks.
 //! - [`ComputePipeline`] from embedded SPIR-V ([`shaders`]) with specialization and push constants.
-//! - [`Commands`]: one-shot command buffers, submitted and waited on with a fence.
+//! - [`Commands`]: a recorder (pooled command buffer) for any number of passes, submitted once;
+//!   its completion is a timeline value ([`Submission`]).
+//! - [`FrameRing`]: N frames in flight, each waiting only for its own slot's last submission.
 //! - [`Profiler`]: timestamp queries per pass, CPU spans, a table and Chrome trace JSON.
 //!
-//! Lifetime rule: every object holds an `Arc<GpuContext>` and destroys its Vulkan handles once,
-//! on drop; submissions wait for their fence, so nothing is in flight when a resource drops.
-//! See `docs/gpu.md`.
+//! Lifetime rule: every object holds an `Arc<GpuContext>`; dropping it queues its Vulkan handles
+//! with the timeline value of the last submission, and the context destroys them once the GPU has
+//! passed that value (wgpu-core's deferred release). See `docs/gpu.md`.
 
 // Every public item of the GPU layer (generated shader constants included) is documented.
 #![warn(missing_docs)]
 
 mod commands;
 mod context;
+mod frame;
 mod memory;
 mod pipeline;
 mod profiler;
+mod release;
+mod ring;
 pub mod shaders;
 /// Push constants of the test shaders (`shaders/glsl/test/`, `shaders::TEST_*`), for the
 /// GPU-layer tests.
 #[path = "gpu_shared.rs"]
 pub mod test_layouts;
 
-pub use commands::Commands;
-pub use context::{DeviceInfo, GpuContext, GpuOptions};
+pub use commands::{Commands, Readback, Submission};
+pub use context::{DeviceInfo, DeviceType, GpuContext, GpuOptions, GpuStats, REQUIRED_FEATURES};
+pub use frame::{FrameRing, DEFAULT_FRAMES_IN_FLIGHT};
 pub use memory::{Buffer, Image, MemLocation};
 pub use pipeline::{ComputePipeline, ComputePipelineDesc};
 pub use profiler::{CpuSpan, PassTiming, Profiler};
@@ -51,15 +59,38 @@ pub enum GpuError {
         /// All devices found, with their types.
         available: String,
     },
-    /// A Vulkan call failed.
-    #[error("{call} failed: {result}")]
+    /// The device lacks a feature voxdag's shaders or host code need.
+    #[error("device \"{device}\" is unsupported: it lacks {feature}")]
+    Unsupported {
+        /// The device.
+        device: String,
+        /// The missing feature, as Vulkan names it (e.g. `shaderBufferInt64Atomics`).
+        feature: String,
+    },
+    /// The device was lost (driver reset, hang, removal): recreate the context.
+    #[error("Vulkan device lost")]
+    DeviceLost,
+    /// Device memory is exhausted (free resources, e.g. run GC, and retry).
+    #[error("out of device memory{0}")]
+    OutOfDeviceMemory(String),
+    /// Host memory is exhausted.
+    #[error("out of host memory{0}")]
+    OutOfHostMemory(String),
+    /// The window surface is gone (recreate the surface).
+    #[error("Vulkan surface lost")]
+    SurfaceLost,
+    /// The swapchain no longer matches the surface (recreate the swapchain).
+    #[error("swapchain out of date")]
+    OutOfDate,
+    /// Any other failed Vulkan call, with its `VkResult`.
+    #[error("{call} failed: {result:?}")]
     Vulkan {
         /// The Vulkan function.
         call: &'static str,
-        /// The `VkResult` (and context).
-        result: String,
+        /// The `VkResult`.
+        result: ash::vk::Result,
     },
-    /// Device memory allocation failed.
+    /// Device memory allocation failed for a reason other than exhaustion.
     #[error("allocating '{name}' failed: {message}")]
     Allocation {
         /// Name of the buffer or image.
@@ -102,10 +133,45 @@ pub enum GpuError {
     },
 }
 
-/// Maps an `ash` error to [`GpuError::Vulkan`] for the named call.
-pub(crate) fn vk_err(call: &'static str) -> impl Fn(ash::vk::Result) -> GpuError {
-    move |e| GpuError::Vulkan {
-        call,
-        result: format!("{e:?}"),
+impl GpuError {
+    /// Maps a failed Vulkan call's `VkResult` to the error a caller can act on: device lost,
+    /// out of device / host memory, surface lost, swapchain out of date; anything else keeps its
+    /// `VkResult` in [`GpuError::Vulkan`].
+    pub fn from_vk(call: &'static str, result: ash::vk::Result) -> GpuError {
+        use ash::vk::Result as R;
+        match result {
+            R::ERROR_DEVICE_LOST => GpuError::DeviceLost,
+            R::ERROR_OUT_OF_DEVICE_MEMORY => GpuError::OutOfDeviceMemory(format!(" ({call})")),
+            R::ERROR_OUT_OF_HOST_MEMORY => GpuError::OutOfHostMemory(format!(" ({call})")),
+            R::ERROR_SURFACE_LOST_KHR => GpuError::SurfaceLost,
+            R::ERROR_OUT_OF_DATE_KHR => GpuError::OutOfDate,
+            result => GpuError::Vulkan { call, result },
+        }
     }
+
+    /// Maps a gpu-allocator failure for the named resource: exhaustion becomes
+    /// [`GpuError::OutOfDeviceMemory`] / [`GpuError::OutOfHostMemory`], the rest
+    /// [`GpuError::Allocation`].
+    pub fn from_allocation(name: &str, error: gpu_allocator::AllocationError) -> GpuError {
+        use gpu_allocator::AllocationError as A;
+        match error {
+            A::OutOfMemory => GpuError::OutOfDeviceMemory(format!(" (allocating '{name}')")),
+            // gpu-allocator reports vkAllocateMemory's other failures as text.
+            A::Internal(m) if m.contains("ERROR_OUT_OF_HOST_MEMORY") => {
+                GpuError::OutOfHostMemory(format!(" (allocating '{name}')"))
+            }
+            A::Internal(m) if m.contains("ERROR_OUT_OF_DEVICE_MEMORY") => {
+                GpuError::OutOfDeviceMemory(format!(" (allocating '{name}')"))
+            }
+            e => GpuError::Allocation {
+                name: name.to_string(),
+                message: e.to_string(),
+            },
+        }
+    }
+}
+
+/// Maps an `ash` error to a [`GpuError`] for the named call ([`GpuError::from_vk`]).
+pub(crate) fn vk_err(call: &'static str) -> impl Fn(ash::vk::Result) -> GpuError {
+    move |e| GpuError::from_vk(call, e)
 }

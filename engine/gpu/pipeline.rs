@@ -4,6 +4,7 @@ use std::sync::Arc;
 
 use ash::vk;
 
+use super::release::Garbage;
 use super::{vk_err, GpuContext, GpuError};
 
 /// How to build a [`ComputePipeline`].
@@ -21,7 +22,7 @@ pub struct ComputePipelineDesc<'a> {
     pub storage_image: bool,
 }
 
-/// A compute pipeline and its layout; destroyed on drop.
+/// A compute pipeline and its layout; released on drop once the GPU is done with it.
 pub struct ComputePipeline {
     pub(crate) raw: vk::Pipeline,
     pub(crate) layout: vk::PipelineLayout,
@@ -53,14 +54,8 @@ impl ComputePipeline {
 
 impl Drop for ComputePipeline {
     fn drop(&mut self) {
-        // SAFETY: created by this device; no submission is pending (they all wait for fences).
-        unsafe {
-            self.ctx.device.destroy_pipeline(self.raw, None);
-            self.ctx.device.destroy_pipeline_layout(self.layout, None);
-            if let Some(s) = self.set_layout {
-                self.ctx.device.destroy_descriptor_set_layout(s, None);
-            }
-        }
+        self.ctx
+            .defer(Garbage::Pipeline(self.raw, self.layout, self.set_layout));
     }
 }
 
@@ -167,10 +162,8 @@ impl GpuContext {
                     if let Some(s) = set_layout {
                         device.destroy_descriptor_set_layout(s, None);
                     }
-                    return Err(GpuError::Vulkan {
-                        call: "vkCreateComputePipelines",
-                        result: format!("{e:?} (pipeline '{name}')"),
-                    });
+                    log::error!("creating pipeline '{name}' failed: {e:?}");
+                    return Err(vk_err("vkCreateComputePipelines")(e));
                 }
             };
             self.set_name(raw, name);

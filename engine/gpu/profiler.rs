@@ -8,6 +8,7 @@ use std::time::Instant;
 use ash::vk;
 
 use super::commands::{CommandsState, Lifecycle};
+use super::release::Garbage;
 use super::{vk_err, Commands, GpuContext, GpuError};
 
 /// Timestamp queries in the pool (two per pass); passes beyond this before a `resolve` are
@@ -216,6 +217,18 @@ impl Profiler {
                 p.name
             )));
         }
+        // Wait for the submissions that carry the passes (usually done already).
+        let last = self
+            .pending
+            .iter()
+            .filter_map(|p| match p.lifecycle.get() {
+                CommandsState::Submitted(v) => Some(v),
+                _ => None,
+            })
+            .max();
+        if let Some(v) = last {
+            self.ctx.wait_for(v)?;
+        }
         let resolved_at = self.now_ms();
         // (name, begin, end) raw timestamps of the finished, timed passes.
         let mut timed = Vec::new();
@@ -258,8 +271,8 @@ impl Profiler {
     /// One timestamp, masked to the valid bits.
     fn read_query(&self, q: u32) -> Result<u64, GpuError> {
         let mut stamp = [0u64];
-        // SAFETY: query `q` was reset and written by a command buffer that finished (its
-        // lifecycle says so, and submit waited on its fence).
+        // SAFETY: query `q` was reset and written by a command buffer that finished (resolve
+        // waited for its timeline value).
         unsafe {
             self.ctx.device.get_query_pool_results(
                 self.pool,
@@ -384,8 +397,8 @@ impl Profiler {
 impl Drop for Profiler {
     fn drop(&mut self) {
         if self.pool != vk::QueryPool::null() {
-            // SAFETY: command buffers writing the pool were waited on at submit.
-            unsafe { self.ctx.device.destroy_query_pool(self.pool, None) };
+            // Submissions writing the pool may still run.
+            self.ctx.defer(Garbage::QueryPool(self.pool));
         }
     }
 }

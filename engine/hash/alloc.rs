@@ -52,7 +52,8 @@ impl SlabPool {
         let mut cmd = ctx.begin_commands("hash pool init")?;
         cmd.fill_buffer(&table, 0);
         cmd.fill_buffer(&status, 0);
-        cmd.submit()?;
+        // No wait: later submissions on the queue are ordered after it.
+        cmd.submit_async()?;
         let mut pool = SlabPool {
             ctx: Arc::clone(ctx),
             layout,
@@ -85,13 +86,16 @@ impl SlabPool {
             addresses.push(buf.address());
             added.push(buf);
         }
-        let mut cmd = self.ctx.begin_commands("hash pool grow")?;
-        for buf in &added {
-            cmd.fill_buffer(buf, 0);
+        {
+            // Zero the new super blocks and append their addresses to the table in one
+            // submission, not waited for: later passes on the queue are ordered after it.
+            let mut cmd = self.ctx.begin_commands("hash pool grow")?;
+            for buf in &added {
+                cmd.fill_buffer(buf, 0);
+            }
+            cmd.upload(&self.table, 8 * have as u64, &addresses)?;
+            cmd.submit_async()?;
         }
-        cmd.submit()?;
-        self.ctx
-            .write_buffer(&self.table, 8 * have as u64, &addresses)?;
         self.super_blocks.extend(added);
         Ok(())
     }
@@ -138,7 +142,12 @@ impl SlabPool {
             + self.status.size()
     }
 
-    /// Reads the status block back (one small readback).
+    /// The status block buffer (one [`HashStatus`]).
+    pub fn status_buffer(&self) -> &Buffer {
+        &self.status
+    }
+
+    /// Reads the status block back (one small readback through the readback ring).
     pub fn read_status(&self) -> Result<HashStatus, HashError> {
         let words: Vec<HashStatus> = self.ctx.download(&self.status)?;
         Ok(words[0])

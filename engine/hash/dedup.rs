@@ -25,8 +25,8 @@ use super::gpu_shared::DedupPush;
 use super::layout::murmur_words;
 use super::TeamMode;
 use crate::gpu::{
-    shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, MemLocation,
-    Profiler,
+    shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, DeviceType, GpuContext,
+    GpuError, MemLocation, Profiler, Readback,
 };
 
 /// Most workgroups one dedup dispatch launches (the passes loop over the rest).
@@ -131,6 +131,48 @@ const COUNTER_POOL_USED: usize = 0;
 const COUNTER_ENTRIES: usize = 1;
 const COUNTER_OVERFLOW: usize = 2;
 
+/// Scratch buffers of one dedup batch: the table (buckets + overflow pool), the canonical entry
+/// of every input and the counters.
+#[derive(Debug)]
+pub struct DedupScratch {
+    table: Buffer,
+    canon: Buffer,
+    counters: Buffer,
+    count: u32,
+    buckets: u32,
+    pool_slabs: u32,
+}
+
+impl DedupScratch {
+    /// Overflow slabs of the table's pool.
+    pub fn pool_slabs(&self) -> u32 {
+        self.pool_slabs
+    }
+}
+
+/// A batch recorded by [`GpuDedup::record_dedup`]: its counters, read by
+/// [`GpuDedup::finish_dedup`] after the submission.
+#[derive(Debug)]
+pub struct PendingDedup {
+    counters: Readback<u32>,
+    pool_slabs: u32,
+}
+
+/// What [`GpuDedup::finish_dedup`] found.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DedupResult {
+    /// The representatives are written; this many table entries were made.
+    Done {
+        /// Table entries made.
+        entries: u32,
+    },
+    /// The overflow pool ran out: run the batch again with scratch of this many pool slabs.
+    Retry {
+        /// Pool slabs for the next attempt.
+        pool_slabs: u32,
+    },
+}
+
 /// GPU duplicate detection for keys of one size: the three compiled passes.
 pub struct GpuDedup {
     ctx: Arc<GpuContext>,
@@ -170,7 +212,7 @@ impl GpuDedup {
         }
         let subgroup = ctx.info().subgroup_size.max(1);
         let single_lane = match team {
-            TeamMode::Auto => ctx.info().device_type == "cpu",
+            TeamMode::Auto => ctx.info().device_type == DeviceType::Cpu,
             TeamMode::Subgroup => false,
             TeamMode::SingleLane => true,
         };
@@ -230,7 +272,8 @@ impl GpuDedup {
     }
 
     /// Uploads `keys` (`values.len()` keys of `key_words` words) and `values`, runs the passes and
-    /// reads the representatives back.
+    /// reads the representatives back: one submission, one host wait (more only when the
+    /// overflow pool runs out).
     pub fn dedup(
         &self,
         keys: &[u32],
@@ -245,32 +288,87 @@ impl GpuDedup {
                 attempts: 0,
             });
         }
-        let keys = self.ctx.upload("dedup keys", keys)?;
-        let values = self.ctx.upload("dedup values", values)?;
-        let count = (values.size() / 4) as u32;
+        let count = values.len() as u32;
+        let key_buf =
+            self.ctx
+                .create_buffer("dedup keys", keys.len() as u64 * 4, MemLocation::GpuOnly)?;
+        let value_buf =
+            self.ctx
+                .create_buffer("dedup values", count as u64 * 4, MemLocation::GpuOnly)?;
         let reps = self.ctx.create_buffer(
             "dedup representatives",
             count as u64 * 4,
             MemLocation::GpuOnly,
         )?;
-        let (entries, attempts) = self.dedup_buffers(&keys, &values, count, &reps, profiler)?;
+        let (entries, attempts, out) = self.dedup_flow(
+            &key_buf,
+            &value_buf,
+            count,
+            &reps,
+            Some((keys, values)),
+            profiler,
+        )?;
         Ok(DedupOutput {
-            representatives: self.ctx.download(&reps)?,
+            representatives: out.unwrap_or_default(),
             entries,
             attempts,
         })
     }
 
     /// Runs the passes on GPU buffers: `count` keys and values in, `count` representatives out.
-    /// Returns the table entries made and the attempts needed.
+    /// Returns the table entries made and the attempts needed (one submission and one host wait
+    /// per attempt).
     pub fn dedup_buffers(
         &self,
         keys: &Buffer,
         values: &Buffer,
         count: u32,
         reps: &Buffer,
-        mut profiler: Option<&mut Profiler>,
+        profiler: Option<&mut Profiler>,
     ) -> Result<(u32, u32), DedupError> {
+        self.dedup_flow(keys, values, count, reps, None, profiler)
+            .map(|(e, a, _)| (e, a))
+    }
+
+    /// Scratch for a batch of `count` inputs with `pool_slabs` overflow slabs (`None`: the
+    /// configured initial pool, else the worst-case estimate [`DedupLayout::pool_slabs`]).
+    pub fn scratch(&self, count: u32, pool_slabs: Option<u32>) -> Result<DedupScratch, DedupError> {
+        let n = count.max(1) as u64;
+        let buckets = self.buckets.unwrap_or_else(|| DedupLayout::buckets(count));
+        let pool_slabs = pool_slabs
+            .or(self.initial_pool)
+            .unwrap_or_else(|| DedupLayout::pool_slabs(count));
+        let table_bytes = (buckets as u64 + pool_slabs as u64) * self.layout.slab_words() * 4;
+        Ok(DedupScratch {
+            table: self
+                .ctx
+                .create_buffer("dedup table", table_bytes, MemLocation::GpuOnly)?,
+            canon: self
+                .ctx
+                .create_buffer("dedup canon", n * 4, MemLocation::GpuOnly)?,
+            counters: self
+                .ctx
+                .create_buffer("dedup counters", 16, MemLocation::GpuOnly)?,
+            count,
+            buckets,
+            pool_slabs,
+        })
+    }
+
+    /// Records the three passes of a batch into `cmd` (profiled as "dedup insert" and "dedup
+    /// representatives") and a readback of the counters; finish with
+    /// [`GpuDedup::finish_dedup`] after the submission.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_dedup<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        keys: &'a Buffer,
+        values: &'a Buffer,
+        count: u32,
+        reps: &'a Buffer,
+        scratch: &'a DedupScratch,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<PendingDedup, DedupError> {
         let key_words = self.layout.key_words as u64;
         let n = count as u64;
         for (buffer, words) in [(keys, n * key_words), (values, n), (reps, n)] {
@@ -283,90 +381,144 @@ impl GpuDedup {
                 )));
             }
         }
-        if count == 0 {
-            return Ok((0, 0));
+        if scratch.count < count {
+            return Err(DedupError::InvalidInput(format!(
+                "scratch for {} inputs used for {count}",
+                scratch.count
+            )));
         }
-        let buckets = self.buckets.unwrap_or_else(|| DedupLayout::buckets(count));
-        let mut pool_slabs = self
-            .initial_pool
-            .unwrap_or_else(|| DedupLayout::pool_slabs(count));
-        let canon = self
-            .ctx
-            .create_buffer("dedup canon", n * 4, MemLocation::GpuOnly)?;
-        let counters = self
-            .ctx
-            .create_buffer("dedup counters", 16, MemLocation::GpuOnly)?;
+        let push = DedupPush {
+            keys: keys.address(),
+            values: values.address(),
+            table: scratch.table.address(),
+            canon: scratch.canon.address(),
+            reps: reps.address(),
+            counters: scratch.counters.address(),
+            count,
+            buckets: scratch.buckets,
+            pool_slabs: scratch.pool_slabs,
+            slab_words: self.layout.slab_words() as u32,
+        };
+        let teams_per_group = self.workgroup / self.team;
+        let per_team = [count.div_ceil(teams_per_group).min(MAX_WORKGROUPS), 1, 1];
+        let per_invocation = [count.div_ceil(self.workgroup).min(MAX_WORKGROUPS), 1, 1];
+        cmd.fill_buffer(&scratch.table, 0);
+        cmd.fill_buffer(&scratch.counters, 0);
+        if let Some(p) = profiler.as_deref_mut() {
+            p.begin_pass(cmd, "dedup insert");
+        }
+        cmd.dispatch(&self.insert, per_team, bytemuck::bytes_of(&push), None)?;
+        if let Some(p) = profiler.as_deref_mut() {
+            p.end_pass(cmd);
+        }
+        cmd.barrier();
+        if let Some(p) = profiler.as_deref_mut() {
+            p.begin_pass(cmd, "dedup representatives");
+        }
+        cmd.dispatch(&self.min, per_team, bytemuck::bytes_of(&push), None)?;
+        cmd.barrier();
+        cmd.dispatch(
+            &self.resolve,
+            per_invocation,
+            bytemuck::bytes_of(&push),
+            None,
+        )?;
+        if let Some(p) = profiler {
+            p.end_pass(cmd);
+        }
+        cmd.barrier();
+        Ok(PendingDedup {
+            counters: cmd.readback::<u32>(&scratch.counters, 0, 3)?,
+            pool_slabs: scratch.pool_slabs,
+        })
+    }
+
+    /// Reads a recorded batch's counters once its submission was made (waits if needed): done,
+    /// or the overflow pool ran out and the batch must run again with a bigger one.
+    pub fn finish_dedup(
+        &self,
+        pending: PendingDedup,
+        count: u32,
+    ) -> Result<DedupResult, DedupError> {
+        let state = pending.counters.read()?;
+        let pool_slabs = pending.pool_slabs;
+        // Bit 0: the pool ran out in pass 1 (pass 2 then also misses keys: bit 1).
+        // Bit 1 alone: a key without an entry, which pass 1 never leaves behind.
+        let overflow = state[COUNTER_OVERFLOW];
+        if overflow == 0 {
+            return Ok(DedupResult::Done {
+                entries: state[COUNTER_ENTRIES],
+            });
+        }
+        // Bit 2: a chain walk was cut off (longer than the table: a loop, never a hang).
+        // Every input links at most one slab per entry it makes and wastes at most one, so a
+        // pool of 2 * count slabs never runs out.
+        if overflow & 1 == 0 || overflow & 4 != 0 || pool_slabs >= 2 * count {
+            return Err(DedupError::Inconsistent(format!(
+                "overflow state {overflow} with a pool of {pool_slabs} slabs"
+            )));
+        }
+        log::debug!(
+            "dedup: pool of {pool_slabs} slabs ran out ({} taken), growing",
+            state[COUNTER_POOL_USED]
+        );
+        Ok(DedupResult::Retry {
+            pool_slabs: pool_slabs.saturating_mul(2).min(2 * count),
+        })
+    }
+
+    /// Attempts until the pool suffices; the first uploads the host data when given and every
+    /// attempt reads the representatives back in its own submission when it uploaded.
+    fn dedup_flow(
+        &self,
+        keys: &Buffer,
+        values: &Buffer,
+        count: u32,
+        reps: &Buffer,
+        upload: Option<(&[u32], &[u32])>,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<(u32, u32, Option<Vec<u32>>), DedupError> {
+        if count == 0 {
+            return Ok((0, 0, upload.map(|_| Vec::new())));
+        }
+        let mut pool_slabs = None;
         let mut attempt = 0;
         loop {
             attempt += 1;
-            let table_bytes = (buckets as u64 + pool_slabs as u64) * self.layout.slab_words() * 4;
-            let table = self
-                .ctx
-                .create_buffer("dedup table", table_bytes, MemLocation::GpuOnly)?;
-            let push = DedupPush {
-                keys: keys.address(),
-                values: values.address(),
-                table: table.address(),
-                canon: canon.address(),
-                reps: reps.address(),
-                counters: counters.address(),
-                count,
-                buckets,
-                pool_slabs,
-                slab_words: self.layout.slab_words() as u32,
-            };
-            let teams_per_group = self.workgroup / self.team;
-            let per_team = [count.div_ceil(teams_per_group).min(MAX_WORKGROUPS), 1, 1];
-            let per_invocation = [count.div_ceil(self.workgroup).min(MAX_WORKGROUPS), 1, 1];
+            let scratch = self.scratch(count, pool_slabs)?;
             let mut cmd = self.ctx.begin_commands("dedup")?;
-            cmd.fill_buffer(&table, 0);
-            cmd.fill_buffer(&counters, 0);
-            if let Some(p) = profiler.as_deref_mut() {
-                p.begin_pass(&mut cmd, "dedup insert");
+            if let (Some((k, v)), 1) = (upload, attempt) {
+                cmd.upload(keys, 0, k)?;
+                cmd.upload(values, 0, v)?;
             }
-            cmd.dispatch(&self.insert, per_team, bytemuck::bytes_of(&push), None)?;
-            if let Some(p) = profiler.as_deref_mut() {
-                p.end_pass(&mut cmd);
-            }
-            cmd.barrier();
-            if let Some(p) = profiler.as_deref_mut() {
-                p.begin_pass(&mut cmd, "dedup representatives");
-            }
-            cmd.dispatch(&self.min, per_team, bytemuck::bytes_of(&push), None)?;
-            cmd.barrier();
-            cmd.dispatch(
-                &self.resolve,
-                per_invocation,
-                bytemuck::bytes_of(&push),
-                None,
+            let pending = self.record_dedup(
+                &mut cmd,
+                keys,
+                values,
+                count,
+                reps,
+                &scratch,
+                profiler.as_deref_mut(),
             )?;
-            if let Some(p) = profiler.as_deref_mut() {
-                p.end_pass(&mut cmd);
-            }
-            cmd.submit()?;
+            let back = match upload {
+                Some(_) => Some(cmd.readback::<u32>(reps, 0, count as usize)?),
+                None => None,
+            };
+            cmd.submit_async()?;
+            let result = self.finish_dedup(pending, count)?;
             if let Some(p) = profiler.as_deref_mut() {
                 p.resolve()?;
             }
-            let state: Vec<u32> = self.ctx.read_buffer(&counters, 0, 3)?;
-            // Bit 0: the pool ran out in pass 1 (pass 2 then also misses keys: bit 1).
-            // Bit 1 alone: a key without an entry, which pass 1 never leaves behind.
-            let overflow = state[COUNTER_OVERFLOW];
-            if overflow == 0 {
-                return Ok((state[COUNTER_ENTRIES], attempt));
+            match result {
+                DedupResult::Done { entries } => {
+                    let out = match back {
+                        Some(b) => Some(b.read()?),
+                        None => None,
+                    };
+                    return Ok((entries, attempt, out));
+                }
+                DedupResult::Retry { pool_slabs: p } => pool_slabs = Some(p),
             }
-            // Bit 2: a chain walk was cut off (longer than the table: a loop, never a hang).
-            // Every input links at most one slab per entry it makes and wastes at most one, so a
-            // pool of 2 * count slabs never runs out.
-            if overflow & 1 == 0 || overflow & 4 != 0 || pool_slabs >= 2 * count {
-                return Err(DedupError::Inconsistent(format!(
-                    "overflow state {overflow} with a pool of {pool_slabs} slabs"
-                )));
-            }
-            log::debug!(
-                "dedup: pool of {pool_slabs} slabs ran out ({} taken), growing",
-                state[COUNTER_POOL_USED]
-            );
-            pool_slabs = pool_slabs.saturating_mul(2).min(2 * count);
         }
     }
 }

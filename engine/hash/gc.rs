@@ -18,14 +18,16 @@ use std::sync::Arc;
 
 use super::gpu_shared::GcCounters;
 use super::layout::{
-    Handle, HashVariant, SlabLayout, HANDLE_INVALID, HANDLE_MISS, SLABS_PER_SUPER_BLOCK,
-    SLAB_ACTIVE, SLAB_NEXT, SLAB_OCCUPANCY, SLAB_SLOTS, SUPER_BLOCK_BITMASK_WORDS,
+    Handle, HashStatus, HashVariant, SlabLayout, HANDLE_INVALID, HANDLE_MISS,
+    SLABS_PER_SUPER_BLOCK, SLAB_ACTIVE, SLAB_NEXT, SLAB_OCCUPANCY, SLAB_SLOTS,
+    SUPER_BLOCK_BITMASK_WORDS,
 };
 use super::reference::TableImage;
 use super::table::GpuHashTable;
 use super::HashError;
 use crate::gpu::{
-    shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, MemLocation, Profiler,
+    shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, GpuContext, MemLocation,
+    Profiler, Readback,
 };
 
 /// Most workgroups one GC dispatch launches (the passes loop over the rest).
@@ -134,6 +136,14 @@ pub fn collect_cpu(image: &mut TableImage, live: &[Handle]) -> GcReport {
     report
 }
 
+/// A collection recorded by [`GpuGarbageCollector::record_collect`]: its counters and the
+/// table's status, read by [`GpuGarbageCollector::finish_collect`] after the submission.
+#[derive(Debug)]
+pub struct PendingGc {
+    counters: Readback<GcCounters>,
+    status: Readback<HashStatus>,
+}
+
 /// The GC passes of one table layout (variant and item size).
 pub struct GpuGarbageCollector {
     ctx: Arc<GpuContext>,
@@ -146,6 +156,9 @@ pub struct GpuGarbageCollector {
     team: u32,
     mark: ComputePipeline,
     sweep: ComputePipeline,
+    /// The passes' counters (zeroed at the start of every recorded collection; collections
+    /// on the one queue run one after the other).
+    counters: Buffer,
 }
 
 impl GpuGarbageCollector {
@@ -181,6 +194,11 @@ impl GpuGarbageCollector {
             team,
             mark: pipeline("hash gc mark", shaders::HASH_GC_MARK)?,
             sweep: pipeline("hash gc sweep", shaders::HASH_GC_SWEEP)?,
+            counters: ctx.create_buffer(
+                "hash gc counters",
+                std::mem::size_of::<GcCounters>() as u64,
+                MemLocation::GpuOnly,
+            )?,
         })
     }
 
@@ -216,20 +234,60 @@ impl GpuGarbageCollector {
         } else {
             live.iter().map(|h| h.0).collect()
         };
-        let buffer = self.ctx.upload("hash gc live handles", &raw)?;
-        self.collect_buffers(table, &buffer, count, profiler)
+        let buffer = self.ctx.create_buffer(
+            "hash gc live handles",
+            4 * raw.len() as u64,
+            MemLocation::GpuOnly,
+        )?;
+        // Upload and both passes in one submission, one host wait.
+        let mut cmd = self.ctx.begin_commands("hash gc")?;
+        cmd.upload(&buffer, 0, &raw)?;
+        self.finish_recorded(cmd, table, &buffer, count, profiler)
+    }
+
+    /// Records, submits and finishes a collection that starts in `cmd`.
+    fn finish_recorded<'a>(
+        &'a self,
+        mut cmd: Commands<'a>,
+        table: &'a GpuHashTable,
+        live: &'a Buffer,
+        count: u32,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<GcReport, HashError> {
+        let pending = self.record_collect(&mut cmd, table, live, count, profiler.as_deref_mut())?;
+        cmd.submit_async()?;
+        let report = self.finish_collect(pending)?;
+        if let Some(p) = profiler {
+            p.resolve()?;
+        }
+        Ok(report)
     }
 
     /// Collects `table`, keeping the items named by the first `count` handles of `live` (a GPU
     /// buffer of `u32` handles; sentinels skipped; handles beyond the pool or in a free slab
-    /// counted in [`GcReport::bad_handles`] and ignored).
+    /// counted in [`GcReport::bad_handles`] and ignored). One submission, one host wait.
     pub fn collect_buffers(
         &self,
         table: &mut GpuHashTable,
         live: &Buffer,
         count: u32,
-        mut profiler: Option<&mut Profiler>,
+        profiler: Option<&mut Profiler>,
     ) -> Result<GcReport, HashError> {
+        let cmd = self.ctx.begin_commands("hash gc")?;
+        self.finish_recorded(cmd, table, live, count, profiler)
+    }
+
+    /// Records a collection of `table` into `cmd` (mark, sweep, then readbacks of the counters
+    /// and the table status); the table must not be used by other passes recorded between this
+    /// and the submission's completion. Finish with [`GpuGarbageCollector::finish_collect`].
+    pub fn record_collect<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        table: &'a GpuHashTable,
+        live: &'a Buffer,
+        count: u32,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<PendingGc, HashError> {
         if table.layout() != self.layout {
             return Err(HashError::InvalidArgument(format!(
                 "collector built for {:?}, table is {:?}",
@@ -243,17 +301,12 @@ impl GpuGarbageCollector {
                 live.name()
             )));
         }
-        let counters = self.ctx.create_buffer(
-            "hash gc counters",
-            std::mem::size_of::<GcCounters>() as u64,
-            MemLocation::GpuOnly,
-        )?;
+        let counters = &self.counters;
         let push = table.push_constants(counters.address(), live.address(), count);
         let buckets = table.config().buckets;
-        let mut cmd = self.ctx.begin_commands("hash gc")?;
-        cmd.fill_buffer(&counters, 0);
+        cmd.fill_buffer(counters, 0);
         if let Some(p) = profiler.as_deref_mut() {
-            p.begin_pass(&mut cmd, "hash gc mark");
+            p.begin_pass(cmd, "hash gc mark");
         }
         let mark_groups = count.div_ceil(self.workgroup).min(MAX_WORKGROUPS);
         cmd.dispatch(
@@ -263,11 +316,11 @@ impl GpuGarbageCollector {
             None,
         )?;
         if let Some(p) = profiler.as_deref_mut() {
-            p.end_pass(&mut cmd);
+            p.end_pass(cmd);
         }
         cmd.barrier();
         if let Some(p) = profiler.as_deref_mut() {
-            p.begin_pass(&mut cmd, "hash gc sweep");
+            p.begin_pass(cmd, "hash gc sweep");
         }
         let sweep_groups = buckets
             .div_ceil(self.workgroup / self.team)
@@ -278,14 +331,20 @@ impl GpuGarbageCollector {
             bytemuck::bytes_of(&push),
             None,
         )?;
-        if let Some(p) = profiler.as_deref_mut() {
-            p.end_pass(&mut cmd);
-        }
-        cmd.submit()?;
         if let Some(p) = profiler {
-            p.resolve()?;
+            p.end_pass(cmd);
         }
-        let status = table.pool().read_status()?;
+        cmd.barrier();
+        Ok(PendingGc {
+            counters: cmd.readback::<GcCounters>(counters, 0, 1)?,
+            status: cmd.readback::<HashStatus>(table.pool().status_buffer(), 0, 1)?,
+        })
+    }
+
+    /// Reads a recorded collection's results once its submission was made (waits if needed).
+    pub fn finish_collect(&self, pending: PendingGc) -> Result<GcReport, HashError> {
+        let status = pending.status.read()?[0];
+
         if status.subgroup_mismatch != 0 {
             return Err(HashError::SubgroupMismatch {
                 expected: self.team,
@@ -297,7 +356,7 @@ impl GpuGarbageCollector {
                 walks: status.broken_chains,
             });
         }
-        let c: Vec<GcCounters> = self.ctx.download(&counters)?;
+        let c = pending.counters.read()?;
         Ok(GcReport {
             bad_handles: c[0].bad_handles,
             freed_items: c[0].freed_items,

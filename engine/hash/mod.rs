@@ -22,7 +22,7 @@ pub mod table;
 pub use alloc::{PoolOccupancy, SlabPool};
 pub use layout::{Handle, HashStatus, HashVariant, SlabLayout, HANDLE_INVALID, HANDLE_MISS};
 pub use reference::{ReferenceTable, TableImage, WalkReport};
-pub use table::{GpuHashTable, HashTableConfig, InsertReport, TeamMode};
+pub use table::{GpuHashTable, HashTableConfig, InsertReport, PendingInsert, TeamMode};
 
 use crate::gpu::GpuError;
 

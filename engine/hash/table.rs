@@ -2,12 +2,16 @@
 //!
 //! Passes (each one dispatch, `shaders/glsl/hash/*.comp`): `search` (items -> handles or
 //! [`HANDLE_MISS`]), `insert` (places every item whose handle is still `HANDLE_MISS`), `read`
-//! (handles -> items). `insert` of a batch = fill the handles with `HANDLE_MISS`, then insert
-//! rounds; `find_or_insert` = search, then insert rounds over the misses (no compaction: items
-//! already found are skipped by their handle). After each insert round the host reads the status
-//! block; items left out for lack of a slab are counted there, the pool grows and the round
-//! repeats for them only. Data stays on the GPU; the `&[u32]` helpers upload and read back.
+//! (handles -> items). Each has a recorded form (`record_*`) that records into a caller's
+//! [`Commands`]; the `*_buffers` and host-slice calls are wrappers that record everything (the
+//! upload, the passes, the status and the result readbacks through the staging rings) into one
+//! submission and wait once. `find_or_insert` = search, then an insert round over the misses (no
+//! compaction: items already found are skipped by their handle), after a conservative pool
+//! reservation; the status block is read back before and after the round in the same
+//! submission. Only if a round reports items left out for lack of a slab does
+//! [`GpuHashTable::finish_insert`] grow the pool and run another round for them.
 
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::Arc;
 
 use super::alloc::SlabPool;
@@ -18,8 +22,8 @@ use super::layout::{
 use super::reference::TableImage;
 use super::HashError;
 use crate::gpu::{
-    shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, GpuContext, MemLocation,
-    Profiler,
+    shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, DeviceType, GpuContext,
+    MemLocation, Profiler, Readback,
 };
 
 /// How a table is built.
@@ -96,10 +100,20 @@ pub struct GpuHashTable {
     workgroup: u32,
     subgroup: u32,
     team: u32,
-    /// Status read before and after each insert round (counters are cumulative).
+    /// Status after the last insert round this table read (counters are cumulative); its
+    /// `allocated_slabs` only over-estimates (GC frees), which keeps [`GpuHashTable::reserve`]
+    /// conservative.
     status: HashStatus,
     /// Seed of the next pass's random block choice.
-    pass_seed: u32,
+    pass_seed: AtomicU32,
+}
+
+/// An insert recorded by [`GpuHashTable::record_insert`]: the status block before and after its
+/// insert round, read by [`GpuHashTable::finish_insert`] once the submission has completed.
+#[derive(Debug)]
+pub struct PendingInsert {
+    before: Readback<HashStatus>,
+    after: Readback<HashStatus>,
 }
 
 impl GpuHashTable {
@@ -130,7 +144,7 @@ impl GpuHashTable {
         }
         let workgroup = subgroup.max(64);
         let single_lane = match config.team {
-            TeamMode::Auto => ctx.info().device_type == "cpu",
+            TeamMode::Auto => ctx.info().device_type == DeviceType::Cpu,
             TeamMode::Subgroup => false,
             TeamMode::SingleLane => true,
         };
@@ -161,7 +175,8 @@ impl GpuHashTable {
         )?;
         let mut cmd = ctx.begin_commands("hash heads init")?;
         cmd.fill_buffer(&heads, 0);
-        cmd.submit()?;
+        // No wait: later submissions on the queue are ordered after it.
+        cmd.submit_async()?;
         let pool = SlabPool::new(ctx, layout, config.initial_super_blocks)?;
         Ok(GpuHashTable {
             ctx: Arc::clone(ctx),
@@ -176,7 +191,7 @@ impl GpuHashTable {
             subgroup,
             team,
             status: HashStatus::default(),
-            pass_seed: 0x2545_f491,
+            pass_seed: AtomicU32::new(0x2545_f491),
         })
     }
 
@@ -233,7 +248,7 @@ impl GpuHashTable {
             count,
             buckets: self.config.buckets,
             blocks: self.pool.block_count(),
-            seed: self.pass_seed,
+            seed: self.pass_seed.load(Ordering::Relaxed),
         }
     }
 
@@ -294,8 +309,165 @@ impl GpuHashTable {
         Ok(())
     }
 
+    /// Records a search pass into `cmd`: `handles[i]` = handle of `items[i]` or
+    /// [`HANDLE_MISS`] (profiled as "hash search"). `items` holds `count * item_words` words,
+    /// `handles` `count` words. Errors the pass reports land in the status block
+    /// ([`GpuHashTable::record_status`]).
+    pub fn record_search<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        items: &'a Buffer,
+        handles: &'a Buffer,
+        count: u32,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<(), HashError> {
+        if count == 0 {
+            return Ok(());
+        }
+        Self::check_count(items, count, self.config.item_words, "items")?;
+        Self::check_count(handles, count, 1, "handles")?;
+        let push = self.push_constants(items.address(), handles.address(), count);
+        let groups = self.cooperative_groups(count);
+        self.record(
+            cmd,
+            &mut profiler,
+            "hash search",
+            &self.search,
+            groups,
+            &push,
+        )?;
+        cmd.barrier();
+        Ok(())
+    }
+
+    /// Records a readback of the status block (through the readback ring).
+    pub fn record_status<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+    ) -> Result<Readback<HashStatus>, HashError> {
+        Ok(cmd.readback::<HashStatus>(self.pool.status_buffer(), 0, 1)?)
+    }
+
+    /// Records one insert round into `cmd`: places every item whose handle is still
+    /// [`HANDLE_MISS`] (profiled as "hash insert"), with status readbacks before and after.
+    /// Items left out for lack of a slab show in the status; [`GpuHashTable::finish_insert`]
+    /// grows the pool and runs further rounds for them.
+    pub fn record_insert_round<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        items: &'a Buffer,
+        handles: &'a Buffer,
+        count: u32,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<PendingInsert, HashError> {
+        Self::check_count(items, count, self.config.item_words, "items")?;
+        Self::check_count(handles, count, 1, "handles")?;
+        let before = self.record_status(cmd)?;
+        let seed = super::layout::fmix32(
+            self.pass_seed
+                .load(Ordering::Relaxed)
+                .wrapping_add(0x9e37_79b9),
+        );
+        self.pass_seed.store(seed, Ordering::Relaxed);
+        let push = self.push_constants(items.address(), handles.address(), count);
+        let groups = self.cooperative_groups(count);
+        self.record(
+            cmd,
+            &mut profiler,
+            "hash insert",
+            &self.insert,
+            groups,
+            &push,
+        )?;
+        cmd.barrier();
+        let after = self.record_status(cmd)?;
+        Ok(PendingInsert { before, after })
+    }
+
+    /// Records an insert (`search_first == false`: the items are known to be absent; the
+    /// handles are first filled with [`HANDLE_MISS`]) or a find-or-insert (`search_first`: a
+    /// search pass, then an insert round over the misses) into `cmd`. Call
+    /// [`GpuHashTable::reserve`]`(count)` before (it may grow the pool); after the submission,
+    /// [`GpuHashTable::finish_insert`] reads the status and re-runs the round for items a full
+    /// pool left out (rare with the reservation).
+    pub fn record_insert<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        items: &'a Buffer,
+        handles: &'a Buffer,
+        count: u32,
+        search_first: bool,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<PendingInsert, HashError> {
+        Self::check_count(handles, count, 1, "handles")?;
+        if search_first {
+            self.record_search(cmd, items, handles, count, profiler.as_deref_mut())?;
+        } else {
+            cmd.fill_buffer(handles, HANDLE_MISS);
+        }
+        self.record_insert_round(cmd, items, handles, count, profiler)
+    }
+
+    /// Completes a recorded insert once its submission was made: reads the status before and
+    /// after its round (waiting for the GPU if needed), reports pass errors, and while items
+    /// were left out for lack of a slab grows the pool and runs another round (its own
+    /// submission) for them, up to `max_insert_rounds`.
+    pub fn finish_insert(
+        &mut self,
+        pending: PendingInsert,
+        items: &Buffer,
+        handles: &Buffer,
+        count: u32,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<InsertReport, HashError> {
+        let PendingInsert { before, after } = pending;
+        let first = before.read()?[0];
+        let mut first_after = Some(after);
+        let mut report = InsertReport::default();
+        loop {
+            report.rounds += 1;
+            let (last, after) = match first_after.take() {
+                Some(after) => (first, after),
+                None => {
+                    let mut cmd = self.ctx.begin_commands("hash insert round")?;
+                    let p = self.record_insert_round(
+                        &mut cmd,
+                        items,
+                        handles,
+                        count,
+                        profiler.as_deref_mut(),
+                    )?;
+                    cmd.submit_async()?;
+                    (p.before.read()?[0], p.after)
+                }
+            };
+            self.status = after.read()?[0];
+            Self::status_ok(&self.status, self.subgroup)?;
+            let left = self.status.exhausted.wrapping_sub(last.exhausted);
+            if left == 0 {
+                break;
+            }
+            report.retried_items += left;
+            let room = MAX_SUPER_BLOCKS - self.pool.super_block_count();
+            if report.rounds >= self.config.max_insert_rounds || room == 0 {
+                return Err(HashError::Exhausted {
+                    items: left,
+                    super_blocks: self.pool.super_block_count(),
+                });
+            }
+            // Grow for the left-over items, at least one super block.
+            let slabs = self.status.allocated_slabs as u64
+                + left as u64 / SLAB_SLOTS as u64
+                + left.min(self.config.buckets) as u64;
+            self.grow_for(slabs, true)?;
+        }
+        report.invalid_items = self.status.invalid_items.wrapping_sub(first.invalid_items);
+        report.super_blocks = self.pool.super_block_count();
+        Ok(report)
+    }
+
     /// Search pass: `handles[i]` = handle of `items[i]` or [`HANDLE_MISS`] (profiled as
-    /// "hash search"). `items` holds `count * item_words` words, `handles` `count` words.
+    /// "hash search"). One submission, one host wait (for the status check).
     pub fn search_buffers(
         &self,
         items: &Buffer,
@@ -306,28 +478,20 @@ impl GpuHashTable {
         if count == 0 {
             return Ok(());
         }
-        Self::check_count(items, count, self.config.item_words, "items")?;
-        Self::check_count(handles, count, 1, "handles")?;
-        let push = self.push_constants(items.address(), handles.address(), count);
         let mut cmd = self.ctx.begin_commands("hash search")?;
-        let groups = self.cooperative_groups(count);
-        self.record(
-            &mut cmd,
-            &mut profiler,
-            "hash search",
-            &self.search,
-            groups,
-            &push,
-        )?;
-        cmd.submit()?;
+        self.record_search(&mut cmd, items, handles, count, profiler.as_deref_mut())?;
+        let status = self.record_status(&mut cmd)?;
+        cmd.submit_async()?;
+        let status = status.read()?[0];
         if let Some(p) = profiler {
             p.resolve()?;
         }
-        self.check_status()
+        Self::status_ok(&status, self.subgroup)
     }
 
     /// Insert of items known to be absent: fills `handles` with [`HANDLE_MISS`] and runs insert
     /// rounds (profiled as "hash insert"). Duplicates inside the batch each get their own slot.
+    /// One submission and one host wait unless the pool runs out.
     pub fn insert_buffers(
         &mut self,
         items: &Buffer,
@@ -335,31 +499,83 @@ impl GpuHashTable {
         count: u32,
         profiler: Option<&mut Profiler>,
     ) -> Result<InsertReport, HashError> {
-        if count == 0 {
-            return Ok(self.empty_report());
-        }
-        Self::check_count(handles, count, 1, "handles")?;
-        let mut cmd = self.ctx.begin_commands("hash insert reset")?;
-        cmd.fill_buffer(handles, HANDLE_MISS);
-        cmd.submit()?;
-        self.insert_rounds(items, handles, count, profiler)
+        self.insert_flow(items, handles, count, None, false, profiler)
+            .map(|r| r.0)
     }
 
     /// Find-or-insert: a search pass, then insert rounds for the misses. Every item ends with a
     /// handle; an item present twice in the batch but absent from the table is inserted twice
-    /// (each copy its own slot): deduplicate the batch first when that matters.
+    /// (each copy its own slot): deduplicate the batch first when that matters. One submission
+    /// and one host wait unless the pool runs out.
     pub fn find_or_insert_buffers(
         &mut self,
         items: &Buffer,
         handles: &Buffer,
         count: u32,
-        mut profiler: Option<&mut Profiler>,
+        profiler: Option<&mut Profiler>,
     ) -> Result<InsertReport, HashError> {
+        self.insert_flow(items, handles, count, None, true, profiler)
+            .map(|r| r.0)
+    }
+
+    /// Reserve, record (optionally the items' upload first and the handles' readback last),
+    /// submit, finish. Returns the report and the handles when `upload` was given.
+    fn insert_flow(
+        &mut self,
+        items: &Buffer,
+        handles: &Buffer,
+        count: u32,
+        upload: Option<&[u32]>,
+        search_first: bool,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<(InsertReport, Option<Vec<u32>>), HashError> {
         if count == 0 {
-            return Ok(self.empty_report());
+            return Ok((self.empty_report(), upload.map(|_| Vec::new())));
         }
-        self.search_buffers(items, handles, count, profiler.as_deref_mut())?;
-        self.insert_rounds(items, handles, count, profiler)
+        Self::check_count(items, count, self.config.item_words, "items")?;
+        Self::check_count(handles, count, 1, "handles")?;
+        if self.config.grow_before_insert {
+            // Every item may be new (find-or-insert cannot tell without a readback).
+            self.reserve(count)?;
+        }
+        let name = if search_first {
+            "hash find-or-insert"
+        } else {
+            "hash insert"
+        };
+        let (pending, handles_back) = {
+            let mut cmd = self.ctx.begin_commands(name)?;
+            if let Some(data) = upload {
+                cmd.upload(items, 0, data)?;
+            }
+            let pending = self.record_insert(
+                &mut cmd,
+                items,
+                handles,
+                count,
+                search_first,
+                profiler.as_deref_mut(),
+            )?;
+            let back = match upload {
+                Some(_) => Some(cmd.readback::<u32>(handles, 0, count as usize)?),
+                None => None,
+            };
+            cmd.submit_async()?;
+            (pending, back)
+        };
+        let report = self.finish_insert(pending, items, handles, count, profiler.as_deref_mut())?;
+        if let Some(p) = profiler {
+            p.resolve()?;
+        }
+        let out = match handles_back {
+            // Later rounds changed handles after the readback: read them again.
+            Some(_) if report.rounds > 1 => {
+                Some(self.ctx.read_buffer(handles, 0, count as usize)?)
+            }
+            Some(back) => Some(back.read()?),
+            None => None,
+        };
+        Ok((report, out))
     }
 
     fn empty_report(&self) -> InsertReport {
@@ -392,72 +608,6 @@ impl GpuHashTable {
         Ok(())
     }
 
-    fn insert_rounds(
-        &mut self,
-        items: &Buffer,
-        handles: &Buffer,
-        count: u32,
-        mut profiler: Option<&mut Profiler>,
-    ) -> Result<InsertReport, HashError> {
-        Self::check_count(items, count, self.config.item_words, "items")?;
-        Self::check_count(handles, count, 1, "handles")?;
-        // Fresh counters: other passes on this pool (garbage collection) change them.
-        self.status = self.pool.read_status()?;
-        if self.config.grow_before_insert {
-            // Every item may be new (find-or-insert cannot tell without a readback).
-            self.reserve(count)?;
-        }
-        let before = self.status;
-        let mut report = InsertReport::default();
-        loop {
-            report.rounds += 1;
-            self.pass_seed = super::layout::fmix32(self.pass_seed.wrapping_add(0x9e37_79b9));
-            let push = self.push_constants(items.address(), handles.address(), count);
-            let mut cmd = self.ctx.begin_commands("hash insert")?;
-            let groups = self.cooperative_groups(count);
-            self.record(
-                &mut cmd,
-                &mut profiler,
-                "hash insert",
-                &self.insert,
-                groups,
-                &push,
-            )?;
-            cmd.submit()?;
-            if let Some(p) = profiler.as_deref_mut() {
-                p.resolve()?;
-            }
-            let last = self.status;
-            self.status = self.pool.read_status()?;
-            Self::status_ok(&self.status, self.subgroup)?;
-            let left = self.status.exhausted.wrapping_sub(last.exhausted);
-            if left == 0 {
-                break;
-            }
-            report.retried_items += left;
-            let room = MAX_SUPER_BLOCKS - self.pool.super_block_count();
-            if report.rounds >= self.config.max_insert_rounds || room == 0 {
-                return Err(HashError::Exhausted {
-                    items: left,
-                    super_blocks: self.pool.super_block_count(),
-                });
-            }
-            // Grow for the left-over items, at least one super block.
-            let slabs = self.status.allocated_slabs as u64
-                + left as u64 / SLAB_SLOTS as u64
-                + left.min(self.config.buckets) as u64;
-            self.grow_for(slabs, true)?;
-        }
-        report.invalid_items = self.status.invalid_items.wrapping_sub(before.invalid_items);
-        report.super_blocks = self.pool.super_block_count();
-        Ok(report)
-    }
-
-    fn check_status(&self) -> Result<(), HashError> {
-        let status = self.pool.read_status()?;
-        Self::status_ok(&status, self.subgroup)
-    }
-
     /// The errors a pass leaves in the status block: a subgroup size other than the one the
     /// pipelines were specialised for, or chain walks cut off (a corrupt table).
     fn status_ok(status: &HashStatus, expected: u32) -> Result<(), HashError> {
@@ -475,12 +625,14 @@ impl GpuHashTable {
         Ok(())
     }
 
-    /// Read pass: `out[i * item_words ..]` = the item of `handles[i]` (zeros for
-    /// [`HANDLE_MISS`], [`HANDLE_INVALID`] and handles beyond the pool). Profiled as "hash read".
-    pub fn read_items_buffers(
-        &self,
-        handles: &Buffer,
-        out: &Buffer,
+    /// Records a read pass into `cmd`: `out[i * item_words ..]` = the item of `handles[i]`
+    /// (zeros for [`HANDLE_MISS`], [`HANDLE_INVALID`] and handles beyond the pool). Profiled as
+    /// "hash read".
+    pub fn record_read_items<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        handles: &'a Buffer,
+        out: &'a Buffer,
         count: u32,
         mut profiler: Option<&mut Profiler>,
     ) -> Result<(), HashError> {
@@ -493,15 +645,24 @@ impl GpuHashTable {
         let groups = count
             .div_ceil(self.workgroup)
             .clamp(1, self.ctx.info().max_compute_workgroup_count[0]);
+        self.record(cmd, &mut profiler, "hash read", &self.read, groups, &push)?;
+        cmd.barrier();
+        Ok(())
+    }
+
+    /// Read pass ([`GpuHashTable::record_read_items`]) in its own submission, waited for.
+    pub fn read_items_buffers(
+        &self,
+        handles: &Buffer,
+        out: &Buffer,
+        count: u32,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<(), HashError> {
+        if count == 0 {
+            return Ok(());
+        }
         let mut cmd = self.ctx.begin_commands("hash read")?;
-        self.record(
-            &mut cmd,
-            &mut profiler,
-            "hash read",
-            &self.read,
-            groups,
-            &push,
-        )?;
+        self.record_read_items(&mut cmd, handles, out, count, profiler.as_deref_mut())?;
         cmd.submit()?;
         if let Some(p) = profiler {
             p.resolve()?;
@@ -532,28 +693,49 @@ impl GpuHashTable {
         Ok(count)
     }
 
-    fn upload_batch(&self, items: &[u32]) -> Result<(u32, Buffer, Buffer), HashError> {
-        let count = self.validate_items(items)?;
-        let items = self.ctx.upload("hash items", items)?;
+    /// Buffers for a host batch: items (not uploaded yet) and handles.
+    fn batch_buffers(&self, count: u32) -> Result<(Buffer, Buffer), HashError> {
+        let items = self.ctx.create_buffer(
+            "hash items",
+            4 * count as u64 * self.config.item_words as u64,
+            MemLocation::GpuOnly,
+        )?;
         let handles =
             self.ctx
                 .create_buffer("hash handles", 4 * count as u64, MemLocation::GpuOnly)?;
-        Ok((count, items, handles))
+        Ok((items, handles))
     }
 
-    /// Searches host items (`item_words` words each); `None` = absent.
+    /// Searches host items (`item_words` words each); `None` = absent. Upload, search, status
+    /// and handles readback in one submission, one host wait.
     pub fn search(
         &self,
         items: &[u32],
-        profiler: Option<&mut Profiler>,
+        mut profiler: Option<&mut Profiler>,
     ) -> Result<Vec<Option<Handle>>, HashError> {
         if items.is_empty() {
             return Ok(Vec::new());
         }
-        let (count, items, handles) = self.upload_batch(items)?;
-        self.search_buffers(&items, &handles, count, profiler)?;
-        let raw: Vec<u32> = self.ctx.download(&handles)?;
-        Ok(raw.into_iter().map(Handle::from_raw).collect())
+        let count = self.validate_items(items)?;
+        let (item_buf, handles) = self.batch_buffers(count)?;
+        let mut cmd = self.ctx.begin_commands("hash search")?;
+        cmd.upload(&item_buf, 0, items)?;
+        self.record_search(
+            &mut cmd,
+            &item_buf,
+            &handles,
+            count,
+            profiler.as_deref_mut(),
+        )?;
+        let status = self.record_status(&mut cmd)?;
+        let back = cmd.readback::<u32>(&handles, 0, count as usize)?;
+        cmd.submit_async()?;
+        let status = status.read()?[0];
+        if let Some(p) = profiler {
+            p.resolve()?;
+        }
+        Self::status_ok(&status, self.subgroup)?;
+        Ok(back.read()?.into_iter().map(Handle::from_raw).collect())
     }
 
     /// Inserts host items known to be absent; returns their handles.
@@ -565,7 +747,8 @@ impl GpuHashTable {
         self.insert_host(items, profiler, false)
     }
 
-    /// Finds or inserts host items; returns their handles.
+    /// Finds or inserts host items; returns their handles. Upload, search, insert and handles
+    /// readback in one submission, one host wait (unless the pool runs out).
     pub fn find_or_insert(
         &mut self,
         items: &[u32],
@@ -583,14 +766,18 @@ impl GpuHashTable {
         if items.is_empty() {
             return Ok((Vec::new(), self.empty_report()));
         }
-        let (count, items, handles) = self.upload_batch(items)?;
-        let report = if search_first {
-            self.find_or_insert_buffers(&items, &handles, count, profiler)?
-        } else {
-            self.insert_buffers(&items, &handles, count, profiler)?
-        };
-        let raw: Vec<u32> = self.ctx.download(&handles)?;
+        let count = self.validate_items(items)?;
+        let (item_buf, handles) = self.batch_buffers(count)?;
+        let (report, raw) = self.insert_flow(
+            &item_buf,
+            &handles,
+            count,
+            Some(items),
+            search_first,
+            profiler,
+        )?;
         let handles = raw
+            .unwrap_or_default()
             .into_iter()
             .enumerate()
             .map(|(i, h)| {
@@ -609,7 +796,8 @@ impl GpuHashTable {
         Ok((handles, report))
     }
 
-    /// Dereferences handles on the GPU; returns `item_words` words per handle.
+    /// Dereferences handles on the GPU; returns `item_words` words per handle (one submission,
+    /// one host wait).
     pub fn read_items(&self, handles: &[Handle]) -> Result<Vec<u32>, HashError> {
         if handles.is_empty() {
             return Ok(Vec::new());
@@ -617,14 +805,19 @@ impl GpuHashTable {
         let count = u32::try_from(handles.len())
             .map_err(|_| HashError::InvalidArgument("more than 2^32 handles".into()))?;
         let raw: Vec<u32> = handles.iter().map(|h| h.0).collect();
-        let handle_buf = self.ctx.upload("hash read handles", &raw)?;
-        let out = self.ctx.create_buffer(
-            "hash read items",
-            4 * count as u64 * self.config.item_words as u64,
-            MemLocation::GpuOnly,
-        )?;
-        self.read_items_buffers(&handle_buf, &out, count, None)?;
-        Ok(self.ctx.download(&out)?)
+        let handle_buf =
+            self.ctx
+                .create_buffer("hash read handles", 4 * count as u64, MemLocation::GpuOnly)?;
+        let words = count as usize * self.config.item_words as usize;
+        let out =
+            self.ctx
+                .create_buffer("hash read items", 4 * words as u64, MemLocation::GpuOnly)?;
+        let mut cmd = self.ctx.begin_commands("hash read")?;
+        cmd.upload(&handle_buf, 0, &raw)?;
+        self.record_read_items(&mut cmd, &handle_buf, &out, count, None)?;
+        let back = cmd.readback::<u32>(&out, 0, words)?;
+        cmd.submit_async()?;
+        Ok(back.read()?)
     }
 
     /// Downloads the whole table (heads, every super block, status) for host-side checks.
