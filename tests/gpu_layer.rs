@@ -79,6 +79,7 @@ fn device_override_that_matches_nothing_lists_devices() {
     let options = GpuOptions {
         validation: false,
         device: Some("no such gpu 1234".into()),
+        display: None,
     };
     match GpuContext::new(&options) {
         Err(GpuError::DeviceNotFound { wanted, available }) => {

@@ -697,7 +697,7 @@ pub fn demo(args: &DemoArgs, quiet: bool) -> Result<()> {
 }
 
 /// Fails early, before any work, when the output's folder does not exist.
-fn check_output_dir(output: &Path) -> Result<()> {
+pub fn check_output_dir(output: &Path) -> Result<()> {
     let dir = output
         .parent()
         .filter(|p| !p.as_os_str().is_empty())

@@ -37,7 +37,7 @@ impl Lifecycle {
         }
     }
 
-    fn set(&self, state: CommandsState) {
+    pub(crate) fn set(&self, state: CommandsState) {
         let v = match state {
             CommandsState::Recording => 0,
             CommandsState::Finished => 1,
@@ -513,6 +513,83 @@ impl Drop for Commands<'_> {
         unsafe {
             if self.pending {
                 // Submitted but the wait failed (device lost?): make sure nothing runs any more.
+                let _queue = self.ctx.queue();
+                let _ = device.device_wait_idle();
+            }
+            device.destroy_fence(self.fence, None);
+            device.destroy_descriptor_pool(self.descriptor_pool, None);
+            device.destroy_command_pool(self.pool, None);
+        }
+    }
+}
+
+/// A command buffer ended by [`Commands::detach`], owned by a caller that submits it itself (the
+/// frame ring of `swapchain.rs`, with its own semaphores) and keeps it until its fence signals.
+pub(crate) struct DetachedCommands {
+    /// The ended command buffer.
+    pub(crate) raw: vk::CommandBuffer,
+    /// Signalled by the caller's submission.
+    pub(crate) fence: vk::Fence,
+    pool: vk::CommandPool,
+    descriptor_pool: vk::DescriptorPool,
+    lifecycle: Arc<Lifecycle>,
+    /// Submitted and not yet waited on.
+    pub(crate) pending: bool,
+    ctx: Arc<GpuContext>,
+}
+
+impl Commands<'_> {
+    /// Ends recording and hands the command buffer, its fence and pools to the caller, who submits
+    /// it (setting `pending`) and must keep every resource it references alive until
+    /// [`DetachedCommands::wait`] returned.
+    pub(crate) fn detach(mut self) -> Result<DetachedCommands, GpuError> {
+        // SAFETY: our command buffer, in the recording state.
+        unsafe { self.ctx.device.end_command_buffer(self.raw) }
+            .map_err(vk_err("vkEndCommandBuffer"))?;
+        let detached = DetachedCommands {
+            raw: std::mem::replace(&mut self.raw, vk::CommandBuffer::null()),
+            fence: std::mem::replace(&mut self.fence, vk::Fence::null()),
+            pool: std::mem::replace(&mut self.pool, vk::CommandPool::null()),
+            descriptor_pool: std::mem::replace(
+                &mut self.descriptor_pool,
+                vk::DescriptorPool::null(),
+            ),
+            // `self`'s Drop marks a fresh lifecycle abandoned, not the one the profiler watches.
+            lifecycle: std::mem::take(&mut self.lifecycle),
+            pending: false,
+            ctx: Arc::clone(&self.ctx),
+        };
+        Ok(detached)
+    }
+}
+
+impl DetachedCommands {
+    /// Waits for the submission's fence (if submitted) and marks its profiler passes finished.
+    pub(crate) fn wait(&mut self) -> Result<(), GpuError> {
+        if self.pending {
+            // SAFETY: the fence belongs to this device and was passed to a queue submission.
+            unsafe {
+                self.ctx
+                    .device
+                    .wait_for_fences(&[self.fence], true, u64::MAX)
+            }
+            .map_err(vk_err("vkWaitForFences"))?;
+            self.pending = false;
+            self.lifecycle.set(CommandsState::Finished);
+        }
+        Ok(())
+    }
+}
+
+impl Drop for DetachedCommands {
+    fn drop(&mut self) {
+        if self.lifecycle.get() != CommandsState::Finished {
+            self.lifecycle.set(CommandsState::Abandoned);
+        }
+        let device = &self.ctx.device;
+        // SAFETY: as for `Commands`: never submitted, waited on, or the device is idled first.
+        unsafe {
+            if self.pending {
                 let _queue = self.ctx.queue();
                 let _ = device.device_wait_idle();
             }

@@ -20,6 +20,9 @@ pub struct GpuOptions {
     /// Pick the first device whose name contains this (case-insensitive) substring
     /// (default: env `VOXDAG_DEVICE`).
     pub device: Option<String>,
+    /// Present to windows of this display (`voxdag view`): enables the surface instance extensions
+    /// it needs and `VK_KHR_swapchain`. `None` (the default) keeps the context headless.
+    pub display: Option<raw_window_handle::RawDisplayHandle>,
 }
 
 impl Default for GpuOptions {
@@ -32,7 +35,11 @@ impl Default for GpuOptions {
         let device = std::env::var("VOXDAG_DEVICE")
             .ok()
             .filter(|s| !s.trim().is_empty());
-        GpuOptions { validation, device }
+        GpuOptions {
+            validation,
+            device,
+            display: None,
+        }
     }
 }
 
@@ -121,7 +128,7 @@ unsafe extern "system" fn debug_callback(
 /// `Arc<GpuContext>` and destroys its own Vulkan objects on drop, so the context outlives them and
 /// its `Drop` (which waits for the device to be idle) runs last.
 pub struct GpuContext {
-    _entry: ash::Entry,
+    pub(crate) entry: ash::Entry,
     pub(crate) instance: ash::Instance,
     debug_instance: Option<ash::ext::debug_utils::Instance>,
     messenger: vk::DebugUtilsMessengerEXT,
@@ -134,6 +141,10 @@ pub struct GpuContext {
     allocator: ManuallyDrop<Mutex<Allocator>>,
     info: DeviceInfo,
     validation: bool,
+    /// Whether the surface and swapchain extensions are enabled ([`GpuOptions::display`]).
+    pub(crate) presentation: bool,
+    /// The chosen physical device (surface queries).
+    pub(crate) physical: vk::PhysicalDevice,
 }
 
 /// A physical device candidate during selection.
@@ -221,11 +232,17 @@ impl GpuContext {
         } else {
             Vec::new()
         };
-        let ext_ptrs: Vec<*const std::ffi::c_char> = if has_debug_utils {
+        let mut ext_ptrs: Vec<*const std::ffi::c_char> = if has_debug_utils {
             vec![ash::ext::debug_utils::NAME.as_ptr()]
         } else {
             Vec::new()
         };
+        if let Some(display) = options.display {
+            let surface_exts = ash_window::enumerate_required_extensions(display).map_err(|e| {
+                GpuError::Surface(format!("no Vulkan surface support for this display: {e:?}"))
+            })?;
+            ext_ptrs.extend_from_slice(surface_exts);
+        }
         let messenger_state = Box::<MessengerState>::default();
         let user_ptr = &*messenger_state as *const MessengerState as *mut c_void;
         let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
@@ -383,8 +400,15 @@ impl GpuContext {
         let queue_infos = [vk::DeviceQueueCreateInfo::default()
             .queue_family_index(queue_family)
             .queue_priorities(&priorities)];
+        let presentation = options.display.is_some();
+        let device_exts = if presentation {
+            vec![ash::khr::swapchain::NAME.as_ptr()]
+        } else {
+            Vec::new()
+        };
         let device_info = vk::DeviceCreateInfo::default()
             .queue_create_infos(&queue_infos)
+            .enabled_extension_names(&device_exts)
             .push_next(&mut features2);
         let device = instance
             .create_device(physical, &device_info, None)
@@ -464,7 +488,7 @@ impl GpuContext {
             .map(|_| ash::ext::debug_utils::Device::new(&instance, &device));
         guard.instance = None; // ownership moves into the context
         let ctx = GpuContext {
-            _entry: entry,
+            entry,
             instance,
             debug_instance,
             messenger,
@@ -476,6 +500,8 @@ impl GpuContext {
             allocator: ManuallyDrop::new(Mutex::new(allocator)),
             info,
             validation,
+            presentation,
+            physical,
         };
         ctx.set_name(queue, "main queue");
         Ok(Arc::new(ctx))

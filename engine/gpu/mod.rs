@@ -7,6 +7,8 @@
 //! - [`ComputePipeline`] from embedded SPIR-V ([`shaders`]) with specialization and push constants.
 //! - [`Commands`]: one-shot command buffers, submitted and waited on with a fence.
 //! - [`Profiler`]: timestamp queries per pass, CPU spans, a table and Chrome trace JSON.
+//! - [`Surface`] and [`Presenter`]: a window's surface, its swapchain, frames in flight, the blit
+//!   of a compute image to the screen and an egui overlay (`voxdag view`).
 //!
 //! Lifetime rule: every object holds an `Arc<GpuContext>` and destroys its Vulkan handles once,
 //! on drop; submissions wait for their fence, so nothing is in flight when a resource drops.
@@ -21,12 +23,16 @@ mod memory;
 mod pipeline;
 mod profiler;
 pub mod shaders;
+mod surface;
+mod swapchain;
 
 pub use commands::Commands;
 pub use context::{DeviceInfo, GpuContext, GpuOptions};
 pub use memory::{Buffer, Image, MemLocation};
 pub use pipeline::{ComputePipeline, ComputePipelineDesc};
 pub use profiler::{CpuSpan, PassTiming, Profiler};
+pub use surface::Surface;
+pub use swapchain::{FrameSlot, OverlayFrame, Presenter, PresenterOptions, PresenterStats};
 
 use std::path::PathBuf;
 
@@ -88,6 +94,10 @@ pub enum GpuError {
     /// An argument the GPU layer cannot use (sizes, push-constant length, ...).
     #[error("invalid argument: {0}")]
     InvalidArgument(String),
+    /// Creating or using a window surface or swapchain failed (no presentation support, surface
+    /// lost, ...).
+    #[error("presentation: {0}")]
+    Surface(String),
     /// Writing a file (e.g. a trace) failed.
     #[error("writing {path}: {source}")]
     Io {

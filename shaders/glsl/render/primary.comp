@@ -32,7 +32,7 @@ layout(push_constant, std430) uniform Push {
     uint64_t color_words;   // ChunkedColors::words (encoded colour chunks)
     uint64_t chunk_starts;  // ChunkedColors::chunk_starts (u64)
     uint64_t chunk_offsets; // ChunkedColors::chunk_offsets (u64)
-    uint64_t hits;          // one uint per pixel
+    uint64_t hits;          // one uint per pixel, or 0: no hit mask (the viewer)
     uint color_format;      // attr::ColorFormat id of every chunk
     uint chunk_count;       // chunks
 } push;
@@ -63,5 +63,7 @@ void main() {
     bool hit;
     vec4 color = shade_pixel(pixel, p, hit);
     imageStore(out_image, ivec2(pixel), color);
-    HitsRef(push.hits).h[pixel.y * p.width + pixel.x] = hit ? 1u : 0u;
+    if (push.hits != 0ul) {
+        HitsRef(push.hits).h[pixel.y * p.width + pixel.x] = hit ? 1u : 0u;
+    }
 }
