@@ -557,15 +557,18 @@ impl Presenter {
         // SAFETY: recording into the frame's command buffer; the swapchain image was acquired
         // for it, and its layout is set explicitly (UNDEFINED: its old contents are discarded).
         unsafe {
-            let source_ready = vk::ImageMemoryBarrier::default()
-                .src_access_mask(vk::AccessFlags::SHADER_WRITE)
-                .dst_access_mask(vk::AccessFlags::TRANSFER_READ)
-                .old_layout(vk::ImageLayout::GENERAL)
-                .new_layout(vk::ImageLayout::GENERAL)
-                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                .image(source.raw)
-                .subresource_range(color_range());
+            // Storage images live in GENERAL; the blit reads from TRANSFER_SRC_OPTIMAL.
+            let source_ready = layout_barrier(
+                source.raw,
+                (
+                    vk::ImageLayout::GENERAL,
+                    vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                ),
+                (
+                    vk::AccessFlags::SHADER_WRITE,
+                    vk::AccessFlags::TRANSFER_READ,
+                ),
+            );
             let target_ready = layout_barrier(
                 image,
                 (
@@ -609,7 +612,7 @@ impl Presenter {
             device.cmd_blit_image(
                 raw,
                 source.raw,
-                vk::ImageLayout::GENERAL,
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
                 image,
                 vk::ImageLayout::TRANSFER_DST_OPTIMAL,
                 &[blit],
@@ -618,6 +621,25 @@ impl Presenter {
                 } else {
                     vk::Filter::LINEAR
                 },
+            );
+            device.cmd_pipeline_barrier(
+                raw,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
+                &[layout_barrier(
+                    source.raw,
+                    (
+                        vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                        vk::ImageLayout::GENERAL,
+                    ),
+                    (
+                        vk::AccessFlags::TRANSFER_READ,
+                        vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE,
+                    ),
+                )],
             );
             let mut layout = vk::ImageLayout::TRANSFER_DST_OPTIMAL;
             let mut access = vk::AccessFlags::TRANSFER_WRITE;
