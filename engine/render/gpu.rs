@@ -285,6 +285,10 @@ impl GpuRenderer {
         match profiler {
             Some(p) => {
                 p.begin_pass(cmd, "primary rays");
+                // lavapipe resolves a timestamp at its next flush, and a barrier flushes: without
+                // it, once a render pass ran on the queue (the viewer), the begin timestamp is
+                // taken after the dispatch and the pass reads ~0 ms.
+                cmd.barrier();
                 let result = cmd.dispatch(
                     &self.primary,
                     groups,
