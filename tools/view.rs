@@ -115,6 +115,10 @@ struct ViewReport {
     cpu_ms_mean: f64,
     /// Median of the same.
     cpu_ms_median: f64,
+    /// On-CPU time of the frame loop's thread per frame (ms, `/proc/thread-self/schedstat`),
+    /// mean after the warm-up: unlike `cpu_ms_*`, not inflated when other threads (lavapipe's,
+    /// other processes) preempt it, but it includes driver work done inside submit and present.
+    thread_cpu_ms_mean: f64,
     /// Mean GPU time per pass (ms) after the warm-up.
     gpu_ms: Vec<(String, f64)>,
     /// Window size at exit.
@@ -144,7 +148,8 @@ impl ViewReport {
             .collect();
         format!(
             "view: {} frames, {:.1} fps ({:.2} ms/frame) at {}x{} (internal {}x{}, scale {:.2}), \
-             CPU frame loop {:.3} ms mean / {:.3} ms median, GPU {}, {} swapchain(s), {}",
+             CPU frame loop {:.3} ms mean / {:.3} ms median (on-CPU {:.3} ms), GPU {}, \
+             {} swapchain(s), {}",
             self.frames,
             self.fps,
             self.frame_ms_mean,
@@ -155,6 +160,7 @@ impl ViewReport {
             self.render_scale,
             self.cpu_ms_mean,
             self.cpu_ms_median,
+            self.thread_cpu_ms_mean,
             passes.join(", "),
             self.swapchain_creations,
             self.present_mode
@@ -261,6 +267,15 @@ impl CameraInput {
     }
 }
 
+/// Nanoseconds this thread has run on a CPU (first field of `/proc/thread-self/schedstat`; 0 where
+/// unavailable).
+fn thread_cpu_ns() -> u64 {
+    std::fs::read_to_string("/proc/thread-self/schedstat")
+        .ok()
+        .and_then(|s| s.split_whitespace().next()?.parse().ok())
+        .unwrap_or(0)
+}
+
 /// Rotates `v` by `yaw` around +y and raises its elevation by `pitch` (clamped short of the
 /// poles), keeping its length.
 fn rotate(v: Vec3, yaw: f32, pitch: f32) -> Vec3 {
@@ -298,8 +313,9 @@ struct Running {
     cpu_ms: f64,
     internal: [u32; 2],
     scale: f32,
-    /// Per presented frame: interval since the previous one (ms), CPU loop cost (ms).
-    samples: Vec<(f64, f64)>,
+    /// Per presented frame: interval since the previous one (ms), CPU loop cost (ms), on-CPU
+    /// time of the thread (ms).
+    samples: Vec<(f64, f64, f64)>,
     gpu_sums: Vec<(String, f64, usize)>,
     extents: Vec<([u32; 2], usize)>,
     frames: usize,
@@ -547,6 +563,7 @@ impl Running {
     /// One frame: wait for a slot, camera, overlay, record the render and present it.
     fn redraw(&mut self, args: &ViewArgs) -> Result<()> {
         let start = Instant::now();
+        let thread_start = thread_cpu_ns();
         let waited_before = self.presenter.stats().wait;
         let dt = self
             .last_frame
@@ -627,10 +644,11 @@ impl Running {
         let now = Instant::now();
         let waited = (self.presenter.stats().wait - waited_before).as_secs_f64() * 1e3;
         let cpu = ((now - start).as_secs_f64() * 1e3 - waited).max(0.0);
+        let on_cpu = thread_cpu_ns().saturating_sub(thread_start) as f64 * 1e-6;
         if let Some(prev) = self.last_frame {
             let interval = (now - prev).as_secs_f64() * 1e3;
             self.frame_ms = interval;
-            self.samples.push((interval, cpu));
+            self.samples.push((interval, cpu, on_cpu));
         }
         self.cpu_ms = cpu;
         self.last_frame = Some(now);
@@ -716,7 +734,7 @@ impl Running {
 
     /// The statistics of the run.
     fn report(&self) -> ViewReport {
-        let kept: Vec<(f64, f64)> = self.samples.iter().skip(WARMUP_FRAMES).copied().collect();
+        let kept: Vec<(f64, f64, f64)> = self.samples.iter().skip(WARMUP_FRAMES).copied().collect();
         let kept = if kept.is_empty() {
             self.samples.clone()
         } else {
@@ -737,6 +755,7 @@ impl Running {
             frame_ms_mean,
             cpu_ms_mean: cpu.iter().sum::<f64>() / n,
             cpu_ms_median: cpu.get(cpu.len() / 2).copied().unwrap_or(0.0),
+            thread_cpu_ms_mean: kept.iter().map(|s| s.2).sum::<f64>() / n,
             gpu_ms: self
                 .gpu_sums
                 .iter()
