@@ -864,7 +864,7 @@ pub fn demo(args: &DemoArgs, quiet: bool) -> Result<()> {
 
 /// Fails early, before any work, when an output cannot be written (missing or unwritable
 /// folder, a directory in its place).
-fn check_output(output: &Path) -> Result<()> {
+pub fn check_output(output: &Path) -> Result<()> {
     Ok(check_output_path(output)?)
 }
 

@@ -1,8 +1,13 @@
 #!/usr/bin/env bash
 # Installs the system packages voxdag needs on Debian 12 (idempotent; uses sudo when not root):
-# glslc (shader compiler), the Vulkan loader, lavapipe (Mesa software Vulkan) and the validation layers.
+# glslc (shader compiler), the Vulkan loader, lavapipe (Mesa software Vulkan) and the validation layers,
+# plus what `voxdag view` and its tests (tests/viewer.rs) need: a virtual X server (Xvfb, xauth), xdotool
+# to resize/close windows, and the libraries winit's X11 backend dlopens at run time (checked with
+# LD_DEBUG=files: libX11, libX11-xcb, libXcursor, libXi, libxkbcommon, libxkbcommon-x11; lavapipe's
+# X11 presentation needs the libxcb-* libraries that mesa-vulkan-drivers already depends on).
 set -euo pipefail
-packages=(glslc libvulkan1 mesa-vulkan-drivers vulkan-validationlayers)
+packages=(glslc libvulkan1 mesa-vulkan-drivers vulkan-validationlayers
+  xvfb xauth xdotool libx11-6 libx11-xcb1 libxcursor1 libxi6 libxkbcommon0 libxkbcommon-x11-0)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

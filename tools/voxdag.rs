@@ -3,6 +3,7 @@
 mod bench;
 mod commands;
 mod limited_alloc;
+mod view;
 
 use std::path::PathBuf;
 
@@ -36,6 +37,8 @@ enum Command {
     ExportVoxels(ExportArgs),
     /// Render a .vdag file to a PNG on the GPU (or the CPU reference renderer).
     Render(RenderArgs),
+    /// Open a window that renders a .vdag file every frame (orbit/fly camera, egui overlay).
+    View(ViewArgs),
     /// Run benchmarks and write JSON plus a Markdown table.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -205,6 +208,35 @@ pub struct RenderArgs {
     trace: Option<PathBuf>,
 }
 
+/// Arguments of `voxdag view`.
+#[derive(Args)]
+pub struct ViewArgs {
+    /// The .vdag file.
+    file: PathBuf,
+    /// Window size WIDTHxHEIGHT.
+    #[arg(long, default_value = "1280x720", value_parser = commands::parse_size)]
+    size: (u32, u32),
+    /// Internal resolution as a fraction of the window (0.1..=1); the overlay has a slider.
+    #[arg(long, default_value_t = 1.0)]
+    render_scale: f32,
+    /// Present without waiting for vertical blank (MAILBOX, else IMMEDIATE).
+    #[arg(long)]
+    no_vsync: bool,
+    /// Frames the CPU may record ahead of the GPU.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=4))]
+    frames_in_flight: u32,
+    /// Exit after this many frames.
+    #[arg(long)]
+    frames: Option<u32>,
+    /// Save the last frame (default camera, render scale 1, without the overlay) as a PNG; needs
+    /// --frames.
+    #[arg(long)]
+    screenshot: Option<PathBuf>,
+    /// Write frame rate, CPU frame-loop cost and GPU pass times as JSON at exit.
+    #[arg(long)]
+    stats_json: Option<PathBuf>,
+}
+
 /// Arguments of `voxdag demo`.
 #[derive(Args)]
 pub struct DemoArgs {
@@ -274,6 +306,7 @@ fn main() {
         Command::Verify(args) => commands::verify(&args),
         Command::ExportVoxels(args) => commands::export_voxels(&args),
         Command::Render(args) => commands::render(&args),
+        Command::View(args) => view::view(&args),
         Command::Bench(cmd) => bench::run(cmd, cli.quiet),
         Command::Demo(args) => commands::demo(&args, cli.quiet),
     };

@@ -58,6 +58,9 @@ pub struct GpuOptions {
     /// Test-only: treat these [`REQUIRED_FEATURES`] as missing on every device, to prove the
     /// refusal (default: env `VOXDAG_MASK_FEATURES`, comma-separated; normally empty).
     pub mask_features: Vec<String>,
+    /// Present to windows of this display (`voxdag view`): enables the surface instance extensions
+    /// it needs and `VK_KHR_swapchain`. `None` (the default) keeps the context headless.
+    pub display: Option<raw_window_handle::RawDisplayHandle>,
 }
 
 impl Default for GpuOptions {
@@ -87,6 +90,7 @@ impl Default for GpuOptions {
             device,
             sync_validation,
             mask_features,
+            display: None,
         }
     }
 }
@@ -247,7 +251,7 @@ unsafe extern "system" fn debug_callback(
 /// `Arc<GpuContext>` and destroys its own Vulkan objects on drop, so the context outlives them and
 /// its `Drop` (which waits for the device to be idle) runs last.
 pub struct GpuContext {
-    _entry: ash::Entry,
+    pub(crate) entry: ash::Entry,
     pub(crate) instance: ash::Instance,
     debug_instance: Option<ash::ext::debug_utils::Instance>,
     messenger: vk::DebugUtilsMessengerEXT,
@@ -260,6 +264,10 @@ pub struct GpuContext {
     allocator: ManuallyDrop<Mutex<Allocator>>,
     info: DeviceInfo,
     validation: bool,
+    /// Whether the surface and swapchain extensions are enabled ([`GpuOptions::display`]).
+    pub(crate) presentation: bool,
+    /// The chosen physical device (surface queries).
+    pub(crate) physical: vk::PhysicalDevice,
     /// The queue's timeline semaphore: submission `n` signals value `n`.
     timeline: vk::Semaphore,
     /// Value of the last submission (written with the queue locked).
@@ -381,6 +389,12 @@ impl GpuContext {
         let enabled_checks = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
         let mut validation_features =
             vk::ValidationFeaturesEXT::default().enabled_validation_features(&enabled_checks);
+        if let Some(display) = options.display {
+            let surface_exts = ash_window::enumerate_required_extensions(display).map_err(|e| {
+                GpuError::Surface(format!("no Vulkan surface support for this display: {e:?}"))
+            })?;
+            ext_ptrs.extend_from_slice(surface_exts);
+        }
         let messenger_state = Box::<MessengerState>::default();
         let user_ptr = &*messenger_state as *const MessengerState as *mut c_void;
         let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
@@ -546,8 +560,15 @@ impl GpuContext {
         let queue_infos = [vk::DeviceQueueCreateInfo::default()
             .queue_family_index(queue_family)
             .queue_priorities(&priorities)];
+        let presentation = options.display.is_some();
+        let device_exts = if presentation {
+            vec![ash::khr::swapchain::NAME.as_ptr()]
+        } else {
+            Vec::new()
+        };
         let device_info = vk::DeviceCreateInfo::default()
             .queue_create_infos(&queue_infos)
+            .enabled_extension_names(&device_exts)
             .push_next(&mut features2);
         let device = instance
             .create_device(physical, &device_info, None)
@@ -675,7 +696,7 @@ impl GpuContext {
         };
         guard.instance = None; // ownership moves into the context
         let ctx = GpuContext {
-            _entry: entry,
+            entry,
             instance,
             debug_instance,
             messenger,
@@ -697,6 +718,8 @@ impl GpuContext {
             submissions: AtomicU64::new(0),
             host_waits: AtomicU64::new(0),
             waited: AtomicU64::new(0),
+            presentation,
+            physical,
         };
         ctx.set_name(queue, "main queue");
         ctx.set_name(timeline, "main queue timeline");

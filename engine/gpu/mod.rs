@@ -11,6 +11,8 @@
 //!   its completion is a timeline value ([`Submission`]).
 //! - [`FrameRing`]: N frames in flight, each waiting only for its own slot's last submission.
 //! - [`Profiler`]: timestamp queries per pass, CPU spans, a table and Chrome trace JSON.
+//! - [`Surface`] and [`Presenter`]: a window's surface, its swapchain, frames in flight, the blit
+//!   of a compute image to the screen and an egui overlay (`voxdag view`).
 //!
 //! Lifetime rule: every object holds an `Arc<GpuContext>`; dropping it queues its Vulkan handles
 //! with the timeline value of the last submission, and the context destroys them once the GPU has
@@ -28,6 +30,8 @@ mod profiler;
 mod release;
 mod ring;
 pub mod shaders;
+mod surface;
+mod swapchain;
 /// Push constants of the test shaders (`shaders/glsl/test/`, `shaders::TEST_*`), for the
 /// GPU-layer tests.
 #[path = "gpu_shared.rs"]
@@ -39,6 +43,8 @@ pub use frame::{FrameRing, DEFAULT_FRAMES_IN_FLIGHT};
 pub use memory::{Buffer, Image, MemLocation};
 pub use pipeline::{ComputePipeline, ComputePipelineDesc};
 pub use profiler::{CpuSpan, PassTiming, Profiler};
+pub use surface::Surface;
+pub use swapchain::{FrameSlot, OverlayFrame, Presenter, PresenterOptions, PresenterStats};
 
 use std::path::PathBuf;
 
@@ -123,6 +129,10 @@ pub enum GpuError {
     /// An argument the GPU layer cannot use (sizes, push-constant length, ...).
     #[error("invalid argument: {0}")]
     InvalidArgument(String),
+    /// Creating or using a window surface or swapchain failed (no presentation support, surface
+    /// lost, ...).
+    #[error("presentation: {0}")]
+    Surface(String),
     /// Writing a file (e.g. a trace) failed.
     #[error("writing {path}: {source}")]
     Io {

@@ -3,6 +3,8 @@
 //! The shader runs the same traversal and shading as the CPU reference
 //! ([`super::cpu::render_cpu`]), built from the same [`RenderParams`]; one dispatch of 8x8
 //! workgroups writes an RGBA8 storage image and a per-pixel `u32` hit buffer, both read back.
+//! [`GpuRenderer::record`] records that pass into a caller's command buffer and image instead
+//! (frames in flight, the viewer); [`GpuRenderer::render`] is a blocking wrapper over it.
 //! Buffers are reached through device addresses passed as push constants, so the DAG may exceed
 //! `maxStorageBufferRange` (up to `maxMemoryAllocationSize` per buffer).
 
@@ -16,12 +18,18 @@ use super::{RenderOutput, RenderSettings};
 use crate::attr::ColorFormat;
 use crate::dag::{Svdag, VoxelIndex};
 use crate::gpu::{
-    shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, MemLocation,
-    Profiler,
+    shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, Image,
+    MemLocation, Profiler,
 };
 
 /// Workgroup size of `primary.comp` (specialization constants 0 and 1).
 const WORKGROUP: [u32; 2] = [8, 8];
+
+/// The host-visible frame constants of one frame slot, written by [`GpuRenderer::record`]
+/// through their mapping (no allocation per frame).
+pub struct RenderFrame {
+    params: Buffer,
+}
 
 /// Renders SVDAGs on the GPU; holds the compiled pipeline.
 pub struct GpuRenderer {
@@ -191,8 +199,101 @@ impl GpuRenderer {
         Ok(p)
     }
 
-    /// Renders one image: a single dispatch (profiled as "primary rays"), then readback of the
-    /// image and the hit buffer (CPU spans "readback image" / "readback hits").
+    /// A parameter block for [`GpuRenderer::record`] (one per frame in flight).
+    pub fn create_frame(&self) -> Result<RenderFrame, GpuError> {
+        let params = self.ctx.create_buffer(
+            "render params",
+            std::mem::size_of::<RenderParams>() as u64,
+            MemLocation::CpuToGpu,
+        )?;
+        Ok(RenderFrame { params })
+    }
+
+    /// Records the primary-ray pass (profiled as "primary rays") into `cmd`, writing the
+    /// `settings.width x settings.height` image (camera, light and shadows from `settings`) into
+    /// the top-left corner of `target`, and the hit mask into `hits` when given (one `u32` per
+    /// pixel, row-major). The frame constants go through `frame`'s mapping: nothing is allocated.
+    ///
+    /// `scene` and `frame` are read through device addresses: keep both alive, and do not record
+    /// with `frame` again, until the GPU has finished `cmd` (one [`RenderFrame`] per frame slot).
+    #[allow(clippy::too_many_arguments)]
+    pub fn record<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        scene: &GpuScene,
+        frame: &mut RenderFrame,
+        settings: &RenderSettings,
+        target: &'a Image,
+        hits: Option<&Buffer>,
+        profiler: Option<&mut Profiler>,
+    ) -> Result<(), GpuError> {
+        let (w, h) = (settings.width, settings.height);
+        if w > target.width() || h > target.height() {
+            return Err(GpuError::InvalidArgument(format!(
+                "render size {w}x{h} exceeds target '{}' ({}x{})",
+                target.name(),
+                target.width(),
+                target.height()
+            )));
+        }
+        if let Some(hits) = hits {
+            let need = w as u64 * h as u64 * 4;
+            if hits.size() < need {
+                return Err(GpuError::OutOfRange {
+                    name: hits.name().to_string(),
+                    offset: 0,
+                    len: need,
+                    size: hits.size(),
+                });
+            }
+        }
+        let params = self.params(scene, settings)?;
+        self.ctx
+            .write_mapped(&mut frame.params, 0, std::slice::from_ref(&params))?;
+        let push = PrimaryPush {
+            params: frame.params.address(),
+            words: scene.words.address(),
+            node_voxels: scene.node_voxels.address(),
+            color_words: scene.color_words.address(),
+            chunk_starts: scene.chunk_starts.address(),
+            chunk_offsets: scene.chunk_offsets.address(),
+            hits: hits.map_or(0, Buffer::address),
+            color_format: scene.color_format as u32,
+            chunk_count: scene.chunk_count,
+        };
+        let groups = [w.div_ceil(WORKGROUP[0]), h.div_ceil(WORKGROUP[1]), 1];
+        match profiler {
+            Some(p) => {
+                p.begin_pass(cmd, "primary rays");
+                // lavapipe resolves a timestamp at its next flush, and a barrier flushes: without
+                // it, once a render pass ran on the queue (the viewer), the begin timestamp is
+                // taken after the dispatch and the pass reads ~0 ms.
+                cmd.barrier();
+                let result = cmd.dispatch(
+                    &self.primary,
+                    groups,
+                    bytemuck::bytes_of(&push),
+                    Some(target),
+                );
+                p.end_pass(cmd);
+                result
+            }
+            None => {
+                cmd.begin_label("primary rays");
+                let result = cmd.dispatch(
+                    &self.primary,
+                    groups,
+                    bytemuck::bytes_of(&push),
+                    Some(target),
+                );
+                cmd.end_label();
+                result
+            }
+        }
+    }
+
+    /// Renders one image, blocking: [`GpuRenderer::record`] into a new image and hit buffer,
+    /// submit, then readback of both (CPU spans "readback image" / "readback hits").
     pub fn render(
         &self,
         scene: &GpuScene,
@@ -200,52 +301,29 @@ impl GpuRenderer {
         mut profiler: Option<&mut Profiler>,
     ) -> Result<RenderOutput, GpuError> {
         let ctx = &self.ctx;
-        let params = self.params(scene, settings)?;
         let (w, h) = (settings.width, settings.height);
         let pixels = w as u64 * h as u64;
 
-        let upload_start = Instant::now();
-        let mut params_buf = ctx.create_buffer(
-            "render params",
-            std::mem::size_of::<RenderParams>() as u64,
-            MemLocation::CpuToGpu,
-        )?;
-        ctx.write_mapped(&mut params_buf, 0, std::slice::from_ref(&params))?;
+        let setup_start = Instant::now();
+        // Validates the settings before anything is allocated.
+        self.params(scene, settings)?;
+        let mut frame = self.create_frame()?;
         let image = ctx.create_storage_image("render target", w, h)?;
         let hits = ctx.create_buffer("render hits", pixels * 4, MemLocation::GpuOnly)?;
         if let Some(p) = profiler.as_deref_mut() {
-            p.record_cpu_span("render setup", upload_start, Instant::now());
+            p.record_cpu_span("render setup", setup_start, Instant::now());
         }
 
-        let push = PrimaryPush {
-            params: params_buf.address(),
-            words: scene.words.address(),
-            node_voxels: scene.node_voxels.address(),
-            color_words: scene.color_words.address(),
-            chunk_starts: scene.chunk_starts.address(),
-            chunk_offsets: scene.chunk_offsets.address(),
-            hits: hits.address(),
-            color_format: scene.color_format as u32,
-            chunk_count: scene.chunk_count,
-        };
         let mut cmd = ctx.begin_commands("render")?;
-        if let Some(p) = profiler.as_deref_mut() {
-            p.begin_pass(&mut cmd, "primary rays");
-        } else {
-            cmd.begin_label("primary rays");
-        }
-        let groups = [w.div_ceil(WORKGROUP[0]), h.div_ceil(WORKGROUP[1]), 1];
-        cmd.dispatch(
-            &self.primary,
-            groups,
-            bytemuck::bytes_of(&push),
-            Some(&image),
+        self.record(
+            &mut cmd,
+            scene,
+            &mut frame,
+            settings,
+            &image,
+            Some(&hits),
+            profiler.as_deref_mut(),
         )?;
-        if let Some(p) = profiler.as_deref_mut() {
-            p.end_pass(&mut cmd);
-        } else {
-            cmd.end_label();
-        }
         cmd.submit()?;
         if let Some(p) = profiler.as_deref_mut() {
             p.resolve()?;

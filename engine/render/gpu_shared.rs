@@ -45,7 +45,7 @@ gpu_shared! {
         pub(crate) chunk_starts: uint64_t,
         /// Word offset of each colour chunk.
         pub(crate) chunk_offsets: uint64_t,
-        /// One hit flag per pixel.
+        /// One hit flag per pixel, or 0: no hit mask (the viewer).
         pub(crate) hits: uint64_t,
         /// `ColorFormat` id.
         pub(crate) color_format: uint,

@@ -53,5 +53,7 @@ void main() {
     bool hit;
     vec4 color = shade_pixel(pixel, p, hit);
     imageStore(out_image, ivec2(pixel), color);
-    HitsRef(push.hits).h[pixel.y * p.width + pixel.x] = hit ? 1u : 0u;
+    if (push.hits != 0ul) {
+        HitsRef(push.hits).h[pixel.y * p.width + pixel.x] = hit ? 1u : 0u;
+    }
 }

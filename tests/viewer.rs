@@ -1,0 +1,295 @@
+//! `voxdag view` in a real window on a virtual X server (Xvfb started by each test on a free
+//! display): the screenshot equals the headless render, a resize is survived, the window closes
+//! cleanly with validation on. Fails (never skips) without Xvfb/xdotool: run tools/setup.sh.
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use common::{compare, failure_dir, repo, save_png};
+
+/// A private Xvfb server, killed on drop.
+struct Xvfb {
+    child: Child,
+    display: String,
+}
+
+impl Xvfb {
+    /// Starts `Xvfb -displayfd 1`: the server picks a free display number and prints it once it
+    /// accepts connections.
+    fn start() -> Xvfb {
+        let mut child = Command::new("Xvfb")
+            .args([
+                "-displayfd",
+                "1",
+                "-screen",
+                "0",
+                "1024x768x24",
+                "-nolisten",
+                "tcp",
+            ])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap_or_else(|e| {
+                panic!("cannot start Xvfb ({e}): run tools/setup.sh (installs xvfb and xdotool)")
+            });
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().expect("piped"))
+            .read_line(&mut line)
+            .expect("reading Xvfb's display number");
+        let number: u32 = line
+            .trim()
+            .parse()
+            .unwrap_or_else(|_| panic!("Xvfb printed {line:?} instead of a display number"));
+        Xvfb {
+            child,
+            display: format!(":{number}"),
+        }
+    }
+}
+
+impl Drop for Xvfb {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// The CLI with validation on, pinned to no display unless given one.
+fn voxdag(display: Option<&str>) -> Command {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_voxdag"));
+    cmd.env("VOXDAG_VALIDATION", "1")
+        .env_remove("WAYLAND_DISPLAY");
+    match display {
+        Some(d) => cmd.env("DISPLAY", d),
+        None => cmd.env_remove("DISPLAY"),
+    };
+    cmd
+}
+
+fn run(mut cmd: Command) -> Output {
+    let out = cmd.output().expect("running voxdag");
+    assert!(
+        out.status.success(),
+        "{cmd:?} failed ({}):\n{}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// A small coloured scene: the bundled avocado at 128^3 (lossless colour chunks).
+fn scene(dir: &Path) -> PathBuf {
+    let path = dir.join("avocado.vdag");
+    let mut cmd = voxdag(None);
+    cmd.args(["build", "--quiet", "--resolution", "128", "-o"])
+        .arg(&path)
+        .arg(repo().join("assets/avocado/Avocado.gltf"));
+    run(cmd);
+    path
+}
+
+fn read_png(path: &Path) -> image::RgbaImage {
+    image::open(path)
+        .unwrap_or_else(|e| panic!("reading {}: {e}", path.display()))
+        .to_rgba8()
+}
+
+#[test]
+fn screenshot_equals_headless_render() {
+    let dir = tempfile::tempdir().unwrap();
+    let vdag = scene(dir.path());
+    let x = Xvfb::start();
+    let shot = dir.path().join("shot.png");
+    let mut view = voxdag(Some(&x.display));
+    view.arg("view")
+        .arg(&vdag)
+        .args(["--size", "200x150", "--frames", "4", "--screenshot"])
+        .arg(&shot);
+    run(view);
+    let headless = dir.path().join("headless.png");
+    let mut render = voxdag(None);
+    render
+        .arg("render")
+        .arg(&vdag)
+        .args(["--size", "200x150", "--out"])
+        .arg(&headless);
+    run(render);
+    let (a, b) = (read_png(&shot), read_png(&headless));
+    assert_eq!(a.dimensions(), b.dimensions(), "screenshot size");
+    // Golden tolerance (tests/render_gpu.rs): at most 0.5% of pixels off by more than 8/255.
+    let diff = compare(b.as_raw(), a.as_raw(), 8);
+    let allowed = (0.005 * (a.width() * a.height()) as f64) as usize;
+    if diff.differing > allowed {
+        let out = failure_dir();
+        save_png(
+            &out.join("viewer.actual.png"),
+            a.width(),
+            a.height(),
+            a.as_raw(),
+        );
+        save_png(
+            &out.join("viewer.diff.png"),
+            a.width(),
+            a.height(),
+            &diff.diff_rgba,
+        );
+        panic!(
+            "screenshot differs from the headless render in {} pixels (allowed {allowed}, max \
+             delta {}); wrote viewer.actual.png and viewer.diff.png under {}",
+            diff.differing,
+            diff.max_delta,
+            out.display()
+        );
+    }
+}
+
+/// Runs `xdotool ARGS`, returning its stdout.
+fn xdotool(display: &str, args: &[&str]) -> String {
+    let out = Command::new("xdotool")
+        .args(args)
+        .env("DISPLAY", display)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run xdotool ({e}): run tools/setup.sh"));
+    assert!(
+        out.status.success(),
+        "xdotool {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// Waits (up to 60 s) for the viewer's window and returns its id.
+fn find_window(display: &str, viewer: &mut Child) -> String {
+    let start = Instant::now();
+    loop {
+        let out = Command::new("xdotool")
+            .args(["search", "--name", "voxdag view"])
+            .env("DISPLAY", display)
+            .output()
+            .expect("running xdotool: run tools/setup.sh");
+        if let Some(id) = String::from_utf8_lossy(&out.stdout).lines().next() {
+            return id.trim().to_string();
+        }
+        if let Some(status) = viewer.try_wait().unwrap() {
+            panic!("the viewer exited ({status}) before its window appeared");
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "no viewer window after 60 s"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// Waits (up to 60 s) for the viewer to exit.
+fn wait_exit(viewer: Child) -> Output {
+    let start = Instant::now();
+    let mut viewer = viewer;
+    while viewer.try_wait().unwrap().is_none() {
+        if start.elapsed() > Duration::from_secs(60) {
+            let _ = viewer.kill();
+            panic!("the viewer did not exit within 60 s of the close request");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    viewer.wait_with_output().unwrap()
+}
+
+#[test]
+fn survives_an_external_resize_and_closes_on_escape() {
+    let dir = tempfile::tempdir().unwrap();
+    let vdag = scene(dir.path());
+    let x = Xvfb::start();
+    let stats = dir.path().join("stats.json");
+    let mut cmd = voxdag(Some(&x.display));
+    cmd.arg("view")
+        .arg(&vdag)
+        .args(["--size", "160x120", "--no-vsync", "--stats-json"])
+        .arg(&stats)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    let mut viewer = cmd.spawn().expect("starting voxdag view");
+    let id = find_window(&x.display, &mut viewer);
+    // Let it present a few frames at the first size, then resize from outside (as a window
+    // manager would), let it present at the new size, then close it with Esc.
+    std::thread::sleep(Duration::from_millis(1500));
+    xdotool(&x.display, &["windowsize", &id, "232", "174"]);
+    std::thread::sleep(Duration::from_millis(1500));
+    xdotool(&x.display, &["windowfocus", "--sync", &id]);
+    xdotool(&x.display, &["key", "Escape"]);
+    let out = wait_exit(viewer);
+    assert!(
+        out.status.success(),
+        "viewer failed ({}):\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&stats).expect("stats written at exit")).unwrap();
+    assert_eq!(report["validation_messages"], 0);
+    assert_eq!(
+        report["extent"],
+        serde_json::json!([232, 174]),
+        "final size: {report}"
+    );
+    assert!(
+        report["swapchain_creations"].as_u64().unwrap() >= 2,
+        "the swapchain was rebuilt: {report}"
+    );
+    let extents = report["extents"].as_array().unwrap();
+    assert_eq!(extents[0][0], serde_json::json!([160, 120]), "{report}");
+}
+
+#[test]
+fn frames_exit_is_clean_with_three_frames_in_flight() {
+    let dir = tempfile::tempdir().unwrap();
+    let vdag = scene(dir.path());
+    let x = Xvfb::start();
+    let stats = dir.path().join("stats.json");
+    let mut view = voxdag(Some(&x.display));
+    view.arg("view")
+        .arg(&vdag)
+        .args([
+            "--size",
+            "128x96",
+            "--frames",
+            "12",
+            "--frames-in-flight",
+            "3",
+            "--render-scale",
+            "0.5",
+            "--stats-json",
+        ])
+        .arg(&stats);
+    let out = run(view);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !stderr.contains("vulkan"),
+        "Vulkan messages on stderr:\n{stderr}"
+    );
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
+    assert_eq!(report["frames"], 12);
+    assert_eq!(report["frames_in_flight"], 3);
+    assert_eq!(report["internal"], serde_json::json!([64, 48]));
+    assert_eq!(report["validation_messages"], 0);
+}
+
+#[test]
+fn no_display_is_a_one_line_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let vdag = scene(dir.path());
+    let mut view = voxdag(None);
+    view.arg("view").arg(&vdag);
+    let out = view.output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
+    assert!(stderr.contains("no display"), "{stderr}");
+}
