@@ -397,10 +397,15 @@ fn compact_translation_fields_are_checked() {
         let (at, why) = reason(with(flags & !8, word));
         assert!(at == 4 && why.contains("flag bit 4"), "{why}");
         // A level that cannot translate named in the coding word.
-        for bit in [3, 7, 31] {
+        for bit in [3, 7] {
             let (at, why) = reason(with(flags, word | 1 << bit));
             assert!(at == 12 && why.contains("cannot translate"), "{why}");
         }
+        // Tagged-pointer bits without flag bit 5, or flag bit 5 without tables.
+        let (at, why) = reason(with(flags, word | 1 << 8));
+        assert!(at == 12 && why.contains("flag bit 5"), "{why}");
+        let (at, why) = reason(with(flags | 32, word | 1 << 8));
+        assert!(at == 4 && why.contains("flag bit 5"), "{why}");
         // A coding word without flag bit 4.
         if word != 0 {
             let (at, why) = reason(with(flags & !16, word));
@@ -418,6 +423,47 @@ fn compact_translation_fields_are_checked() {
         checked < 19 * 3,
         "flipping the coding of a level was never refused"
     );
+}
+
+/// Tagged 16-bit pointers (flag bit 5): the table modes use them where cheaper; a tag bit for a
+/// level that has no parent is refused, and flipping a level's tagging never panics.
+#[test]
+fn tagged_pointers_are_checked() {
+    let dag = Svdag::from_voxels(&symmetric_scene(64)).unwrap();
+    let mut tagged_seen = false;
+    for o in [TsvdagOptions::MODES[1], TsvdagOptions::MODES[2]] {
+        for translations in [false, true] {
+            let e =
+                TsvdagEncoding::build_with_translations(&dag, TransformSet::All, translations, o)
+                    .unwrap();
+            tagged_seen |= e.tagged.contains(&true);
+            let p = e.to_payload();
+            assert_eq!(TsvdagEncoding::from_payload(&p, 64).unwrap(), e);
+            let flags = u32::from_le_bytes(p[4..8].try_into().unwrap());
+            let word = u32::from_le_bytes(p[12..16].try_into().unwrap());
+            let with = |flags: u32, word: u32| {
+                let mut b = p.clone();
+                b[4..8].copy_from_slice(&flags.to_le_bytes());
+                b[12..16].copy_from_slice(&word.to_le_bytes());
+                TsvdagEncoding::from_payload(&b, 64)
+            };
+            // Level 4 is the root level of a 64^3 grid: no pointer points at it.
+            match with(flags | 32, word | 1 << (8 + 4)) {
+                Err(voxdag::dag::encode::EncodeError::Corrupt { offset, reason }) => {
+                    assert!(offset == 12 && reason.contains("no parent"), "{reason}")
+                }
+                other => panic!("expected an error, got {other:?}"),
+            }
+            for l in 0..4 {
+                let w = word ^ 1 << (8 + l);
+                let f = if w >> 8 == 0 { flags & !32 } else { flags | 32 };
+                if let Ok(other) = with(f, w) {
+                    let _ = VoxelIter::new(&other).count();
+                }
+            }
+        }
+    }
+    assert!(tagged_seen, "no level chose tagged pointers");
 }
 
 #[test]

@@ -862,12 +862,12 @@ impl VdagFile {
             ),
             _ => {
                 let e = TsvdagEncoding::from_payload(payload, parsed.resolution).map_err(map)?;
-                if parsed.version < 2 && e.compact_translations() {
+                if parsed.version < 2 && e.needs_v2() {
                     return Err(err(
                         at + 4,
                         format!(
-                            "tsvdag flag bit 4 (compact translation fields) needs format \
-                             version 2, file is version {}",
+                            "tsvdag flag bits 4-5 (compact translation fields, tagged pointers) \
+                             need format version 2, file is version {}",
                             parsed.version
                         ),
                     ));

@@ -87,7 +87,8 @@ struct Bytes {
 }
 
 /// TSVDAG bytes per mode with a cumulative set of encoder heuristics (`v1`: none, as the
-/// format-v1 encoder; `+reorient`; `+compact`: escape/mask translation fields; `+tie-break`: all).
+/// format-v1 encoder; `+reorient`; `+compact`: escape/mask translation fields; `+tie-break`;
+/// `+tagged`: tagged 16-bit pointers where cheaper, i.e. all).
 #[derive(Serialize, Deserialize)]
 struct Ablation {
     heuristics: String,
@@ -160,11 +161,12 @@ fn measure(scene_name: &str, input: &std::path::Path, resolution: u32) -> Result
     let v1 = v1?;
     let mut ablation = Vec::new();
     let mut tuning = TsvdagTuning::V1;
-    for step in ["v1", "+reorient", "+compact", "+tie-break"] {
+    for step in ["v1", "+reorient", "+compact", "+tie-break", "+tagged"] {
         match step {
             "+reorient" => tuning.reorient = true,
             "+compact" => tuning.compact_translations = true,
             "+tie-break" => tuning.tie_break = true,
+            "+tagged" => tuning.tagged_pointers = true,
             _ => {}
         }
         let [base, lut, huffman] = if step == "v1" { v1 } else { modes(tuning)? };

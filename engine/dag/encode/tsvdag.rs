@@ -152,6 +152,9 @@ pub struct TsvdagTuning {
     pub compact_translations: bool,
     /// Node order ties: untranslated references, then fewer children first.
     pub tie_break: bool,
+    /// With tables: per child level, tagged 16-bit pointers where they cost less (format v2,
+    /// payload flag bit 5).
+    pub tagged_pointers: bool,
 }
 
 impl TsvdagTuning {
@@ -160,12 +163,14 @@ impl TsvdagTuning {
         reorient: true,
         compact_translations: true,
         tie_break: true,
+        tagged_pointers: true,
     };
     /// Every heuristic off: the format-v1 encoder.
     pub const V1: TsvdagTuning = TsvdagTuning {
         reorient: false,
         compact_translations: false,
         tie_break: false,
+        tagged_pointers: false,
     };
 }
 
@@ -229,6 +234,9 @@ pub struct TsvdagEncoding {
     pub codes: Vec<Option<Huffman>>,
     /// Per child level: how translation fields are written without Huffman.
     pub translation_coding: Vec<TranslationCoding>,
+    /// Per child level, with tables: 16-bit pointers carry the table/inline tag bit like the
+    /// longer ones (format v2, payload flag bit 5).
+    pub tagged: Vec<bool>,
 }
 
 /// How a pointer with its flag set writes its translation, per child level that translates,
@@ -325,6 +333,11 @@ impl TsvdagEncoding {
         Ok(out)
     }
 
+    /// Whether the payload needs format v2: compact translation fields or tagged pointers.
+    pub fn needs_v2(&self) -> bool {
+        self.compact_translations() || self.tagged.contains(&true)
+    }
+
     /// Whether some child level uses the escape or mask form (flag bit 4, format v2).
     pub fn compact_translations(&self) -> bool {
         self.translation_coding
@@ -389,6 +402,7 @@ impl TsvdagEncoding {
             tables: vec![Vec::new(); top + 1],
             codes: vec![None; top + 1],
             translation_coding: vec![TranslationCoding::Full; top + 1],
+            tagged: vec![false; top + 1],
         };
         let Some(root) = g.root else {
             return Ok(out);
@@ -459,23 +473,40 @@ impl TsvdagEncoding {
             } else {
                 &[TranslationCoding::Full]
             };
-            let mut best: Option<(u64, TranslationCoding, Vec<(u64, u16)>, Vec<u64>)> = None;
+            // Per translation coding the pointer values, then per pointer layout (tables with
+            // plain or tagged 16-bit pointers) the cost: the cheapest combination is written.
+            let layouts: &[bool] = if options.lut && tuning.tagged_pointers {
+                &[false, true]
+            } else {
+                &[false]
+            };
+            let mut best: Option<(u64, TranslationCoding, bool, Vec<(u64, u16)>, Vec<u64>)> = None;
             let mut last_err = None;
             for &coding in codings {
                 out.translation_coding[l - 1] = coding;
-                match out.assign_pointers(cl, &keys, &sorted) {
-                    Ok((entries, table, cost)) => {
-                        if best.as_ref().is_none_or(|b| cost < b.0) {
-                            best = Some((cost, coding, entries, table));
-                        }
+                let values = match out.pointer_values(cl, &keys) {
+                    Ok(v) => v,
+                    Err(e) => {
+                        last_err = Some(e);
+                        continue;
                     }
-                    Err(e) => last_err = Some(e),
+                };
+                for &tagged in layouts {
+                    match out.assign_pointers(cl, &keys, &values, &sorted, tagged) {
+                        Ok((entries, table, cost)) => {
+                            if best.as_ref().is_none_or(|b| cost < b.0) {
+                                best = Some((cost, coding, tagged, entries, table));
+                            }
+                        }
+                        Err(e) => last_err = Some(e),
+                    }
                 }
             }
-            let Some((_, coding, entries, table)) = best else {
+            let Some((_, coding, tagged, entries, table)) = best else {
                 return Err(last_err.expect("at least one coding tried"));
             };
             out.translation_coding[l - 1] = coding;
+            out.tagged[l - 1] = tagged;
             out.tables[l - 1] = table;
             let mut stream: Vec<u16> = Vec::new();
             let mut offsets = vec![u64::MAX; counts[l]];
@@ -505,50 +536,72 @@ impl TsvdagEncoding {
         Ok(out)
     }
 
+    /// `E` of every distinct pointer of child level `cl` (`keys[i]`: pointer, reference count).
+    fn pointer_values(&self, cl: u32, keys: &[(PointerKey, u64)]) -> Result<Vec<u64>, EncodeError> {
+        keys.iter()
+            .map(|&((idx, t, tr), _)| {
+                let ptr = GraphPointer {
+                    node: 0,
+                    transform: Transform::from_index(t as usize).expect("checked"),
+                    translation: tr,
+                };
+                self.encode_pointer(cl, idx, &ptr)
+            })
+            .collect()
+    }
+
     /// Stored value and size (u16 words) of every distinct pointer of child level `cl`
-    /// (`keys[i]`: pointer and reference count; `sorted`: ids by descending count), the
-    /// level's table, and the cost in u16 words (pointers plus table).
+    /// (`keys[i]`: pointer and reference count, `values[i]` its `E`; `sorted`: ids by
+    /// descending count), the level's table, and the cost in u16 words (pointers plus table).
+    /// With tables, `tagged` makes 16-bit pointers carry the table/inline tag bit too.
     #[allow(clippy::type_complexity)]
     fn assign_pointers(
         &self,
         cl: u32,
         keys: &[(PointerKey, u64)],
+        values: &[u64],
         sorted: &[u32],
+        tagged: bool,
     ) -> Result<(Vec<(u64, u16)>, Vec<u64>, u64), EncodeError> {
         let mut entries = vec![(0u64, 0u16); keys.len()];
         let mut table: Vec<u64> = Vec::new();
         let mut cost = 0u64;
         let bits = |v: u64| 64 - v.leading_zeros();
+        // Smallest tagged size: 16 bits when tagged, else 32 (16-bit values are table indices).
+        let min_tagged = if tagged { 1 } else { 2 };
         for &id in sorted {
-            let ((idx, t, tr), count) = keys[id as usize];
-            let ptr = GraphPointer {
-                node: 0,
-                transform: Transform::from_index(t as usize).expect("checked"),
-                translation: tr,
-            };
-            let e = self.encode_pointer(cl, idx, &ptr)?;
+            let count = keys[id as usize].1;
+            let e = values[id as usize];
             let entry = if self.options.lut {
-                let inline_bits = bits(e) + 1;
-                let inline_size = inline_bits.div_ceil(16).max(2) as u64;
+                let inline_size = (bits(e) + 1).div_ceil(16).max(min_tagged) as u64;
                 let inline_cost = if inline_size > 3 {
                     u64::MAX
                 } else {
                     count * inline_size
                 };
                 let i = table.len() as u64;
-                let (tv, tsize) = if i <= 0xffff {
+                let (tv, tsize) = if !tagged && i <= 0xffff {
                     (i, 1u64)
                 } else {
-                    (i << 1 | 1, (bits(i) + 1).div_ceil(16).max(2) as u64)
+                    (
+                        i << 1 | 1,
+                        (bits(i) + 1).div_ceil(16).max(min_tagged) as u64,
+                    )
                 };
                 let table_cost = count * tsize + 4;
-                if table_cost < inline_cost {
+                if table_cost < inline_cost && tsize <= 3 {
                     table.push(e);
                     cost += table_cost;
                     (tv, tsize as u16)
-                } else {
+                } else if inline_size <= 3 {
                     cost += inline_cost;
                     (e << 1, inline_size as u16)
+                } else {
+                    return Err(EncodeError::TooLarge(format!(
+                        "pointer of {} bits at level {}",
+                        bits(e),
+                        cl + 1
+                    )));
                 }
             } else {
                 let size = bits(e).div_ceil(16).max(1);
@@ -645,7 +698,7 @@ impl TsvdagEncoding {
         let l = level as usize;
         let mut e = v;
         if self.options.lut {
-            let table_index = if code == 1 {
+            let table_index = if code == 1 && !self.tagged[l] {
                 Some(v)
             } else if v & 1 == 1 {
                 Some(v >> 1)
@@ -763,6 +816,7 @@ impl TsvdagEncoding {
             | (self.options.huffman as u32) << 2
             | (self.translations as u32) << 3
             | (self.compact_translations() as u32) << 4
+            | (self.tagged.contains(&true) as u32) << 5
             | set_id(self.set) << 8;
         w.u32(flags);
         w.u32(self.root.map_or(0, |t| t.index() as u32));
@@ -772,7 +826,13 @@ impl TsvdagEncoding {
             .enumerate()
             .filter(|(_, c)| **c == TranslationCoding::Mask)
             .fold(0u32, |m, (l, _)| m | 1 << l);
-        w.u32(mask_levels);
+        let tagged_levels = self
+            .tagged
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| **t)
+            .fold(0u32, |m, (l, _)| m | 1 << (8 + l));
+        w.u32(mask_levels | tagged_levels);
         w.u64(self.leaves.len() as u64);
         for l in &self.levels[1..] {
             w.u64(l.len() as u64);
@@ -821,7 +881,7 @@ impl TsvdagEncoding {
             ));
         }
         let flags = r.u32("flags")?;
-        if flags & !0x31f != 0 {
+        if flags & !0x33f != 0 {
             return Err(corrupt(4, format!("unknown flags {flags:#x}")));
         }
         let set = match (flags >> 8) & 3 {
@@ -844,7 +904,25 @@ impl TsvdagEncoding {
             huffman: flags & 4 != 0,
         };
         let translations = flags & 8 != 0;
-        let mask_levels = r.u32("translation coding")?;
+        let word = r.u32("coding word")?;
+        let (mask_levels, tagged_levels) = (word & 0xff, word >> 8);
+        let mut tagged = vec![false; top + 1];
+        if flags & 32 != 0 {
+            if !options.lut {
+                return Err(corrupt(4, "tagged pointers (flag bit 5) need tables"));
+            }
+            if tagged_levels >> top != 0 {
+                return Err(corrupt(
+                    12,
+                    format!("coding word {word:#x} tags a level that has no parent"),
+                ));
+            }
+            for (l, t) in tagged.iter_mut().enumerate() {
+                *t = (tagged_levels >> l) & 1 == 1;
+            }
+        } else if tagged_levels != 0 {
+            return Err(corrupt(12, "tagged-pointer bits without flag bit 5"));
+        }
         let mut translation_coding = vec![TranslationCoding::Full; top + 1];
         if flags & 16 != 0 {
             if options.huffman || !translations {
@@ -937,6 +1015,7 @@ impl TsvdagEncoding {
             tables,
             codes,
             translation_coding,
+            tagged,
         };
         enc.validate(&bases)?;
         Ok(enc)
