@@ -629,27 +629,33 @@ impl TsvdagEncoding {
     ) -> Result<u64, EncodeError> {
         let tb = translation_bits(level);
         let side = 4i64 << level;
-        let mut fields: Vec<(u64, u32)> = Vec::new(); // (value, bits), low bits first
+        // Fields accumulate from the low bits (at most 1 + 6 + 3 + 3 * 5 bits before the target:
+        // no allocation, this runs once per distinct pointer and candidate layout).
+        let (mut e, mut used) = (0u64, 0u32);
+        let mut push = |v: u64, bits: u32| {
+            e |= v << used;
+            used += bits;
+        };
         if self.options.huffman {
             let sym = p.transform.index() * 8 + nonzero_mask(&p.translation);
             let code = self.codes[level as usize].as_ref();
             let (c, len) = code
                 .and_then(|h| h.encode(sym))
                 .ok_or_else(|| EncodeError::InvalidInput("symbol without a code".into()))?;
-            fields.push((c as u64, len as u32));
+            push(c as u64, len as u32);
             for &t in &p.translation {
                 if t != 0 {
-                    fields.push(((t as i64 + side) as u64, tb));
+                    push((t as i64 + side) as u64, tb);
                 }
             }
         } else if self.set != TransformSet::None || self.translates(level) {
             let any = p.transform != Transform::IDENTITY || p.translation != [0; 3];
-            fields.push((any as u64, 1));
+            push(any as u64, 1);
             if any {
-                fields.push((
+                push(
                     transform_field(self.set, p.transform),
                     transform_bits(self.set),
-                ));
+                );
                 if self.translates(level) {
                     let coding = self.translation_coding[level as usize];
                     let mask = nonzero_mask(&p.translation);
@@ -657,34 +663,29 @@ impl TsvdagEncoding {
                     let axes = match coding {
                         TranslationCoding::Full => 7,
                         TranslationCoding::Escape if mask == 0 => {
-                            fields.push((0, tb));
+                            push(0, tb);
                             0
                         }
                         TranslationCoding::Escape => 7,
                         TranslationCoding::Mask => {
-                            fields.push((mask as u64, 3));
+                            push(mask as u64, 3);
                             mask
                         }
                     };
                     for (a, &t) in p.translation.iter().enumerate() {
                         if (axes >> a) & 1 == 1 {
-                            fields.push(((t as i64 + side) as u64, tb));
+                            push((t as i64 + side) as u64, tb);
                         }
                     }
                 }
             }
         }
-        let used: u32 = fields.iter().map(|f| f.1).sum();
         if used + (64 - target.leading_zeros()) > 63 {
             return Err(EncodeError::TooLarge(format!(
                 "pointer to {target} needs over 63 bits"
             )));
         }
-        let mut e = target;
-        for &(v, b) in fields.iter().rev() {
-            e = e << b | v;
-        }
-        Ok(e)
+        Ok(target << used | e)
     }
 
     /// Decodes the pointer value `v` (size code `code`) of a child at level `level`:
