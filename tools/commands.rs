@@ -209,7 +209,11 @@ pub fn encode_dag(
             for &mode in modes {
                 match TsvdagEncoding::encode(&graph, mode) {
                     Ok(e) => {
-                        if best.as_ref().is_none_or(|b| e.byte_size() < b.byte_size()) {
+                        let better = match &best {
+                            Some(b) => e.byte_size() < b.byte_size(),
+                            None => true,
+                        };
+                        if better {
                             best = Some(e);
                         }
                     }

@@ -42,6 +42,10 @@ const SYMBOLS: usize = 48 * 8;
 /// (new target id, transform id, translation): a distinct pointer of a level.
 type PointerKey = (u64, u8, [i32; 3]);
 
+/// A child level's candidate layout: (cost in u16 words, translation coding, tagged, per
+/// distinct pointer its stored value and size, the table).
+type Candidate = (u64, TranslationCoding, bool, Vec<(u64, u16)>, Vec<u64>);
+
 /// A child pointer of a [`TransformGraph`] node.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
 pub struct GraphPointer {
@@ -480,7 +484,7 @@ impl TsvdagEncoding {
             } else {
                 &[false]
             };
-            let mut best: Option<(u64, TranslationCoding, bool, Vec<(u64, u16)>, Vec<u64>)> = None;
+            let mut best: Option<Candidate> = None;
             let mut last_err = None;
             for &coding in codings {
                 out.translation_coding[l - 1] = coding;
@@ -494,7 +498,11 @@ impl TsvdagEncoding {
                 for &tagged in layouts {
                     match out.assign_pointers(cl, &keys, &values, &sorted, tagged) {
                         Ok((entries, table, cost)) => {
-                            if best.as_ref().is_none_or(|b| cost < b.0) {
+                            let better = match &best {
+                                Some(b) => cost < b.0,
+                                None => true,
+                            };
+                            if better {
                                 best = Some((cost, coding, tagged, entries, table));
                             }
                         }
