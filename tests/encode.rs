@@ -6,11 +6,11 @@ mod common;
 
 use proptest::prelude::*;
 use voxdag::dag::encode::{
-    contains, raycast, EncodedDag, GraphLevel, GraphPointer, SsvdagEncoding, TransformGraph,
-    TsvdagEncoding, TsvdagOptions, VoxelDigest, VoxelIter,
+    contains, raycast, reorient, EncodedDag, GraphLevel, GraphPointer, SsvdagEncoding,
+    TransformGraph, TranslationCoding, TsvdagEncoding, TsvdagOptions, VoxelDigest, VoxelIter,
 };
 use voxdag::dag::raycast::{Ray, T_UNBOUNDED};
-use voxdag::dag::{Svdag, Transform, TransformSet, VoxelIndex};
+use voxdag::dag::{build_transform_dag, Svdag, Transform, TransformSet, VoxelIndex};
 use voxdag::scene::{morton, Voxels};
 
 const SETS: [TransformSet; 4] = [
@@ -126,6 +126,11 @@ fn check_all(voxels: &Voxels, rays: usize) {
         }
         // Decoding back to an SVDAG gives the same DAG.
         assert_eq!(enc.to_svdag(Vec::new()).unwrap(), dag, "{name}: to_svdag");
+        // No mode changes the per-level element counts of the transform DAG.
+        if let EncodedDag::Tsvdag(e) = &enc {
+            let want = build_transform_dag(&dag, e.set, e.translations).level_counts();
+            assert_eq!(e.node_counts().unwrap(), want, "{name}: node counts");
+        }
     }
 }
 
@@ -334,6 +339,133 @@ fn translated_pointers_match_brute_force() {
     }
 }
 
+/// Re-orienting keeps the voxels, the node counts per level and the set; the root becomes
+/// plain.
+#[test]
+fn reorient_keeps_voxels_and_counts() {
+    for seed in 1..40u64 {
+        let g = random_graph(seed.wrapping_mul(0x2545_f491_4f6c_dd1d));
+        let r = reorient(&g);
+        let lens = |g: &TransformGraph| g.levels.iter().map(|l| l.len()).collect::<Vec<_>>();
+        assert_eq!(lens(&r), lens(&g), "seed {seed}");
+        assert_eq!(r.root.unwrap().transform, Transform::IDENTITY);
+        let sorted = |g: &TransformGraph| {
+            let mut v = expand(g, 3, &g.root.unwrap());
+            v.sort_unstable();
+            v
+        };
+        assert_eq!(sorted(&r), sorted(&g), "seed {seed}");
+        assert!(r
+            .levels
+            .iter()
+            .all(|l| l.children.iter().all(|c| r.set.contains(c.transform))));
+    }
+}
+
+/// The base mode of a translated graph uses the compact translation codings, and a mutation of
+/// the new header fields is refused with a clear error.
+#[test]
+fn compact_translation_fields_are_checked() {
+    let base = TsvdagOptions {
+        lut: false,
+        huffman: false,
+    };
+    let mut checked = 0;
+    for seed in 1..20u64 {
+        let e = TsvdagEncoding::encode(&random_graph(seed), base).unwrap();
+        assert!(e.compact_translations());
+        assert!(e.translation_coding[3..]
+            .iter()
+            .all(|c| *c == TranslationCoding::Full));
+        let p = e.to_payload();
+        assert_eq!(TsvdagEncoding::from_payload(&p, 32).unwrap(), e);
+        let flags = u32::from_le_bytes(p[4..8].try_into().unwrap());
+        let word = u32::from_le_bytes(p[12..16].try_into().unwrap());
+        let with = |flags: u32, word: u32| {
+            let mut b = p.clone();
+            b[4..8].copy_from_slice(&flags.to_le_bytes());
+            b[12..16].copy_from_slice(&word.to_le_bytes());
+            TsvdagEncoding::from_payload(&b, 32)
+        };
+        let reason = |r: Result<TsvdagEncoding, _>| match r {
+            Err(voxdag::dag::encode::EncodeError::Corrupt { offset, reason }) => (offset, reason),
+            other => panic!("seed {seed}: expected a corrupt-payload error, got {other:?}"),
+        };
+        // Flag bit 4 with Huffman, or without translations.
+        let (at, why) = reason(with(flags | 4, word));
+        assert!(at == 4 && why.contains("flag bit 4"), "{why}");
+        let (at, why) = reason(with(flags & !8, word));
+        assert!(at == 4 && why.contains("flag bit 4"), "{why}");
+        // A level that cannot translate named in the coding word.
+        for bit in [3, 7] {
+            let (at, why) = reason(with(flags, word | 1 << bit));
+            assert!(at == 12 && why.contains("cannot translate"), "{why}");
+        }
+        // Tagged-pointer bits without flag bit 5, or flag bit 5 without tables.
+        let (at, why) = reason(with(flags, word | 1 << 8));
+        assert!(at == 12 && why.contains("flag bit 5"), "{why}");
+        let (at, why) = reason(with(flags | 32, word | 1 << 8));
+        assert!(at == 4 && why.contains("flag bit 5"), "{why}");
+        // A coding word without flag bit 4.
+        if word != 0 {
+            let (at, why) = reason(with(flags & !16, word));
+            assert!(at == 12 && why.contains("flag bit 4"), "{why}");
+        }
+        // The other coding for a level: decodes differently or is refused, never panics.
+        for l in 0..3 {
+            if let Ok(other) = with(flags, word ^ 1 << l) {
+                let _ = VoxelIter::new(&other).count();
+                checked += 1;
+            }
+        }
+    }
+    assert!(
+        checked < 19 * 3,
+        "flipping the coding of a level was never refused"
+    );
+}
+
+/// Tagged 16-bit pointers (flag bit 5): the table modes use them where cheaper; a tag bit for a
+/// level that has no parent is refused, and flipping a level's tagging never panics.
+#[test]
+fn tagged_pointers_are_checked() {
+    let dag = Svdag::from_voxels(&symmetric_scene(64)).unwrap();
+    let mut tagged_seen = false;
+    for o in [TsvdagOptions::MODES[1], TsvdagOptions::MODES[2]] {
+        for translations in [false, true] {
+            let e =
+                TsvdagEncoding::build_with_translations(&dag, TransformSet::All, translations, o)
+                    .unwrap();
+            tagged_seen |= e.tagged.contains(&true);
+            let p = e.to_payload();
+            assert_eq!(TsvdagEncoding::from_payload(&p, 64).unwrap(), e);
+            let flags = u32::from_le_bytes(p[4..8].try_into().unwrap());
+            let word = u32::from_le_bytes(p[12..16].try_into().unwrap());
+            let with = |flags: u32, word: u32| {
+                let mut b = p.clone();
+                b[4..8].copy_from_slice(&flags.to_le_bytes());
+                b[12..16].copy_from_slice(&word.to_le_bytes());
+                TsvdagEncoding::from_payload(&b, 64)
+            };
+            // Level 4 is the root level of a 64^3 grid: no pointer points at it.
+            match with(flags | 32, word | 1 << (8 + 4)) {
+                Err(voxdag::dag::encode::EncodeError::Corrupt { offset, reason }) => {
+                    assert!(offset == 12 && reason.contains("no parent"), "{reason}")
+                }
+                other => panic!("expected an error, got {other:?}"),
+            }
+            for l in 0..4 {
+                let w = word ^ 1 << (8 + l);
+                let f = if w >> 8 == 0 { flags & !32 } else { flags | 32 };
+                if let Ok(other) = with(f, w) {
+                    let _ = VoxelIter::new(&other).count();
+                }
+            }
+        }
+    }
+    assert!(tagged_seen, "no level chose tagged pointers");
+}
+
 #[test]
 fn translations_refused_where_not_allowed() {
     let mut g = random_graph(7);
@@ -410,6 +542,46 @@ fn shared_meshes_round_trip() {
             assert_eq!(enc.digest().unwrap(), digest, "{mesh} {name}");
             let back = enc.to_svdag(Vec::new()).unwrap();
             assert_eq!(back.words, dag.words, "{mesh} {name}");
+        }
+    }
+}
+
+/// Every shared mesh with S+A+T in every mode at 256^3 (more with
+/// `VOXDAG_TEST_SAT_RESOLUTIONS=256,512,1024`): the decoded voxels equal the input and the node
+/// counts equal the transform DAG's.
+#[test]
+fn shared_meshes_sat_every_mode() {
+    let Some(data) = common::shared_data() else {
+        return;
+    };
+    let resolutions: Vec<u32> = std::env::var("VOXDAG_TEST_SAT_RESOLUTIONS")
+        .unwrap_or_else(|_| "256".into())
+        .split(',')
+        .map(|r| r.trim().parse().expect("resolution list"))
+        .collect();
+    for &n in &resolutions {
+        for mesh in [
+            "bunny.obj",
+            "dragon.obj",
+            "buddha.obj",
+            "horse.obj",
+            "teapot.obj",
+            "sponza-dabrovic.obj",
+            "sponza-crytek/sponza_crytek_noleaf.obj",
+        ] {
+            let dag = common::build_scene(&data.join("meshes").join(mesh), Some(n));
+            let mut codes = Vec::new();
+            dag.for_each_voxel(|c| codes.push(c));
+            let tdag = build_transform_dag(&dag, TransformSet::All, true);
+            let graph = TransformGraph::from_transform_dag(&tdag);
+            for o in all_options() {
+                let e = TsvdagEncoding::encode(&graph, o).unwrap();
+                let name = format!("{mesh} {n} {}", o.mode_name());
+                assert_eq!(e.node_counts().unwrap(), tdag.level_counts(), "{name}");
+                let back = TsvdagEncoding::from_payload(&e.to_payload(), n).unwrap();
+                let got: Vec<u64> = VoxelIter::new(&back).collect::<Result<_, _>>().unwrap();
+                assert!(got == codes, "{name}: decoded voxels differ");
+            }
         }
     }
 }

@@ -143,10 +143,12 @@ fn header_corruptions_are_rejected() {
     b[0] = b'X';
     expect_format_error(&b, Some(0));
 
-    let mut b = good.clone();
-    put_u32(&mut b, 8, 2);
-    fix_crc(&mut b);
-    expect_format_error(&b, Some(8));
+    for version in [0, voxdag::dag::FORMAT_VERSION + 1] {
+        let mut b = good.clone();
+        put_u32(&mut b, 8, version);
+        fix_crc(&mut b);
+        expect_format_error(&b, Some(8));
+    }
 
     let mut b = good.clone();
     b[len - 10] ^= 0x40;

@@ -11,11 +11,12 @@ use voxdag::atomic_file::{check_output_path, write_atomic};
 use voxdag::attr::{ColorCodec, LosslessVariant, StoredColors};
 use voxdag::dag::digest::ContentDigest;
 use voxdag::dag::encode::{
-    DigestBuilder, EncodedDag, SsvdagEncoding, TsvdagEncoding, TsvdagOptions, VoxelDigest,
+    DigestBuilder, EncodeError, EncodedDag, SsvdagEncoding, TransformGraph, TsvdagEncoding,
+    TsvdagOptions, VoxelDigest,
 };
 use voxdag::dag::{
-    analyze_symmetry, export_vox, export_xyz_u32_file, DagStats, Svdag, SymmetryAnalysis,
-    TransformSet, VdagFile, VoxelIndex,
+    analyze_symmetry, build_transform_dag_with_progress, export_vox, export_xyz_u32_file, DagStats,
+    Svdag, SymmetryAnalysis, TransformSet, VdagFile, VoxelIndex,
 };
 use voxdag::gpu::{GpuContext, GpuOptions, Profiler};
 use voxdag::render::cpu::{render_cpu_with, ColorSource};
@@ -25,7 +26,7 @@ use voxdag::scene::{self, ImportOptions};
 
 use crate::{
     BuildArgs, ColorsArg, DemoArgs, EncodingArg, ExportArgs, ExportFormat, RenderArgs, StatsArgs,
-    TransformsArg, VerifyArgs,
+    TransformsArg, TsvdagModeArg, VerifyArgs,
 };
 
 /// What `voxdag build --report` writes: the inputs, the outcome and the cost of one build.
@@ -204,28 +205,65 @@ fn transform_set(t: TransformsArg) -> TransformSet {
     }
 }
 
-/// Encodes a DAG as `voxdag build` asks.
+/// The tsvdag modes `voxdag build` tries: the one pinned by `--tsvdag-mode` or
+/// `--no-lut`/`--no-huffman`, else base, lut and huffman (the smallest is kept).
+pub fn tsvdag_modes(args: &BuildArgs) -> Vec<TsvdagOptions> {
+    let mode = |lut, huffman| TsvdagOptions { lut, huffman };
+    match args.tsvdag_mode {
+        Some(TsvdagModeArg::Base) => vec![mode(false, false)],
+        Some(TsvdagModeArg::Lut) => vec![mode(true, false)],
+        Some(TsvdagModeArg::Huffman) => vec![mode(true, true)],
+        None if args.no_lut || args.no_huffman => vec![mode(!args.no_lut, !args.no_huffman)],
+        None => TsvdagOptions::MODES.to_vec(),
+    }
+}
+
+/// Encodes a DAG as `voxdag build` asks; tsvdag: builds the transform DAG (the translation
+/// search of `--transforms sat` reports on a progress bar) and keeps the smallest of `modes`.
 pub fn encode_dag(
     dag: &Svdag,
     encoding: EncodingArg,
     transforms: TransformsArg,
-    options: TsvdagOptions,
+    modes: &[TsvdagOptions],
+    quiet: bool,
 ) -> Result<EncodedDag> {
     Ok(match encoding {
         EncodingArg::Svdag32 => EncodedDag::Svdag32(dag.clone()),
         EncodingArg::Ssvdag => EncodedDag::Ssvdag(SsvdagEncoding::build(dag)?),
         EncodingArg::Tsvdag => {
-            if transforms == TransformsArg::Sat {
-                bail!(
-                    "--transforms sat needs the translation search (engine/dag/translate.rs), \
-                     not merged into this build yet; use --transforms sa"
-                );
-            }
-            EncodedDag::Tsvdag(TsvdagEncoding::build(
+            let bar = progress_bar(quiet);
+            bar.set_message("translations");
+            let tdag = build_transform_dag_with_progress(
                 dag,
                 transform_set(transforms),
-                options,
-            )?)
+                transforms == TransformsArg::Sat,
+                &bar,
+            );
+            bar.finish_and_clear();
+            let graph = TransformGraph::from_transform_dag(&tdag);
+            drop(tdag);
+            let mut best: Option<TsvdagEncoding> = None;
+            let mut too_large = None;
+            for &mode in modes {
+                match TsvdagEncoding::encode(&graph, mode) {
+                    Ok(e) => {
+                        let better = match &best {
+                            Some(b) => e.byte_size() < b.byte_size(),
+                            None => true,
+                        };
+                        if better {
+                            best = Some(e);
+                        }
+                    }
+                    // Inline pointers may not fit 48 bits on huge scenes: another mode may.
+                    Err(e @ EncodeError::TooLarge(_)) if modes.len() > 1 => too_large = Some(e),
+                    Err(e) => return Err(e.into()),
+                }
+            }
+            match best {
+                Some(e) => EncodedDag::Tsvdag(e),
+                None => return Err(too_large.expect("some mode was tried").into()),
+            }
         }
     })
 }
@@ -258,14 +296,20 @@ pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
         check_output(report)?;
     }
     let (dag, report, digest) = build_scene_digest(args, quiet)?;
-    let options = TsvdagOptions {
-        lut: !args.no_lut,
-        huffman: !args.no_huffman,
-    };
     let start = Instant::now();
-    let encoded = encode_dag(&dag, args.encoding, args.transforms, options)?;
+    let encoded = encode_dag(
+        &dag,
+        args.encoding,
+        args.transforms,
+        &tsvdag_modes(args),
+        quiet,
+    )?;
     let encode_time = start.elapsed();
     let bytes = encoded.byte_size();
+    let kind = match &encoded {
+        EncodedDag::Tsvdag(e) => format!("tsvdag ({} mode)", e.options.mode_name()),
+        other => other.kind().name().to_string(),
+    };
     let (colors, stored_colors) = encode_colors(&dag, args, quiet)?;
     let file = VdagFile {
         encoded,
@@ -281,7 +325,7 @@ pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
         report.voxels,
         report.stats.levels.iter().map(|l| l.svdag).sum::<u64>(),
         bytes,
-        file.encoded.kind().name(),
+        kind,
         report.voxelize_s,
         report.build_s,
         seconds(encode_time),
@@ -367,7 +411,14 @@ impl ColorStats {
 
 /// `voxdag stats`.
 pub fn stats(args: &StatsArgs, quiet: bool) -> Result<()> {
-    let (dag, stored) = load_svdag_stored(&args.file)?;
+    let mut file = VdagFile::load(&args.file)?;
+    let encoding = file.encoded.kind().name();
+    let mode = match &file.encoded {
+        EncodedDag::Tsvdag(e) => Some(e.options.mode_name()),
+        _ => None,
+    };
+    let stored = file.stored_colors.take();
+    let dag = file.into_svdag(&args.file)?;
     let colors = ColorStats::new(dag.colors.len() as u64, stored.as_ref());
     let (stats, bytes) = if args.quick {
         (dag.stats(), Vec::new())
@@ -375,12 +426,16 @@ pub fn stats(args: &StatsArgs, quiet: bool) -> Result<()> {
         describe(&dag, quiet)?
     };
     if args.json {
-        println!(
-            "{}",
-            serde_json::to_string(&stats_json(&stats, &bytes, &colors)?)?
-        );
+        let mut json = stats_json(&stats, &bytes, &colors)?;
+        if let Some(obj) = json.as_object_mut() {
+            obj.insert("encoding".into(), encoding.into());
+            obj.insert("tsvdag_mode".into(), mode.into());
+        }
+        println!("{}", serde_json::to_string(&json)?);
     } else {
+        let mode = mode.map_or_else(String::new, |m| format!(" ({m} mode)"));
         print!("{}", stats_table(&args.file, &stats, &bytes));
+        println!("  stored      {encoding}{mode}");
         print!("{}", color_line(&colors));
     }
     Ok(())
@@ -833,6 +888,7 @@ pub fn demo(args: &DemoArgs, quiet: bool) -> Result<()> {
         report: Some(args.out_dir.join("avocado-build.json")),
         encoding: EncodingArg::Svdag32,
         transforms: TransformsArg::Sa,
+        tsvdag_mode: None,
         no_lut: false,
         no_huffman: false,
     };

@@ -85,14 +85,28 @@ pub struct BuildArgs {
     #[arg(long, value_enum, default_value = "svdag32")]
     encoding: EncodingArg,
     /// Transforms the tsvdag encoding may use (sat: S+A plus translations).
-    #[arg(long, value_enum, default_value = "sa")]
+    #[arg(long, value_enum, default_value = "sat")]
     transforms: TransformsArg,
-    /// tsvdag: no pointer look-up tables.
+    /// tsvdag: the pointer mode (default: encode all three, keep the smallest).
+    #[arg(long, value_enum, conflicts_with_all = ["no_lut", "no_huffman"])]
+    tsvdag_mode: Option<TsvdagModeArg>,
+    /// tsvdag: no pointer look-up tables (pins the mode; with `--no-huffman`: `base`).
     #[arg(long)]
     no_lut: bool,
-    /// tsvdag: no Huffman coding of transform ids.
+    /// tsvdag: no Huffman coding of transform ids (pins the mode; alone: `lut`).
     #[arg(long)]
     no_huffman: bool,
+}
+
+/// Pointer modes of the tsvdag encoding (`voxdag build --tsvdag-mode`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum TsvdagModeArg {
+    /// No tables, no Huffman: every pointer inline.
+    Base,
+    /// Per-level pointer look-up tables.
+    Lut,
+    /// Tables plus Huffman-coded transform ids and translation masks.
+    Huffman,
 }
 
 /// A `--colors` value: a codec, or `None` for `none`.

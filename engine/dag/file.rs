@@ -20,8 +20,11 @@ use rayon::prelude::*;
 
 /// The 8 bytes every `.vdag` file starts with.
 pub const MAGIC: [u8; 8] = *b"VOXDAG\0\x01";
-/// The format version this code reads and writes.
-pub const FORMAT_VERSION: u32 = 1;
+/// The format version this code writes (2: tsvdag payloads may use compact translation fields,
+/// payload flag bit 4). Versions `OLDEST_FORMAT_VERSION..=FORMAT_VERSION` are read.
+pub const FORMAT_VERSION: u32 = 2;
+/// The oldest format version this code reads.
+pub const OLDEST_FORMAT_VERSION: u32 = 1;
 /// Header size in bytes.
 const HEADER_LEN: u64 = 64;
 /// Bytes per section-table entry.
@@ -435,6 +438,7 @@ fn u64_at(b: &[u8], at: u64) -> u64 {
 
 /// A checked header and section table.
 struct Parsed {
+    version: u32,
     encoding: Encoding,
     resolution: u32,
     level_count: u32,
@@ -464,8 +468,14 @@ fn parse_header(bytes: &[u8], name: &Path) -> Result<Parsed, DagError> {
         return Err(err(0, "not a .vdag file (bad magic)".into()));
     }
     let version = u32_at(bytes, 8);
-    if version != FORMAT_VERSION {
-        return Err(err(8, format!("unsupported format version {version}")));
+    if !(OLDEST_FORMAT_VERSION..=FORMAT_VERSION).contains(&version) {
+        return Err(err(
+            8,
+            format!(
+                "unsupported format version {version} (this build reads \
+                 {OLDEST_FORMAT_VERSION}..={FORMAT_VERSION})"
+            ),
+        ));
     }
     let file_size = u64_at(bytes, 32);
     if file_size != len {
@@ -621,6 +631,7 @@ fn parse_header(bytes: &[u8], name: &Path) -> Result<Parsed, DagError> {
         }
     }
     Ok(Parsed {
+        version,
         encoding,
         resolution,
         level_count,
@@ -923,9 +934,20 @@ impl VdagFile {
             Encoding::Ssvdag => EncodedDag::Ssvdag(
                 SsvdagEncoding::from_payload(payload, parsed.resolution).map_err(map)?,
             ),
-            _ => EncodedDag::Tsvdag(
-                TsvdagEncoding::from_payload(payload, parsed.resolution).map_err(map)?,
-            ),
+            _ => {
+                let e = TsvdagEncoding::from_payload(payload, parsed.resolution).map_err(map)?;
+                if parsed.version < 2 && e.needs_v2() {
+                    return Err(err(
+                        at + 4,
+                        format!(
+                            "tsvdag flag bits 4-5 (compact translation fields, tagged pointers) \
+                             need format version 2, file is version {}",
+                            parsed.version
+                        ),
+                    ));
+                }
+                EncodedDag::Tsvdag(e)
+            }
         };
         debug_assert_eq!(parsed.level_count, parsed.resolution.trailing_zeros() - 1);
         let colors = match decoded {

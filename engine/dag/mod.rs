@@ -38,7 +38,7 @@ pub use canonical::{
     SymmetryAnalysis, SymmetryLevelCounts, TransformPointer,
 };
 pub use export::{export_vox, export_xyz_u32, export_xyz_u32_file};
-pub use file::{ColorFormat, Encoding, VdagFile, FORMAT_VERSION, MAGIC};
+pub use file::{ColorFormat, Encoding, VdagFile, FORMAT_VERSION, MAGIC, OLDEST_FORMAT_VERSION};
 pub use index::VoxelIndex;
 pub use ssvdag::{Invariance, Ssvdag};
 pub use stats::{ByteStats, DagStats, LevelStats};

@@ -9,7 +9,9 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use image::{Rgb, RgbImage};
 use serde::{Deserialize, Serialize};
-use voxdag::dag::encode::{SsvdagEncoding, TransformGraph, TsvdagEncoding, TsvdagOptions};
+use voxdag::dag::encode::{
+    SsvdagEncoding, TransformGraph, TsvdagEncoding, TsvdagOptions, TsvdagTuning,
+};
 use voxdag::dag::{build_transform_dag, CanonicalDag, Invariance, Ssvdag, Svdag, TransformSet};
 use voxdag::scene::{self, ImportOptions};
 
@@ -57,6 +59,9 @@ struct StageTimes {
     sat: f64,
     encode_ssvdag: f64,
     encode_tsvdag: f64,
+    /// The three modes with the format-v1 encoder's heuristics (`TsvdagTuning::V1`), same run.
+    #[serde(default)]
+    encode_tsvdag_v1: f64,
 }
 
 /// Unique elements (nodes + leaves over all levels) per variant.
@@ -81,6 +86,17 @@ struct Bytes {
     tsvdag: u64,
 }
 
+/// TSVDAG bytes per mode with a cumulative set of encoder heuristics (`v1`: none, as the
+/// format-v1 encoder; `+reorient`; `+compact`: escape/mask translation fields; `+tie-break`;
+/// `+tagged`: tagged 16-bit pointers where cheaper, i.e. all).
+#[derive(Serialize, Deserialize)]
+struct Ablation {
+    heuristics: String,
+    base: u64,
+    lut: u64,
+    huffman: u64,
+}
+
 /// One (scene, resolution) measurement.
 #[derive(Serialize, Deserialize)]
 struct CompressRow {
@@ -91,6 +107,8 @@ struct CompressRow {
     bytes: Bytes,
     seconds: StageTimes,
     peak_rss_bytes: u64,
+    #[serde(default)]
+    ablation: Vec<Ablation>,
 }
 
 /// Runs `f` and returns its result with the seconds it took.
@@ -132,6 +150,33 @@ fn measure(scene_name: &str, input: &std::path::Path, resolution: u32) -> Result
             encode(true, true),
         )
     });
+    let modes = |tuning: TsvdagTuning| -> Result<[u64; 3]> {
+        let mut out = [0; 3];
+        for (o, &mode) in out.iter_mut().zip(&TsvdagOptions::MODES) {
+            *o = TsvdagEncoding::encode_tuned(&graph, mode, tuning)?.byte_size();
+        }
+        Ok(out)
+    };
+    let (v1, encode_tsvdag_v1) = timed(|| modes(TsvdagTuning::V1));
+    let v1 = v1?;
+    let mut ablation = Vec::new();
+    let mut tuning = TsvdagTuning::V1;
+    for step in ["v1", "+reorient", "+compact", "+tie-break", "+tagged"] {
+        match step {
+            "+reorient" => tuning.reorient = true,
+            "+compact" => tuning.compact_translations = true,
+            "+tie-break" => tuning.tie_break = true,
+            "+tagged" => tuning.tagged_pointers = true,
+            _ => {}
+        }
+        let [base, lut, huffman] = if step == "v1" { v1 } else { modes(tuning)? };
+        ablation.push(Ablation {
+            heuristics: step.to_string(),
+            base,
+            lut,
+            huffman,
+        });
+    }
     Ok(CompressRow {
         scene: scene_name.to_string(),
         resolution,
@@ -161,8 +206,10 @@ fn measure(scene_name: &str, input: &std::path::Path, resolution: u32) -> Result
             sat: sat_s,
             encode_ssvdag,
             encode_tsvdag,
+            encode_tsvdag_v1,
         },
         peak_rss_bytes: peak_rss_bytes(),
+        ablation,
     })
 }
 
@@ -247,14 +294,36 @@ fn markdown(rows: &[CompressRow]) -> String {
             pct(b.tsvdag, b.ssvdag)
         );
     }
-    md += "\n### Seconds per stage and peak memory\n\n| scene | N | voxelize+build | SSVDAG | S | A | S+A | S+A+T | encode SSVDAG | encode TSVDAG (3 variants) | peak RSS MiB |\n|---|---|---|---|---|---|---|---|---|---|---|\n";
+    md += "\n### TSVDAG bytes per encoder heuristic (cumulative; best mode in bold)\n\n| scene | N | heuristics | Base | +LUT | +LUT+Huffman |\n|---|---|---|---|---|---|\n";
+    for r in rows {
+        for a in &r.ablation {
+            let best = a.base.min(a.lut).min(a.huffman);
+            let cell = |v: u64| {
+                if v == best {
+                    format!("**{v}**")
+                } else {
+                    v.to_string()
+                }
+            };
+            md += &format!(
+                "| {} | {} | {} | {} | {} | {} |\n",
+                r.scene,
+                r.resolution,
+                a.heuristics,
+                cell(a.base),
+                cell(a.lut),
+                cell(a.huffman)
+            );
+        }
+    }
+    md += "\n### Seconds per stage and peak memory\n\n| scene | N | voxelize+build | SSVDAG | S | A | S+A | S+A+T | encode SSVDAG | encode TSVDAG (3 variants) | same, v1 heuristics | peak RSS MiB |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n";
     for r in rows {
         let t = &r.seconds;
         md +=
             &format!(
-            "| {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.0} |\n",
+            "| {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.0} |\n",
             r.scene, r.resolution, t.voxelize_and_build, t.ssvdag, t.s, t.a, t.sa, t.sat,
-            t.encode_ssvdag, t.encode_tsvdag, r.peak_rss_bytes as f64 / 1048576.0
+            t.encode_ssvdag, t.encode_tsvdag, t.encode_tsvdag_v1, r.peak_rss_bytes as f64 / 1048576.0
         );
     }
     md += "\nChart: per row one group of bars = element counts of SSVDAG, S, A, S+A, S+A+T as a share of the SVDAG's (full height = SVDAG).\n";

@@ -23,7 +23,8 @@ pub use huffman::{length_limited_code_lengths, Huffman};
 pub use ssvdag::SsvdagEncoding;
 pub use traverse::{contains, raycast, to_svdag, voxel_digest, EncodedHit, TreeView, VoxelIter};
 pub use tsvdag::{
-    GraphLevel, GraphPointer, TransformGraph, TsvdagEncoding, TsvdagOptions, MAX_TRANSLATION_LEVEL,
+    reorient, GraphLevel, GraphPointer, TransformGraph, TranslationCoding, TsvdagEncoding,
+    TsvdagOptions, TsvdagTuning, MAX_TRANSLATION_LEVEL,
 };
 
 /// Errors of encoding and of decoding encoded bytes.

@@ -26,7 +26,7 @@ use std::sync::Arc;
 
 use super::bytes::{Reader, Writer};
 use super::huffman::Huffman;
-use super::ssvdag::{read_node, sort_by_refcount};
+use super::ssvdag::read_node;
 use super::traverse::{root_level, TreeView};
 use super::{corrupt, EncodeError};
 use crate::dag::transform::{Transform, TransformSet, PERMUTATIONS};
@@ -41,6 +41,10 @@ const SYMBOLS: usize = 48 * 8;
 
 /// (new target id, transform id, translation): a distinct pointer of a level.
 type PointerKey = (u64, u8, [i32; 3]);
+
+/// A child level's candidate layout: (cost in u16 words, translation coding, tagged, per
+/// distinct pointer its stored value and size, the table).
+type Candidate = (u64, TranslationCoding, bool, Vec<(u64, u16)>, Vec<u64>);
 
 /// A child pointer of a [`TransformGraph`] node.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
@@ -140,6 +144,68 @@ pub struct TsvdagOptions {
     pub huffman: bool,
 }
 
+/// Encoder heuristics that do not change the format's semantics, switchable to measure each
+/// (`voxdag bench compress` ablations). All off reproduces the format-v1 encoder byte for byte.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TsvdagTuning {
+    /// Without tables: store each node in the orientation of its most frequent untranslated
+    /// reference ([`reorient`]).
+    pub reorient: bool,
+    /// Without Huffman: escape or mask coding of translation fields, chosen per child level
+    /// (format v2, payload flag bit 4).
+    pub compact_translations: bool,
+    /// Node order ties: untranslated references, then fewer children first.
+    pub tie_break: bool,
+    /// With tables: per child level, tagged 16-bit pointers where they cost less (format v2,
+    /// payload flag bit 5).
+    pub tagged_pointers: bool,
+}
+
+impl TsvdagTuning {
+    /// Every heuristic on (what `encode` uses).
+    pub const ALL: TsvdagTuning = TsvdagTuning {
+        reorient: true,
+        compact_translations: true,
+        tie_break: true,
+        tagged_pointers: true,
+    };
+    /// Every heuristic off: the format-v1 encoder.
+    pub const V1: TsvdagTuning = TsvdagTuning {
+        reorient: false,
+        compact_translations: false,
+        tie_break: false,
+        tagged_pointers: false,
+    };
+}
+
+impl TsvdagOptions {
+    /// The three modes `voxdag build` chooses from: base, lut, huffman.
+    pub const MODES: [TsvdagOptions; 3] = [
+        TsvdagOptions {
+            lut: false,
+            huffman: false,
+        },
+        TsvdagOptions {
+            lut: true,
+            huffman: false,
+        },
+        TsvdagOptions {
+            lut: true,
+            huffman: true,
+        },
+    ];
+
+    /// The mode's name: `base`, `lut`, `huffman`, or `huffman-nolut` (Huffman without tables).
+    pub fn mode_name(&self) -> &'static str {
+        match (self.lut, self.huffman) {
+            (false, false) => "base",
+            (true, false) => "lut",
+            (true, true) => "huffman",
+            (false, true) => "huffman-nolut",
+        }
+    }
+}
+
 impl Default for TsvdagOptions {
     fn default() -> Self {
         TsvdagOptions {
@@ -170,6 +236,24 @@ pub struct TsvdagEncoding {
     pub tables: Vec<Vec<u64>>,
     /// Huffman code per child level (when enabled and the level is pointed to).
     pub codes: Vec<Option<Huffman>>,
+    /// Per child level: how translation fields are written without Huffman.
+    pub translation_coding: Vec<TranslationCoding>,
+    /// Per child level, with tables: 16-bit pointers carry the table/inline tag bit like the
+    /// longer ones (format v2, payload flag bit 5).
+    pub tagged: Vec<bool>,
+}
+
+/// How a pointer with its flag set writes its translation, per child level that translates,
+/// without Huffman (`docs/encodings.md`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TranslationCoding {
+    /// Three fields, zero translations included (the only form of format v1; Huffman files and
+    /// levels without translations use it too).
+    Full,
+    /// A single all-zero field stands for "no translation"; otherwise the three fields.
+    Escape,
+    /// A 3-bit mask of the nonzero axes, then only their fields.
+    Mask,
 }
 
 /// A node handle of the TSVDAG view.
@@ -238,6 +322,33 @@ impl TsvdagEncoding {
         self.translations && level <= MAX_TRANSLATION_LEVEL
     }
 
+    /// Stored elements per level, leaves first (the node counts of the transform DAG it
+    /// encodes, whatever the mode).
+    pub fn node_counts(&self) -> Result<Vec<u64>, EncodeError> {
+        let mut out = vec![self.leaves.len() as u64];
+        for stream in &self.levels[1..] {
+            let (mut nodes, mut off) = (0u64, 0usize);
+            while off < stream.len() {
+                off = read_node(stream, off, 3, 0)?.1;
+                nodes += 1;
+            }
+            out.push(nodes);
+        }
+        Ok(out)
+    }
+
+    /// Whether the payload needs format v2: compact translation fields or tagged pointers.
+    pub fn needs_v2(&self) -> bool {
+        self.compact_translations() || self.tagged.contains(&true)
+    }
+
+    /// Whether some child level uses the escape or mask form (flag bit 4, format v2).
+    pub fn compact_translations(&self) -> bool {
+        self.translation_coding
+            .iter()
+            .any(|c| *c != TranslationCoding::Full)
+    }
+
     /// Canonicalizes an SVDAG under `set` and encodes it (no translations).
     pub fn build(
         dag: &crate::dag::Svdag,
@@ -259,10 +370,22 @@ impl TsvdagEncoding {
         Self::encode(&TransformGraph::from_transform_dag(&tdag), options)
     }
 
-    /// Encodes a graph.
+    /// Encodes a graph. Without look-up tables every stored node is first re-oriented to the
+    /// transform of its most frequent untranslated reference ([`reorient`]), so that most
+    /// pointers become plain ones; the table modes keep the canonical orientation, whose
+    /// pointers are more shareable.
     pub fn encode(
         g: &TransformGraph,
         options: TsvdagOptions,
+    ) -> Result<TsvdagEncoding, EncodeError> {
+        Self::encode_tuned(g, options, TsvdagTuning::ALL)
+    }
+
+    /// [`TsvdagEncoding::encode`] with a choice of heuristics.
+    pub fn encode_tuned(
+        g: &TransformGraph,
+        options: TsvdagOptions,
+        tuning: TsvdagTuning,
     ) -> Result<TsvdagEncoding, EncodeError> {
         let top = root_level(g.resolution) as usize;
         if g.levels.len() != top + 1 {
@@ -282,6 +405,8 @@ impl TsvdagEncoding {
             levels: vec![Vec::new(); top + 1],
             tables: vec![Vec::new(); top + 1],
             codes: vec![None; top + 1],
+            translation_coding: vec![TranslationCoding::Full; top + 1],
+            tagged: vec![false; top + 1],
         };
         let Some(root) = g.root else {
             return Ok(out);
@@ -291,18 +416,21 @@ impl TsvdagEncoding {
                 "root pointer out of the set or translated".into(),
             ));
         }
-        out.root = Some(root.transform);
         let counts: Vec<usize> = g.levels.iter().map(|l| l.len()).collect();
         if root.node as usize >= counts[top] {
             return Err(EncodeError::InvalidInput("root node out of range".into()));
         }
-        let order = sort_by_refcount(&counts, root.node as usize, |l, n| {
-            g.levels[l]
-                .node_children(n)
-                .iter()
-                .map(|c| c.node as usize)
-                .collect()
-        });
+        check_graph(g)?;
+        let reoriented;
+        let g = if tuning.reorient && !options.lut && g.set != TransformSet::None {
+            reoriented = reorient(g);
+            &reoriented
+        } else {
+            g
+        };
+        let root = g.root.expect("checked");
+        out.root = Some(root.transform);
+        let order = sort_nodes(g, &counts, root.node as usize, tuning.tie_break);
         let mut new_id = vec![u64::MAX; counts[0]];
         for (i, &old) in order[0].iter().enumerate() {
             out.leaves.push(g.levels[0].leaves[old]);
@@ -310,110 +438,99 @@ impl TsvdagEncoding {
         }
         for l in 1..=top {
             let cl = (l - 1) as u32;
-            let side = 4i32 << cl;
-            // Distinct pointers and their reference counts.
-            let mut refs: FxHashMap<PointerKey, u64> = FxHashMap::default();
+            // Distinct pointers, their reference counts, and the distinct id of every pointer
+            // in stream order (so the stream is written without a second hash look-up).
+            let mut ids: FxHashMap<PointerKey, u32> = FxHashMap::default();
+            let mut keys: Vec<(PointerKey, u64)> = Vec::new();
+            let mut pointer_ids: Vec<u32> = Vec::new();
             for &old in &order[l] {
                 for c in g.levels[l].node_children(old) {
-                    if !g.set.contains(c.transform) {
-                        return Err(EncodeError::InvalidInput(format!(
-                            "transform {} outside the set at level {l}",
-                            c.transform.index()
-                        )));
-                    }
-                    if c.translation != [0; 3] && !out.translates(cl) {
-                        return Err(EncodeError::InvalidInput(format!(
-                            "translation at level {cl}, where none is allowed"
-                        )));
-                    }
-                    if c.translation.iter().any(|&t| t <= -side || t >= side) {
-                        return Err(EncodeError::InvalidInput(format!(
-                            "translation {:?} out of range at level {cl}",
-                            c.translation
-                        )));
-                    }
                     let key = (
                         new_id[c.node as usize],
                         c.transform.index() as u8,
                         c.translation,
                     );
-                    *refs.entry(key).or_insert(0) += 1;
+                    let id = *ids.entry(key).or_insert_with(|| {
+                        keys.push((key, 0));
+                        keys.len() as u32 - 1
+                    });
+                    keys[id as usize].1 += 1;
+                    pointer_ids.push(id);
                 }
             }
-            let mut sorted: Vec<(PointerKey, u64)> = refs.into_iter().collect();
-            sorted.sort_unstable_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
+            drop(ids);
+            let mut sorted: Vec<u32> = (0..keys.len() as u32).collect();
+            sorted.sort_unstable_by(|&a, &b| {
+                let (ka, kb) = (&keys[a as usize], &keys[b as usize]);
+                kb.1.cmp(&ka.1).then(ka.0.cmp(&kb.0))
+            });
             if options.huffman {
                 let mut hist = vec![0u64; SYMBOLS];
-                for ((_, t, tr), count) in &sorted {
+                for ((_, t, tr), count) in &keys {
                     hist[*t as usize * 8 + nonzero_mask(tr)] += *count;
                 }
                 out.codes[l - 1] = Huffman::from_weights(&hist);
             }
-            let mut value: FxHashMap<PointerKey, (u64, u16)> = FxHashMap::default();
-            let mut table: Vec<u64> = Vec::new();
-            for ((idx, t, tr), count) in sorted {
-                let ptr = GraphPointer {
-                    node: 0,
-                    transform: Transform::from_index(t as usize).expect("checked"),
-                    translation: tr,
-                };
-                let e = out.encode_pointer(cl, idx, &ptr)?;
-                let bits = |v: u64| 64 - v.leading_zeros();
-                let entry = if options.lut {
-                    let inline_bits = bits(e) + 1;
-                    let inline_size = inline_bits.div_ceil(16).max(2) as u64;
-                    let inline_cost = if inline_size > 3 {
-                        u64::MAX
-                    } else {
-                        count * inline_size
-                    };
-                    let i = table.len() as u64;
-                    let (tv, tsize) = if i <= 0xffff {
-                        (i, 1u64)
-                    } else {
-                        (i << 1 | 1, (bits(i) + 1).div_ceil(16).max(2) as u64)
-                    };
-                    let table_cost = count * tsize + 4;
-                    if table_cost < inline_cost {
-                        table.push(e);
-                        (tv, tsize as u16)
-                    } else {
-                        (e << 1, inline_size as u16)
+            let compact = tuning.compact_translations && !options.huffman && out.translates(cl);
+            let codings: &[TranslationCoding] = if compact {
+                &[TranslationCoding::Escape, TranslationCoding::Mask]
+            } else {
+                &[TranslationCoding::Full]
+            };
+            // Per translation coding the pointer values, then per pointer layout (tables with
+            // plain or tagged 16-bit pointers) the cost: the cheapest combination is written.
+            let layouts: &[bool] = if options.lut && tuning.tagged_pointers {
+                &[false, true]
+            } else {
+                &[false]
+            };
+            let mut best: Option<Candidate> = None;
+            let mut last_err = None;
+            for &coding in codings {
+                out.translation_coding[l - 1] = coding;
+                let values = match out.pointer_values(cl, &keys) {
+                    Ok(v) => v,
+                    Err(e) => {
+                        last_err = Some(e);
+                        continue;
                     }
-                } else {
-                    let size = bits(e).div_ceil(16).max(1);
-                    if size > 3 {
-                        return Err(EncodeError::TooLarge(format!(
-                            "pointer of {} bits at level {l} without look-up tables",
-                            bits(e)
-                        )));
-                    }
-                    (e, size as u16)
                 };
-                value.insert((idx, t, tr), entry);
+                for &tagged in layouts {
+                    match out.assign_pointers(cl, &keys, &values, &sorted, tagged) {
+                        Ok((entries, table, cost)) => {
+                            let better = match &best {
+                                Some(b) => cost < b.0,
+                                None => true,
+                            };
+                            if better {
+                                best = Some((cost, coding, tagged, entries, table));
+                            }
+                        }
+                        Err(e) => last_err = Some(e),
+                    }
+                }
             }
+            let Some((_, coding, tagged, entries, table)) = best else {
+                return Err(last_err.expect("at least one coding tried"));
+            };
+            out.translation_coding[l - 1] = coding;
+            out.tagged[l - 1] = tagged;
             out.tables[l - 1] = table;
             let mut stream: Vec<u16> = Vec::new();
             let mut offsets = vec![u64::MAX; counts[l]];
+            let mut next = pointer_ids.iter();
             for &old in &order[l] {
                 offsets[old] = stream.len() as u64;
                 let at = stream.len();
                 stream.push(0);
                 let mut header = 0u16;
                 let mask = g.levels[l].child_masks[old];
-                let mut k = 0;
                 for o in 0..8 {
                     if (mask >> o) & 1 == 0 {
                         continue;
                     }
-                    let c = g.levels[l].node_children(old)[k];
-                    k += 1;
-                    let key = (
-                        new_id[c.node as usize],
-                        c.transform.index() as u8,
-                        c.translation,
-                    );
-                    let (v, size) = value[&key];
+                    let id = *next.next().expect("one id per pointer");
+                    let (v, size) = entries[id as usize];
                     for i in 0..size {
                         stream.push((v >> (16 * i)) as u16);
                     }
@@ -427,6 +544,90 @@ impl TsvdagEncoding {
         Ok(out)
     }
 
+    /// `E` of every distinct pointer of child level `cl` (`keys[i]`: pointer, reference count).
+    fn pointer_values(&self, cl: u32, keys: &[(PointerKey, u64)]) -> Result<Vec<u64>, EncodeError> {
+        keys.iter()
+            .map(|&((idx, t, tr), _)| {
+                let ptr = GraphPointer {
+                    node: 0,
+                    transform: Transform::from_index(t as usize).expect("checked"),
+                    translation: tr,
+                };
+                self.encode_pointer(cl, idx, &ptr)
+            })
+            .collect()
+    }
+
+    /// Stored value and size (u16 words) of every distinct pointer of child level `cl`
+    /// (`keys[i]`: pointer and reference count, `values[i]` its `E`; `sorted`: ids by
+    /// descending count), the level's table, and the cost in u16 words (pointers plus table).
+    /// With tables, `tagged` makes 16-bit pointers carry the table/inline tag bit too.
+    #[allow(clippy::type_complexity)]
+    fn assign_pointers(
+        &self,
+        cl: u32,
+        keys: &[(PointerKey, u64)],
+        values: &[u64],
+        sorted: &[u32],
+        tagged: bool,
+    ) -> Result<(Vec<(u64, u16)>, Vec<u64>, u64), EncodeError> {
+        let mut entries = vec![(0u64, 0u16); keys.len()];
+        let mut table: Vec<u64> = Vec::new();
+        let mut cost = 0u64;
+        let bits = |v: u64| 64 - v.leading_zeros();
+        // Smallest tagged size: 16 bits when tagged, else 32 (16-bit values are table indices).
+        let min_tagged = if tagged { 1 } else { 2 };
+        for &id in sorted {
+            let count = keys[id as usize].1;
+            let e = values[id as usize];
+            let entry = if self.options.lut {
+                let inline_size = (bits(e) + 1).div_ceil(16).max(min_tagged) as u64;
+                let inline_cost = if inline_size > 3 {
+                    u64::MAX
+                } else {
+                    count * inline_size
+                };
+                let i = table.len() as u64;
+                let (tv, tsize) = if !tagged && i <= 0xffff {
+                    (i, 1u64)
+                } else {
+                    (
+                        i << 1 | 1,
+                        (bits(i) + 1).div_ceil(16).max(min_tagged) as u64,
+                    )
+                };
+                let table_cost = count * tsize + 4;
+                if table_cost < inline_cost && tsize <= 3 {
+                    table.push(e);
+                    cost += table_cost;
+                    (tv, tsize as u16)
+                } else if inline_size <= 3 {
+                    cost += inline_cost;
+                    (e << 1, inline_size as u16)
+                } else {
+                    return Err(EncodeError::TooLarge(format!(
+                        "pointer of {} bits at level {}",
+                        bits(e),
+                        cl + 1
+                    )));
+                }
+            } else {
+                let size = bits(e).div_ceil(16).max(1);
+                if size > 3 {
+                    return Err(EncodeError::TooLarge(format!(
+                        "pointer of {} bits at level {} without look-up tables",
+                        bits(e),
+                        cl + 1
+                    )));
+                }
+                cost += count * size as u64;
+                (e, size as u16)
+            };
+            entries[id as usize] = entry;
+        }
+        Ok((entries, table, cost))
+    }
+
     /// `E` of a pointer to `target` at child level `level`.
     fn encode_pointer(
         &self,
@@ -436,45 +637,63 @@ impl TsvdagEncoding {
     ) -> Result<u64, EncodeError> {
         let tb = translation_bits(level);
         let side = 4i64 << level;
-        let mut fields: Vec<(u64, u32)> = Vec::new(); // (value, bits), low bits first
+        // Fields accumulate from the low bits (at most 1 + 6 + 3 + 3 * 5 bits before the target:
+        // no allocation, this runs once per distinct pointer and candidate layout).
+        let (mut e, mut used) = (0u64, 0u32);
+        let mut push = |v: u64, bits: u32| {
+            e |= v << used;
+            used += bits;
+        };
         if self.options.huffman {
             let sym = p.transform.index() * 8 + nonzero_mask(&p.translation);
             let code = self.codes[level as usize].as_ref();
             let (c, len) = code
                 .and_then(|h| h.encode(sym))
                 .ok_or_else(|| EncodeError::InvalidInput("symbol without a code".into()))?;
-            fields.push((c as u64, len as u32));
+            push(c as u64, len as u32);
             for &t in &p.translation {
                 if t != 0 {
-                    fields.push(((t as i64 + side) as u64, tb));
+                    push((t as i64 + side) as u64, tb);
                 }
             }
         } else if self.set != TransformSet::None || self.translates(level) {
             let any = p.transform != Transform::IDENTITY || p.translation != [0; 3];
-            fields.push((any as u64, 1));
+            push(any as u64, 1);
             if any {
-                fields.push((
+                push(
                     transform_field(self.set, p.transform),
                     transform_bits(self.set),
-                ));
+                );
                 if self.translates(level) {
-                    for &t in &p.translation {
-                        fields.push(((t as i64 + side) as u64, tb));
+                    let coding = self.translation_coding[level as usize];
+                    let mask = nonzero_mask(&p.translation);
+                    // Axes with a field: all (v1), none behind the zero escape, or the mask's.
+                    let axes = match coding {
+                        TranslationCoding::Full => 7,
+                        TranslationCoding::Escape if mask == 0 => {
+                            push(0, tb);
+                            0
+                        }
+                        TranslationCoding::Escape => 7,
+                        TranslationCoding::Mask => {
+                            push(mask as u64, 3);
+                            mask
+                        }
+                    };
+                    for (a, &t) in p.translation.iter().enumerate() {
+                        if (axes >> a) & 1 == 1 {
+                            push((t as i64 + side) as u64, tb);
+                        }
                     }
                 }
             }
         }
-        let used: u32 = fields.iter().map(|f| f.1).sum();
         if used + (64 - target.leading_zeros()) > 63 {
             return Err(EncodeError::TooLarge(format!(
                 "pointer to {target} needs over 63 bits"
             )));
         }
-        let mut e = target;
-        for &(v, b) in fields.iter().rev() {
-            e = e << b | v;
-        }
-        Ok(e)
+        Ok(target << used | e)
     }
 
     /// Decodes the pointer value `v` (size code `code`) of a child at level `level`:
@@ -488,7 +707,7 @@ impl TsvdagEncoding {
         let l = level as usize;
         let mut e = v;
         if self.options.lut {
-            let table_index = if code == 1 {
+            let table_index = if code == 1 && !self.tagged[l] {
                 Some(v)
             } else if v & 1 == 1 {
                 Some(v >> 1)
@@ -537,11 +756,35 @@ impl TsvdagEncoding {
                 let f = take(&mut e, transform_bits(self.set));
                 transform = field_transform(self.set, f).ok_or_else(|| bad("transform field"))?;
                 if self.translates(level) {
-                    for tr in translation.iter_mut() {
-                        *tr = take(&mut e, tb) as i32 - side;
-                        if *tr <= -side || *tr >= side {
-                            return Err(bad("translation amount"));
+                    // Which axes have a field: all three (v1 files, and the escape form
+                    // unless the first field is the zero escape) or the mask's.
+                    let mask = match self.translation_coding[l] {
+                        TranslationCoding::Full => 7,
+                        TranslationCoding::Escape => {
+                            let x = take(&mut e, tb);
+                            if x == 0 {
+                                0
+                            } else {
+                                translation[0] = x as i32 - side;
+                                6
+                            }
                         }
+                        TranslationCoding::Mask => take(&mut e, 3),
+                    };
+                    for (a, tr) in translation.iter_mut().enumerate() {
+                        if (mask >> a) & 1 == 1 {
+                            *tr = take(&mut e, tb) as i32 - side;
+                            if *tr <= -side || *tr >= side {
+                                return Err(bad("translation amount"));
+                            }
+                            if *tr == 0 && self.translation_coding[l] == TranslationCoding::Mask {
+                                return Err(bad("zero translation under a nonzero mask bit"));
+                            }
+                        }
+                    }
+                    let compact = self.translation_coding[l] != TranslationCoding::Full;
+                    if compact && transform == Transform::IDENTITY && translation == [0; 3] {
+                        return Err(bad("plain pointer with its flag set"));
                     }
                 }
             }
@@ -581,10 +824,24 @@ impl TsvdagEncoding {
             | (self.options.lut as u32) << 1
             | (self.options.huffman as u32) << 2
             | (self.translations as u32) << 3
+            | (self.compact_translations() as u32) << 4
+            | (self.tagged.contains(&true) as u32) << 5
             | set_id(self.set) << 8;
         w.u32(flags);
         w.u32(self.root.map_or(0, |t| t.index() as u32));
-        w.u32(0);
+        let mask_levels = self
+            .translation_coding
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| **c == TranslationCoding::Mask)
+            .fold(0u32, |m, (l, _)| m | 1 << l);
+        let tagged_levels = self
+            .tagged
+            .iter()
+            .enumerate()
+            .filter(|(_, t)| **t)
+            .fold(0u32, |m, (l, _)| m | 1 << (8 + l));
+        w.u32(mask_levels | tagged_levels);
         w.u64(self.leaves.len() as u64);
         for l in &self.levels[1..] {
             w.u64(l.len() as u64);
@@ -633,7 +890,7 @@ impl TsvdagEncoding {
             ));
         }
         let flags = r.u32("flags")?;
-        if flags & !0x30f != 0 {
+        if flags & !0x33f != 0 {
             return Err(corrupt(4, format!("unknown flags {flags:#x}")));
         }
         let set = match (flags >> 8) & 3 {
@@ -651,13 +908,61 @@ impl TsvdagEncoding {
                 .ok_or_else(|| corrupt(8, format!("root transform {root_t}")))?;
             Some(t)
         };
-        if r.u32("reserved")? != 0 {
-            return Err(corrupt(12, "reserved field is not zero"));
-        }
         let options = TsvdagOptions {
             lut: flags & 2 != 0,
             huffman: flags & 4 != 0,
         };
+        let translations = flags & 8 != 0;
+        let word = r.u32("coding word")?;
+        let (mask_levels, tagged_levels) = (word & 0xff, word >> 8);
+        let mut tagged = vec![false; top + 1];
+        if flags & 32 != 0 {
+            if !options.lut {
+                return Err(corrupt(4, "tagged pointers (flag bit 5) need tables"));
+            }
+            if tagged_levels >> top != 0 {
+                return Err(corrupt(
+                    12,
+                    format!("coding word {word:#x} tags a level that has no parent"),
+                ));
+            }
+            for (l, t) in tagged.iter_mut().enumerate() {
+                *t = (tagged_levels >> l) & 1 == 1;
+            }
+        } else if tagged_levels != 0 {
+            return Err(corrupt(12, "tagged-pointer bits without flag bit 5"));
+        }
+        let mut translation_coding = vec![TranslationCoding::Full; top + 1];
+        if flags & 16 != 0 {
+            if options.huffman || !translations {
+                return Err(corrupt(
+                    4,
+                    "compact translation fields (flag bit 4) need translations and no Huffman",
+                ));
+            }
+            if mask_levels >> (MAX_TRANSLATION_LEVEL + 1) != 0 {
+                return Err(corrupt(
+                    12,
+                    format!(
+                        "translation coding {mask_levels:#x} names a level that cannot translate"
+                    ),
+                ));
+            }
+            for (l, c) in translation_coding.iter_mut().enumerate().take(top) {
+                if l as u32 <= MAX_TRANSLATION_LEVEL {
+                    *c = if (mask_levels >> l) & 1 == 1 {
+                        TranslationCoding::Mask
+                    } else {
+                        TranslationCoding::Escape
+                    };
+                }
+            }
+        } else if mask_levels != 0 {
+            return Err(corrupt(
+                12,
+                "translation coding word is not zero without flag bit 4",
+            ));
+        }
         let leaf_count = r.u64("leaf count")?;
         let mut stream_lens = Vec::new();
         for _ in 0..top {
@@ -711,13 +1016,15 @@ impl TsvdagEncoding {
         let enc = TsvdagEncoding {
             resolution,
             set,
-            translations: flags & 8 != 0,
+            translations,
             options,
             root,
             leaves,
             levels,
             tables,
             codes,
+            translation_coding,
+            tagged,
         };
         enc.validate(&bases)?;
         Ok(enc)
@@ -890,6 +1197,190 @@ impl TsvdagEncoding {
         })?;
         Ok(Arc::new(grid))
     }
+}
+
+/// Checks the pointers of a graph: transforms in the set, translations only where allowed and
+/// in range, child indices in range.
+fn check_graph(g: &TransformGraph) -> Result<(), EncodeError> {
+    for l in 1..g.levels.len() {
+        let cl = (l - 1) as u32;
+        let side = 4i32 << cl;
+        let below = g.levels[l - 1].len();
+        for c in &g.levels[l].children {
+            if !g.set.contains(c.transform) {
+                return Err(EncodeError::InvalidInput(format!(
+                    "transform {} outside the set at level {l}",
+                    c.transform.index()
+                )));
+            }
+            if c.translation != [0; 3] && !(g.translations && cl <= MAX_TRANSLATION_LEVEL) {
+                return Err(EncodeError::InvalidInput(format!(
+                    "translation at level {cl}, where none is allowed"
+                )));
+            }
+            if c.translation.iter().any(|&t| t <= -side || t >= side) {
+                return Err(EncodeError::InvalidInput(format!(
+                    "translation {:?} out of range at level {cl}",
+                    c.translation
+                )));
+            }
+            if c.node as usize >= below {
+                return Err(EncodeError::InvalidInput(format!(
+                    "child {} out of range at level {cl}",
+                    c.node
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Stores every node of a (checked) graph in the orientation of its most frequent untranslated
+/// reference, top-down: node `C` becomes `R(C)` and every pointer `(C, T, t)` becomes
+/// `(R(C), T ∘ R⁻¹, t)`, so that those references turn into plain pointers. The graph means
+/// the same voxels and has the same number of stored nodes per level.
+pub fn reorient(g: &TransformGraph) -> TransformGraph {
+    let top = g.levels.len() - 1;
+    let mut orient: Vec<Vec<Transform>> = g
+        .levels
+        .iter()
+        .map(|l| vec![Transform::IDENTITY; l.len()])
+        .collect();
+    let Some(root) = g.root else {
+        return g.clone();
+    };
+    orient[top][root.node as usize] = root.transform;
+    for l in (1..=top).rev() {
+        // Votes `node << 6 | transform` of the untranslated pointers as the re-oriented
+        // parents see them; the most frequent transform per child wins (ties: smallest id).
+        let level = &g.levels[l];
+        let mut votes: Vec<u64> = Vec::with_capacity(level.children.len());
+        for n in 0..level.len() {
+            let r = orient[l][n];
+            for c in level.node_children(n) {
+                if c.translation == [0; 3] {
+                    votes.push((c.node as u64) << 6 | r.compose(c.transform).index() as u64);
+                }
+            }
+        }
+        votes.sort_unstable();
+        let below = &mut orient[l - 1];
+        let mut best_count = vec![0u32; below.len()];
+        let mut i = 0;
+        while i < votes.len() {
+            let mut j = i + 1;
+            while j < votes.len() && votes[j] == votes[i] {
+                j += 1;
+            }
+            let node = (votes[i] >> 6) as usize;
+            let run = (j - i) as u32;
+            if run > best_count[node] {
+                best_count[node] = run;
+                below[node] = Transform::from_index((votes[i] & 63) as usize).expect("id < 48");
+            }
+            i = j;
+        }
+    }
+    let levels = g
+        .levels
+        .iter()
+        .enumerate()
+        .map(|(l, level)| {
+            if l == 0 {
+                let leaves = level
+                    .leaves
+                    .iter()
+                    .zip(&orient[0])
+                    .map(|(&m, r)| r.apply_leaf(m))
+                    .collect();
+                return GraphLevel {
+                    leaves,
+                    ..GraphLevel::default()
+                };
+            }
+            let mut out = GraphLevel {
+                leaves: Vec::new(),
+                child_masks: Vec::with_capacity(level.len()),
+                child_starts: Vec::with_capacity(level.len()),
+                children: Vec::with_capacity(level.children.len()),
+            };
+            for n in 0..level.len() {
+                let r = orient[l][n];
+                let mut slots = [None; 8];
+                let mut k = 0;
+                for o in 0..8 {
+                    if (level.child_masks[n] >> o) & 1 == 1 {
+                        let c = level.node_children(n)[k];
+                        k += 1;
+                        let child_r = orient[l - 1][c.node as usize];
+                        slots[r.apply_octant(o)] = Some(GraphPointer {
+                            node: c.node,
+                            transform: r.compose(c.transform).compose(child_r.inverse()),
+                            translation: transform_translation(r, c.translation),
+                        });
+                    }
+                }
+                out.child_starts.push(out.children.len() as u32);
+                out.child_masks
+                    .push(r.apply_child_mask(level.child_masks[n]));
+                out.children.extend(slots.into_iter().flatten());
+            }
+            out
+        })
+        .collect();
+    TransformGraph {
+        resolution: g.resolution,
+        set: g.set,
+        translations: g.translations,
+        levels,
+        root: Some(GraphPointer {
+            node: root.node,
+            transform: Transform::IDENTITY,
+            translation: [0; 3],
+        }),
+    }
+}
+
+/// Orders the stored nodes of every level top-down, dropping unreferenced ones: descending
+/// reference count, then (with `tie_break`) descending untranslated references and fewer
+/// children first (smaller nodes give the following nodes smaller offsets), then the old order.
+/// Returns per level `new -> old` ids.
+fn sort_nodes(
+    g: &TransformGraph,
+    counts: &[usize],
+    root: usize,
+    tie_break: bool,
+) -> Vec<Vec<usize>> {
+    let top = counts.len() - 1;
+    let mut order: Vec<Vec<usize>> = vec![Vec::new(); counts.len()];
+    order[top] = vec![root];
+    for l in (0..top).rev() {
+        let mut refs = vec![0u64; counts[l]];
+        let mut plain = vec![0u64; counts[l]];
+        for &p in &order[l + 1] {
+            for c in g.levels[l + 1].node_children(p) {
+                refs[c.node as usize] += 1;
+                plain[c.node as usize] += (tie_break && c.translation == [0; 3]) as u64;
+            }
+        }
+        let size = |i: usize| {
+            if l == 0 || !tie_break {
+                0
+            } else {
+                g.levels[l].child_masks[i].count_ones()
+            }
+        };
+        let mut ids: Vec<usize> = (0..counts[l]).filter(|&i| refs[i] > 0).collect();
+        ids.sort_unstable_by(|&a, &b| {
+            refs[b]
+                .cmp(&refs[a])
+                .then(plain[b].cmp(&plain[a]))
+                .then(size(a).cmp(&size(b)))
+                .then(a.cmp(&b))
+        });
+        order[l] = ids;
+    }
+    order
 }
 
 fn nonzero_mask(t: &[i32; 3]) -> usize {
