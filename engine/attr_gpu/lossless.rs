@@ -42,21 +42,6 @@ pub struct EncodeScratch {
     blocks: u32,
 }
 
-/// Opens a profiled pass, or just a debug label without a profiler.
-fn begin(profiler: &mut Option<&mut Profiler>, cmd: &mut Commands<'_>, name: &str) {
-    match profiler {
-        Some(p) => p.begin_pass(cmd, name),
-        None => cmd.begin_label(name),
-    }
-}
-
-fn end(profiler: &mut Option<&mut Profiler>, cmd: &mut Commands<'_>) {
-    match profiler {
-        Some(p) => p.end_pass(cmd),
-        None => cmd.end_label(),
-    }
-}
-
 impl LosslessGpu {
     /// Builds the encode and decode pipelines.
     pub fn new(ctx: &Arc<GpuContext>) -> Result<LosslessGpu, GpuError> {
@@ -137,7 +122,7 @@ impl LosslessGpu {
     ) -> Result<Readback<u64>, GpuError> {
         self.check_colors(colors, count, scratch)?;
         let blocks = scratch.blocks;
-        begin(&mut profiler, cmd, "lossless plan");
+        cmd.begin_pass(&mut profiler, "lossless plan");
         let push = PlanPush {
             colors: colors.address(),
             plans: scratch.plans.address(),
@@ -150,9 +135,9 @@ impl LosslessGpu {
             bytemuck::bytes_of(&push),
             None,
         )?;
-        end(&mut profiler, cmd);
+        cmd.end_pass(&mut profiler);
         cmd.barrier();
-        begin(&mut profiler, cmd, "lossless scan");
+        cmd.begin_pass(&mut profiler, "lossless scan");
         let push = ScanPush {
             plans: scratch.plans.address(),
             offsets: scratch.offsets.address(),
@@ -160,7 +145,7 @@ impl LosslessGpu {
             pad: 0,
         };
         cmd.dispatch(&self.scan, [1, 1, 1], bytemuck::bytes_of(&push), None)?;
-        end(&mut profiler, cmd);
+        cmd.end_pass(&mut profiler);
         cmd.barrier();
         cmd.readback::<u64>(&scratch.offsets, blocks as u64 * 8, 1)
     }
@@ -179,7 +164,7 @@ impl LosslessGpu {
         mut profiler: Option<&mut Profiler>,
     ) -> Result<(), GpuError> {
         self.check_colors(colors, count, scratch)?;
-        begin(&mut profiler, cmd, "lossless write");
+        cmd.begin_pass(&mut profiler, "lossless write");
         let push = WritePush {
             colors: colors.address(),
             plans: scratch.plans.address(),
@@ -194,7 +179,7 @@ impl LosslessGpu {
             bytemuck::bytes_of(&push),
             None,
         )?;
-        end(&mut profiler, cmd);
+        cmd.end_pass(&mut profiler);
         cmd.barrier();
         Ok(())
     }
@@ -320,7 +305,7 @@ impl LosslessGpu {
         }
         let max_groups = self.ctx.info().max_compute_workgroup_count[0];
         let groups = [count.div_ceil(WORKGROUP).min(max_groups), 1, 1];
-        begin(&mut profiler, cmd, "lossless decode");
+        cmd.begin_pass(&mut profiler, "lossless decode");
         let push = DecodePush {
             chunk: chunk.address(),
             out_colors: out.address(),
@@ -328,7 +313,7 @@ impl LosslessGpu {
             pad: 0,
         };
         cmd.dispatch(&self.decode, groups, bytemuck::bytes_of(&push), None)?;
-        end(&mut profiler, cmd);
+        cmd.end_pass(&mut profiler);
         cmd.barrier();
         Ok(())
     }

@@ -15,9 +15,7 @@ pub use sort::{KeyWidth, SortScratch};
 
 use std::sync::Arc;
 
-use crate::gpu::{
-    shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, Profiler,
-};
+use crate::gpu::{shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError};
 
 /// Largest element count of any primitive (indices stay below 2^31 in the shaders); the
 /// practical limit is the device's largest buffer (`maxMemoryAllocationSize`).
@@ -59,22 +57,6 @@ pub struct Primitives {
     indirect_args: ComputePipeline,
     radix_hist: [ComputePipeline; 2],
     radix_scatter: [ComputePipeline; 2],
-}
-
-/// Opens a profiled pass, or just a debug label without a profiler.
-fn begin(profiler: &mut Option<&mut Profiler>, cmd: &mut Commands<'_>, name: &str) {
-    match profiler {
-        Some(p) => p.begin_pass(cmd, name),
-        None => cmd.begin_label(name),
-    }
-}
-
-/// Closes what [`begin`] opened.
-fn end(profiler: &mut Option<&mut Profiler>, cmd: &mut Commands<'_>) {
-    match profiler {
-        Some(p) => p.end_pass(cmd),
-        None => cmd.end_label(),
-    }
 }
 
 /// A 2D grid of at least `groups` workgroups (x at most [`GRID_X`]); shaders skip the excess.

@@ -9,7 +9,7 @@
 //! pass scatters the surviving values instead of writing positions.
 
 use super::gpu_shared::{ArgsPush, BlockPush, ReducePush};
-use super::{begin, check_count, check_len, end, grid, Primitives};
+use super::{check_count, check_len, grid, Primitives};
 use crate::gpu::{Buffer, Commands, GpuError, MemLocation, Profiler};
 
 /// Size of [`ReducePush`].
@@ -180,14 +180,14 @@ impl Primitives {
             group_size,
             pad: 0,
         };
-        begin(profiler, cmd, "indirect args");
+        cmd.begin_pass(profiler, "indirect args");
         cmd.dispatch(
             &self.indirect_args,
             [1, 1, 1],
             bytemuck::bytes_of(&push),
             None,
         )?;
-        end(profiler, cmd);
+        cmd.end_pass(profiler);
         cmd.barrier();
         Ok(())
     }
@@ -243,14 +243,14 @@ impl Primitives {
                 n,
                 predicate: (mode == MODE_COMPACT) as u32,
             };
-            begin(profiler, cmd, &format!("scan reduce L{depth}"));
+            cmd.begin_pass(profiler, &format!("scan reduce L{depth}"));
             cmd.dispatch(
                 &self.scan_reduce,
                 grid(groups),
                 bytemuck::bytes_of(&push),
                 None,
             )?;
-            end(profiler, cmd);
+            cmd.end_pass(profiler);
             cmd.barrier();
             let p = partials.address();
             self.record_level(
@@ -279,14 +279,14 @@ impl Primitives {
         } else {
             format!("scan block L{depth}")
         };
-        begin(profiler, cmd, &name);
+        cmd.begin_pass(profiler, &name);
         cmd.dispatch(
             &self.scan_block,
             grid(groups),
             bytemuck::bytes_of(&push),
             None,
         )?;
-        end(profiler, cmd);
+        cmd.end_pass(profiler);
         cmd.barrier();
         Ok(())
     }

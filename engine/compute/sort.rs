@@ -12,7 +12,7 @@
 
 use super::gpu_shared::RadixPush;
 use super::scan::ScanScratch;
-use super::{begin, check_count, check_len, end, grid, Primitives};
+use super::{check_count, check_len, grid, Primitives};
 use crate::gpu::{Buffer, Commands, GpuError, MemLocation, Profiler};
 
 /// Size of [`RadixPush`].
@@ -148,24 +148,24 @@ impl Primitives {
                 n: n32,
                 shift,
             };
-            begin(&mut profiler, cmd, &format!("radix histogram @{shift}"));
+            cmd.begin_pass(&mut profiler, &format!("radix histogram @{shift}"));
             cmd.dispatch(
                 &self.radix_hist[w],
                 grid(tiles),
                 bytemuck::bytes_of(&push),
                 None,
             )?;
-            end(&mut profiler, cmd);
+            cmd.end_pass(&mut profiler);
             cmd.barrier();
             self.record_scan_in_place(cmd, hist, hist_len as u32, &scratch.scan, &mut profiler)?;
-            begin(&mut profiler, cmd, &format!("{scatter} @{shift}"));
+            cmd.begin_pass(&mut profiler, &format!("{scatter} @{shift}"));
             cmd.dispatch(
                 &self.radix_scatter[w],
                 grid(tiles),
                 bytemuck::bytes_of(&push),
                 None,
             )?;
-            end(&mut profiler, cmd);
+            cmd.end_pass(&mut profiler);
             cmd.barrier();
         }
         Ok(())

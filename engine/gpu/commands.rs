@@ -11,7 +11,7 @@ use ash::vk;
 use super::memory::color_range;
 use super::release::{Garbage, Recorder};
 use super::ring::RingKind;
-use super::{vk_err, Buffer, ComputePipeline, GpuContext, GpuError, Image, MemLocation};
+use super::{vk_err, Buffer, ComputePipeline, GpuContext, GpuError, Image, MemLocation, Profiler};
 
 /// Transfers up to this size go through a staging ring; larger ones (or ones that find the ring
 /// full) get a dedicated staging buffer, released after their submission.
@@ -765,6 +765,23 @@ impl<'a> Commands<'a> {
             );
         }
         self.barrier();
+    }
+
+    /// Opens a pass of a pass-recording API that takes an optional profiler: a profiled pass
+    /// (debug label + timestamps) with one, a plain debug label without.
+    pub fn begin_pass(&mut self, profiler: &mut Option<&mut Profiler>, name: &str) {
+        match profiler {
+            Some(p) => p.begin_pass(self, name),
+            None => self.begin_label(name),
+        }
+    }
+
+    /// Closes what [`Commands::begin_pass`] opened (pass the same profiler).
+    pub fn end_pass(&mut self, profiler: &mut Option<&mut Profiler>) {
+        match profiler {
+            Some(p) => p.end_pass(self),
+            None => self.end_label(),
+        }
     }
 
     /// Opens a debug label (shown by RenderDoc / Nsight and in validation messages).
