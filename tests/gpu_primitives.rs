@@ -390,8 +390,36 @@ fn sort_u32_matches_cpu_and_is_stable() {
                 check_sort(&prims, &keys, 32, what);
             }
         }
+        for n in large_sort_sizes() {
+            for width in [32, 64] {
+                let mask = if width == 64 {
+                    u64::MAX
+                } else {
+                    u64::from(u32::MAX)
+                };
+                let keys: Vec<u64> = (0..n).map(|_| rng.next() & mask).collect();
+                check_sort(&prims, &keys, width, "random");
+            }
+        }
     }
     assert_clean(&ctx);
+}
+
+/// Sizes past 2^20 for the sorts, from `VOXDAG_TEST_SORT_LOG2=K` (2^K - 1 and 2^K + 1 random
+/// keys of both widths; K up to 26). Not run by default: a 2^22 sort takes 12-30 s on lavapipe
+/// with 2 cores, 2^26 minutes (docs/gpu-primitives.md).
+fn large_sort_sizes() -> Vec<usize> {
+    match std::env::var("VOXDAG_TEST_SORT_LOG2") {
+        Ok(k) => {
+            let k: u32 = k.trim().parse().expect("VOXDAG_TEST_SORT_LOG2: a number");
+            assert!(
+                (21..=26).contains(&k),
+                "VOXDAG_TEST_SORT_LOG2 must be 21..=26"
+            );
+            vec![(1 << k) - 1, (1 << k) + 1]
+        }
+        Err(_) => Vec::new(),
+    }
 }
 
 #[test]
