@@ -83,7 +83,7 @@ impl Buffer {
     }
 
     pub(crate) fn check_range(&self, offset: u64, len: u64) -> Result<(), GpuError> {
-        if offset.checked_add(len).map_or(true, |end| end > self.size) {
+        if offset.checked_add(len).is_none_or(|end| end > self.size) {
             return Err(GpuError::OutOfRange {
                 name: self.name.clone(),
                 offset,
