@@ -251,7 +251,7 @@ impl GpuContext {
     /// Reads the whole buffer back as `T`s (its size must be a multiple of `size_of::<T>()`).
     pub fn download<T: bytemuck::Pod>(self: &Arc<Self>, src: &Buffer) -> Result<Vec<T>, GpuError> {
         let t = std::mem::size_of::<T>() as u64;
-        if t == 0 || src.size % t != 0 {
+        if t == 0 || !src.size.is_multiple_of(t) {
             return Err(GpuError::InvalidArgument(format!(
                 "buffer '{}' of {} bytes is not a whole number of {t}-byte elements",
                 src.name, src.size
