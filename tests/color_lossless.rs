@@ -59,7 +59,7 @@ fn structured(n: usize, seed: u64) -> Vec<u32> {
         let len = (xorshift(&mut s) % 300 + 1) as usize;
         let base = xorshift(&mut s);
         match xorshift(&mut s) % 3 {
-            0 => out.extend(std::iter::repeat(base).take(len)),
+            0 => out.extend(std::iter::repeat_n(base, len)),
             1 => out.extend((0..len as u32).map(|i| {
                 let [r, g, b] = voxdag::attr::rgb(base);
                 pack_rgb([
@@ -370,7 +370,7 @@ fn targeted_corruptions_are_reported() {
     // A palette index past the palette, in an indexed block with a palette of 3 (2-bit indices).
     let colors: Vec<u32> = [0u8, 40, 0, 80, 40, 0, 80]
         .iter()
-        .flat_map(|&g| std::iter::repeat(pack_rgb([0, g, 0])).take(10))
+        .flat_map(|&g| std::iter::repeat_n(pack_rgb([0, g, 0]), 10))
         .collect();
     let mut w = lossless::encode(&colors, LosslessVariant::Rgb888);
     let h = w[1];

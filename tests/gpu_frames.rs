@@ -89,7 +89,7 @@ fn a_chain_of_1000_dependent_passes_in_one_submission_matches_the_cpu() {
             .unwrap();
             cmd.barrier();
         }
-        let last = if passes % 2 == 0 { &a } else { &b };
+        let last = if passes.is_multiple_of(2) { &a } else { &b };
         let back: Readback<u32> = cmd.readback(last, 0, n as usize).unwrap();
         let submission = cmd.submit_async().unwrap();
         assert_eq!(submission.value(), ctx.last_submitted());

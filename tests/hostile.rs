@@ -368,7 +368,7 @@ fn solid(n: u32) -> Svdag {
         level_starts[level as usize] = words.len() as u64;
         let child = words.len() as u32 + 9;
         words.push(0xff);
-        words.extend(std::iter::repeat(child).take(8));
+        words.extend(std::iter::repeat_n(child, 8));
     }
     level_starts[0] = words.len() as u64;
     words.extend([u32::MAX, u32::MAX]);

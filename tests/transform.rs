@@ -432,7 +432,7 @@ fn transformed_copies_collapse() {
     let group48 = group(TransformSet::All);
     let blob: Vec<[u32; 3]> = loop {
         let blob: Vec<[u32; 3]> = (0..512u64)
-            .filter(|_| rng.next() % 5 == 0)
+            .filter(|_| rng.next().is_multiple_of(5))
             .map(morton::decode)
             .collect();
         let images: HashSet<Vec<u64>> = group48

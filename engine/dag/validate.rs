@@ -122,7 +122,7 @@ impl Svdag {
         }
         // Leaves: pairs of words, never an empty mask.
         let leaves = self.level_range(0);
-        if leaves.is_empty() || (leaves.end - leaves.start) % 2 != 0 {
+        if leaves.is_empty() || !(leaves.end - leaves.start).is_multiple_of(2) {
             return Err((
                 Place::Level(0),
                 format!("leaf level has {} words", leaves.end - leaves.start),
@@ -153,7 +153,9 @@ impl Svdag {
                 for q in p + 1..end {
                     let c = self.words[q] as usize;
                     let ok = match &below {
-                        None => child_range.contains(&c) && (c - child_range.start) % 2 == 0,
+                        None => {
+                            child_range.contains(&c) && (c - child_range.start).is_multiple_of(2)
+                        }
                         Some(starts) => starts.get(c),
                     };
                     if !ok {

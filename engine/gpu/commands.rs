@@ -355,7 +355,7 @@ impl<'a> Commands<'a> {
         push_constants: &[u8],
         image: Option<&'a Image>,
     ) -> Result<(), GpuError> {
-        if offset % 4 != 0 || offset.checked_add(12).map_or(true, |end| end > args.size()) {
+        if !offset.is_multiple_of(4) || offset.checked_add(12).is_none_or(|end| end > args.size()) {
             return Err(GpuError::InvalidArgument(format!(
                 "pipeline '{}': indirect arguments at byte {offset} of '{}' ({} bytes) must be \
                  4-byte aligned and hold three u32s",
@@ -507,7 +507,7 @@ impl<'a> Commands<'a> {
         size: u64,
     ) -> Result<(), GpuError> {
         for (b, off) in [(src, src_offset), (dst, dst_offset)] {
-            if off.checked_add(size).map_or(true, |e| e > b.size()) {
+            if off.checked_add(size).is_none_or(|e| e > b.size()) {
                 return Err(GpuError::OutOfRange {
                     name: b.name().to_string(),
                     offset: off,

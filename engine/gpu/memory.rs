@@ -83,7 +83,7 @@ impl Buffer {
     }
 
     pub(crate) fn check_range(&self, offset: u64, len: u64) -> Result<(), GpuError> {
-        if offset.checked_add(len).map_or(true, |end| end > self.size) {
+        if offset.checked_add(len).is_none_or(|end| end > self.size) {
             return Err(GpuError::OutOfRange {
                 name: self.name.clone(),
                 offset,
@@ -251,7 +251,7 @@ impl GpuContext {
     /// Reads the whole buffer back as `T`s (its size must be a multiple of `size_of::<T>()`).
     pub fn download<T: bytemuck::Pod>(self: &Arc<Self>, src: &Buffer) -> Result<Vec<T>, GpuError> {
         let t = std::mem::size_of::<T>() as u64;
-        if t == 0 || src.size % t != 0 {
+        if t == 0 || !src.size.is_multiple_of(t) {
             return Err(GpuError::InvalidArgument(format!(
                 "buffer '{}' of {} bytes is not a whole number of {t}-byte elements",
                 src.name, src.size

@@ -72,7 +72,7 @@ impl GpuContext {
             )));
         }
         if desc.push_constant_size > self.info().max_push_constants_size
-            || desc.push_constant_size % 4 != 0
+            || !desc.push_constant_size.is_multiple_of(4)
         {
             return Err(GpuError::InvalidArgument(format!(
                 "pipeline '{name}': push constant size {} must be a multiple of 4 and at most {}",

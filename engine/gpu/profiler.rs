@@ -127,18 +127,33 @@ impl Profiler {
         Some(q)
     }
 
-    /// Opens a named pass: debug label + begin timestamp. Passes may nest.
+    /// Opens a named pass: debug label + begin timestamp + an execution-only barrier. Passes may
+    /// nest. Must be called outside a render pass instance (the barrier is recorded there).
     pub fn begin_pass(&mut self, cmd: &mut Commands<'_>, name: &str) {
         cmd.begin_label(name);
         let q = self.take_query(cmd);
         if let Some(q) = q {
-            // SAFETY: query `q` was reset above in this command buffer.
+            // SAFETY: query `q` was reset above in this command buffer; the barrier has no
+            // memory or layout part, and callers record passes outside render pass instances.
             unsafe {
                 self.ctx.device.cmd_write_timestamp(
                     cmd.raw,
                     vk::PipelineStageFlags::TOP_OF_PIPE,
                     self.pool,
                     q,
+                );
+                // lavapipe takes a timestamp at its next flush, and every pipeline barrier
+                // flushes: without one, the begin timestamp can land after the pass's first
+                // dispatch (the pass reads ~0 ms once a render pass ran on the queue). Source
+                // TOP_OF_PIPE waits for nothing, so on real GPUs it orders no work.
+                self.ctx.device.cmd_pipeline_barrier(
+                    cmd.raw,
+                    vk::PipelineStageFlags::TOP_OF_PIPE,
+                    vk::PipelineStageFlags::ALL_COMMANDS,
+                    vk::DependencyFlags::empty(),
+                    &[],
+                    &[],
+                    &[],
                 );
             }
         }

@@ -674,7 +674,7 @@ impl GpuHashTable {
     /// returns its item count.
     pub fn validate_items(&self, items: &[u32]) -> Result<u32, HashError> {
         let w = self.config.item_words as usize;
-        if items.len() % w != 0 {
+        if !items.len().is_multiple_of(w) {
             return Err(HashError::InvalidArgument(format!(
                 "{} words are not a whole number of {w}-word items",
                 items.len()

@@ -122,7 +122,7 @@ impl GpuRenderer {
         // The counts only index colours: without colours they are never used, so a scene of
         // 2^32 voxels or more (a solid 2^21 grid has 2^63) renders with zeros.
         let colorless = match colors {
-            ColorSource::Chunked(c) => c.chunk_starts.last().map_or(true, |&n| n == 0),
+            ColorSource::Chunked(c) => c.chunk_starts.last().is_none_or(|&n| n == 0),
             ColorSource::Raw(raw) => raw.is_empty(),
         };
         for (word, &n) in index.node_voxels.iter().enumerate() {
@@ -264,11 +264,8 @@ impl GpuRenderer {
         let groups = [w.div_ceil(WORKGROUP[0]), h.div_ceil(WORKGROUP[1]), 1];
         match profiler {
             Some(p) => {
+                // begin_pass orders its begin timestamp before the dispatch (lavapipe flush).
                 p.begin_pass(cmd, "primary rays");
-                // lavapipe resolves a timestamp at its next flush, and a barrier flushes: without
-                // it, once a render pass ran on the queue (the viewer), the begin timestamp is
-                // taken after the dispatch and the pass reads ~0 ms.
-                cmd.barrier();
                 let result = cmd.dispatch(
                     &self.primary,
                     groups,

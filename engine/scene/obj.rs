@@ -179,7 +179,7 @@ pub(crate) fn load_obj(
                 mesh.uvs
                     .extend(m.texcoords.chunks_exact(2).map(|t| [t[0], 1.0 - t[1]]));
             } else {
-                mesh.uvs.extend(std::iter::repeat([0.0, 0.0]).take(nv));
+                mesh.uvs.extend(std::iter::repeat_n([0.0, 0.0], nv));
             }
         }
         if any_vertex_colors {
@@ -190,7 +190,7 @@ pub(crate) fn load_obj(
                         .map(|c| [c[0], c[1], c[2], 1.0]),
                 );
             } else {
-                mesh.colors.extend(std::iter::repeat([1.0; 4]).take(nv));
+                mesh.colors.extend(std::iter::repeat_n([1.0; 4], nv));
             }
         }
         let material = if opts.texture_override.is_some() {

@@ -813,7 +813,7 @@ pub fn voxelize_brute_force(mesh: &Mesh, resolution: u32) -> Voxels {
                             break;
                         }
                         let (d2, bary) = voxel_distance(t, c);
-                        if best.map_or(true, |(bd, _, _)| d2 < bd) {
+                        if best.is_none_or(|(bd, _, _)| d2 < bd) {
                             best = Some((d2, i, bary));
                         }
                     }
