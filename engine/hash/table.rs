@@ -274,15 +274,9 @@ impl GpuHashTable {
         groups: u32,
         push: &HashPush,
     ) -> Result<(), HashError> {
-        match profiler.as_deref_mut() {
-            Some(p) => p.begin_pass(cmd, name),
-            None => cmd.begin_label(name),
-        }
+        cmd.begin_pass(profiler, name);
         cmd.dispatch(pipeline, [groups, 1, 1], bytemuck::bytes_of(push), None)?;
-        match profiler.as_deref_mut() {
-            Some(p) => p.end_pass(cmd),
-            None => cmd.end_label(),
-        }
+        cmd.end_pass(profiler);
         Ok(())
     }
 

@@ -225,7 +225,7 @@ impl GpuRenderer {
         settings: &RenderSettings,
         target: &'a Image,
         hits: Option<&Buffer>,
-        profiler: Option<&mut Profiler>,
+        mut profiler: Option<&mut Profiler>,
     ) -> Result<(), GpuError> {
         let (w, h) = (settings.width, settings.height);
         if w > target.width() || h > target.height() {
@@ -262,31 +262,16 @@ impl GpuRenderer {
             chunk_count: scene.chunk_count,
         };
         let groups = [w.div_ceil(WORKGROUP[0]), h.div_ceil(WORKGROUP[1]), 1];
-        match profiler {
-            Some(p) => {
-                // begin_pass orders its begin timestamp before the dispatch (lavapipe flush).
-                p.begin_pass(cmd, "primary rays");
-                let result = cmd.dispatch(
-                    &self.primary,
-                    groups,
-                    bytemuck::bytes_of(&push),
-                    Some(target),
-                );
-                p.end_pass(cmd);
-                result
-            }
-            None => {
-                cmd.begin_label("primary rays");
-                let result = cmd.dispatch(
-                    &self.primary,
-                    groups,
-                    bytemuck::bytes_of(&push),
-                    Some(target),
-                );
-                cmd.end_label();
-                result
-            }
-        }
+        // begin_pass orders its begin timestamp before the dispatch (lavapipe flush).
+        cmd.begin_pass(&mut profiler, "primary rays");
+        let result = cmd.dispatch(
+            &self.primary,
+            groups,
+            bytemuck::bytes_of(&push),
+            Some(target),
+        );
+        cmd.end_pass(&mut profiler);
+        result
     }
 
     /// Renders one image, blocking: [`GpuRenderer::record`] into a new image and hit buffer,
