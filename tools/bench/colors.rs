@@ -60,6 +60,13 @@ pub struct BenchColorsArgs {
     chart: PathBuf,
 }
 
+impl BenchColorsArgs {
+    /// The output files, checked before the work starts.
+    pub(super) fn outputs(&self) -> Vec<&std::path::Path> {
+        vec![&self.json, &self.markdown, &self.chart]
+    }
+}
+
 /// One codec on one scene at one resolution.
 #[derive(Serialize, Deserialize, Clone)]
 struct CodecRow {

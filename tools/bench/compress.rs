@@ -48,6 +48,15 @@ pub struct BenchCompressArgs {
     row_out: Option<PathBuf>,
 }
 
+impl BenchCompressArgs {
+    /// The output files, checked before the work starts.
+    pub(super) fn outputs(&self) -> Vec<&std::path::Path> {
+        let mut out: Vec<&std::path::Path> = vec![&self.json, &self.markdown, &self.chart];
+        out.extend(self.row_out.as_deref());
+        out
+    }
+}
+
 /// Seconds spent in each stage.
 #[derive(Serialize, Deserialize, Default)]
 struct StageTimes {
