@@ -91,8 +91,8 @@ pub struct BenchRenderArgs {
 /// Runs one benchmark.
 pub fn run(command: BenchCommand, quiet: bool) -> Result<()> {
     let outputs: Vec<&Path> = match &command {
-        BenchCommand::Build(args) => vec![&args.json, &args.markdown],
-        BenchCommand::Render(args) => vec![&args.json, &args.markdown],
+        BenchCommand::Build(args) => vec![args.json.as_path(), args.markdown.as_path()],
+        BenchCommand::Render(args) => vec![args.json.as_path(), args.markdown.as_path()],
         BenchCommand::Compress(args) => args.outputs(),
         BenchCommand::Hash(args) => args.outputs(),
         BenchCommand::Colors(args) => args.outputs(),

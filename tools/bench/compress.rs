@@ -49,11 +49,16 @@ pub struct BenchCompressArgs {
 }
 
 impl BenchCompressArgs {
-    /// The output files, checked before the work starts.
+    /// The output files, checked before the work starts (a per-scene child writes only its row).
     pub(super) fn outputs(&self) -> Vec<&std::path::Path> {
-        let mut out: Vec<&std::path::Path> = vec![&self.json, &self.markdown, &self.chart];
-        out.extend(self.row_out.as_deref());
-        out
+        match &self.row_out {
+            Some(row) => vec![row.as_path()],
+            None => vec![
+                self.json.as_path(),
+                self.markdown.as_path(),
+                self.chart.as_path(),
+            ],
+        }
     }
 }
 

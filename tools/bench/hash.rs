@@ -63,7 +63,11 @@ pub struct BenchHashArgs {
 impl BenchHashArgs {
     /// The output files, checked before the work starts.
     pub(super) fn outputs(&self) -> Vec<&std::path::Path> {
-        vec![&self.json, &self.markdown, &self.chart]
+        vec![
+            self.json.as_path(),
+            self.markdown.as_path(),
+            self.chart.as_path(),
+        ]
     }
 }
 

@@ -30,7 +30,7 @@ pub struct BenchPrimitivesArgs {
 impl BenchPrimitivesArgs {
     /// The output files, checked before the work starts.
     pub(super) fn outputs(&self) -> Vec<&std::path::Path> {
-        vec![&self.json, &self.markdown]
+        vec![self.json.as_path(), self.markdown.as_path()]
     }
 }
 
