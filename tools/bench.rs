@@ -113,11 +113,11 @@ pub fn run(command: BenchCommand, quiet: bool) -> Result<()> {
 /// write"): their folders are created as the writers would, then each path is checked.
 fn check_outputs(paths: &[&Path]) -> Result<()> {
     for path in paths {
-        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            if !dir.is_dir() {
-                std::fs::create_dir_all(dir)
-                    .with_context(|| format!("creating {}", dir.display()))?;
-            }
+        if let Some(dir) = path
+            .parent()
+            .filter(|d| !d.as_os_str().is_empty() && !d.is_dir())
+        {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
         }
         check_output(path)?;
     }
