@@ -5,6 +5,7 @@
 mod common;
 
 use proptest::prelude::*;
+use voxdag::dag::digest::ContentDigest;
 use voxdag::dag::encode::{
     contains, raycast, reorient, EncodedDag, GraphLevel, GraphPointer, SsvdagEncoding,
     TransformGraph, TranslationCoding, TsvdagEncoding, TsvdagOptions, VoxelDigest, VoxelIter,
@@ -73,6 +74,13 @@ fn check_all(voxels: &Voxels, rays: usize) {
         let codes: Vec<u64> = enc.voxels().collect::<Result<_, _>>().unwrap();
         assert_eq!(codes, voxels.codes, "{name}: enumeration");
         assert_eq!(enc.digest().unwrap(), digest, "{name}: digest");
+        // The content digest (`verify`) walks the stored nodes of every encoding, tsvdag
+        // translations included, and hashes the same canonical DAG.
+        assert_eq!(
+            ContentDigest::of(&enc, &[]).unwrap(),
+            ContentDigest::of_svdag(&dag, &[]).unwrap(),
+            "{name}: content digest"
+        );
         // Point lookups: every set voxel plus a deterministic sample of the grid.
         for &c in &voxels.codes {
             let [x, y, z] = morton::decode(c);

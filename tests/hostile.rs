@@ -10,7 +10,8 @@ use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use proptest::prelude::*;
-use voxdag::dag::Svdag;
+use voxdag::dag::encode::{EncodedDag, TsvdagEncoding, TsvdagOptions, VoxelDigest};
+use voxdag::dag::{Svdag, TransformSet, VdagFile};
 use voxdag::scene::{self, ImportOptions, Voxels};
 
 /// Runs the CLI with a deadline; `limit_as`: an RLIMIT_AS for the child.
@@ -382,8 +383,8 @@ fn solid(n: u32) -> Svdag {
     dag
 }
 
-/// Class 3: A 1 KB file of 2^63 voxels: verify in seconds, export refused before writing; a solid
-/// 65536^3 grid (2^48 voxels) renders on the CPU and the GPU.
+/// Class 3: A 1 KB file of 2^63 voxels (svdag32 and tsvdag): verify in seconds, export refused
+/// before writing; it and a solid 65536^3 grid (2^48 voxels) render on the CPU and the GPU.
 #[test]
 fn huge_valid_scene() {
     let dir = tempfile::tempdir().unwrap();
@@ -397,6 +398,28 @@ fn huge_valid_scene() {
     assert!(String::from_utf8_lossy(&o.stdout).contains("9223372036854775808 voxels"));
     let o = run_with(&["stats", s(&file), "--quick"], None, 20);
     assert!(o.status.success());
+    // The same voxels as a tsvdag (S+A transforms): its digest is O(stored nodes) too, when
+    // written (in this process) and when verified.
+    let tsv = dir.path().join("solid-tsvdag.vdag");
+    let encoded = TsvdagEncoding::build(&dag, TransformSet::All, TsvdagOptions::default()).unwrap();
+    VdagFile {
+        encoded: EncodedDag::Tsvdag(encoded),
+        colors: Vec::new(),
+        // The v1 voxel digest a tsvdag file must carry: its CRC of 2^63 codes is never computed
+        // (verify checks the count and the content digest).
+        digest: Some(VoxelDigest {
+            voxels: 1 << 63,
+            crc32: 0,
+        }),
+        stored_colors: None,
+    }
+    .save(&tsv)
+    .unwrap();
+    assert!(std::fs::metadata(&tsv).unwrap().len() < 2048);
+    let o = run_with(&["verify", s(&tsv)], None, 20);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("9223372036854775808 voxels"));
+    std::fs::remove_file(&tsv).unwrap();
     let before = names(dir.path());
     let xyz = dir.path().join("all.xyz");
     let o = run_with(
@@ -429,21 +452,27 @@ fn huge_valid_scene() {
     expect(&o, 1, &["more than --max-output 1.0 GiB"]);
     assert!(o.stdout.is_empty());
     assert_eq!(names(dir.path()), before, "nothing written");
-    // The renderers stop at 65536^3 (docs/rendering.md); a solid one has 2^48 voxels, more
-    // than any u32 count (without colours none is needed).
+    // Every valid file renders on both renderers: a solid 65536^3 grid (2^48 voxels, more than
+    // any u32 count; without colours none is needed) and the solid 2^21 one (2^63 voxels, the
+    // largest resolution of the format, the full 21-frame GPU stack), both the same image.
     let file64k = dir.path().join("solid64k.vdag");
     solid(1 << 16).save(&file64k).unwrap();
-    for extra in [&["--cpu"][..], &[][..]] {
-        let png = dir.path().join("solid.png");
-        let mut args = vec!["render", s(&file64k), "--size", "16x16", "--out", s(&png)];
-        args.extend(extra);
-        let o = run_with(&args, None, 60);
-        assert!(
-            o.status.success(),
-            "{extra:?}: {}",
-            String::from_utf8_lossy(&o.stderr)
-        );
-        std::fs::remove_file(&png).unwrap();
+    for scene in [&file64k, &file] {
+        let mut images = Vec::new();
+        for extra in [&["--cpu"][..], &[][..]] {
+            let png = dir.path().join("solid.png");
+            let mut args = vec!["render", s(scene), "--size", "16x16", "--out", s(&png)];
+            args.extend(extra);
+            let o = run_with(&args, None, 60);
+            assert!(
+                o.status.success(),
+                "{scene:?} {extra:?}: {}",
+                String::from_utf8_lossy(&o.stderr)
+            );
+            images.push(std::fs::read(&png).unwrap());
+            std::fs::remove_file(&png).unwrap();
+        }
+        assert_eq!(images[0], images[1], "{scene:?}: GPU == CPU");
     }
     std::fs::remove_file(&file64k).unwrap();
     // The same scene without the content digest: checked, but not proven.
@@ -622,6 +651,35 @@ fn output_files_are_clean() {
         s(&dir.path().join("missing/t.json")),
     ]);
     expect(&o, 1, &["does not exist"]);
+    // Benchmarks check every output (JSON, Markdown, chart, row) before the work starts.
+    let json = work.join("b.json");
+    let md = work.join("b.md");
+    let o = run(&[
+        "bench",
+        "compress",
+        "--json",
+        s(&json),
+        "--markdown",
+        s(&md),
+        "--chart",
+        s(&work),
+    ]);
+    expect(&o, 1, &["is a directory"]);
+    let o = run(&[
+        "bench",
+        "primitives",
+        "--log2",
+        "1",
+        "--json",
+        s(&json),
+        "--markdown",
+        s(&scene.join("b.md")),
+    ]);
+    expect(&o, 1, &["creating"]);
+    assert!(
+        !json.exists() && !md.exists(),
+        "no benchmark ran before its outputs were checked"
+    );
 }
 
 /// An edit of the glTF JSON.

@@ -20,7 +20,9 @@ use voxdag::render::gpu::GpuRenderer;
 use voxdag::render::{render_cpu, Camera, RenderSettings};
 use voxdag::scene::{self, ImportOptions};
 
-use crate::commands::{peak_rss_bytes, progress_bar, seconds, write_json, BuildReport};
+use crate::commands::{
+    check_output, peak_rss_bytes, progress_bar, seconds, write_json, BuildReport,
+};
 
 /// The benchmarks.
 #[derive(Subcommand)]
@@ -88,6 +90,15 @@ pub struct BenchRenderArgs {
 
 /// Runs one benchmark.
 pub fn run(command: BenchCommand, quiet: bool) -> Result<()> {
+    let outputs: Vec<&Path> = match &command {
+        BenchCommand::Build(args) => vec![args.json.as_path(), args.markdown.as_path()],
+        BenchCommand::Render(args) => vec![args.json.as_path(), args.markdown.as_path()],
+        BenchCommand::Compress(args) => args.outputs(),
+        BenchCommand::Hash(args) => args.outputs(),
+        BenchCommand::Colors(args) => args.outputs(),
+        BenchCommand::Primitives(args) => args.outputs(),
+    };
+    check_outputs(&outputs)?;
     match command {
         BenchCommand::Build(args) => bench_build(&args),
         BenchCommand::Render(args) => bench_render(&args, quiet),
@@ -96,6 +107,21 @@ pub fn run(command: BenchCommand, quiet: bool) -> Result<()> {
         BenchCommand::Colors(args) => colors::bench_colors(&args),
         BenchCommand::Primitives(args) => primitives::bench_primitives(&args),
     }
+}
+
+/// Checks every output path before a benchmark starts (hours of work must not end in "cannot
+/// write"): their folders are created as the writers would, then each path is checked.
+fn check_outputs(paths: &[&Path]) -> Result<()> {
+    for path in paths {
+        if let Some(dir) = path
+            .parent()
+            .filter(|d| !d.as_os_str().is_empty() && !d.is_dir())
+        {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        }
+        check_output(path)?;
+    }
+    Ok(())
 }
 
 /// Resolves a scene name of the shared data set, or takes the argument as a path.

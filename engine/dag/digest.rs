@@ -119,17 +119,14 @@ pub fn colors_hash(colors: &[u32]) -> u64 {
 }
 
 impl ContentDigest {
-    /// The digest of `encoded` with `colors` (the decoded colours a reader sees). svdag32 and
-    /// ssvdag cost O(stored nodes); tsvdag node handles are not hashable yet, so its nodes are
-    /// decoded to an SVDAG first (O(voxels); its allocations are bounded by the memory limit).
+    /// The digest of `encoded` with `colors` (the decoded colours a reader sees), in O(stored
+    /// nodes) for every encoding: each distinct node handle (a tsvdag handle includes its
+    /// transform and translation) is hashed once.
     pub fn of(encoded: &EncodedDag, colors: &[u32]) -> Result<ContentDigest, EncodeError> {
         let (dag, voxels) = match encoded {
             EncodedDag::Svdag32(d) => return ContentDigest::of_svdag(d, colors),
             EncodedDag::Ssvdag(d) => dag_hash(d)?,
-            EncodedDag::Tsvdag(_) => {
-                let dag = encoded.to_svdag(Vec::new())?;
-                dag_hash(&dag)?
-            }
+            EncodedDag::Tsvdag(d) => dag_hash(d)?,
         };
         Ok(ContentDigest {
             voxels,

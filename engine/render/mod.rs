@@ -70,7 +70,7 @@ pub enum RenderError {
         height: u32,
     },
     /// The grid resolution is not a power of two in `8..=MAX_GPU_RESOLUTION`.
-    #[error("resolution {0} unsupported: need a power of two in 8..=65536")]
+    #[error("resolution {0} unsupported: need a power of two in 8..=2097152")]
     Resolution(u32),
     /// More colours than a `uint` colour index can address on the GPU.
     #[error("{0} colours exceed the 2^32 limit of GPU colour indices")]

@@ -10,12 +10,14 @@ use crate::dag::Svdag;
 pub const FLAG_HAS_COLORS: u32 = 1;
 /// `flags` bit: cast shadow rays.
 pub const FLAG_SHADOWS: u32 = 2;
-/// Largest grid the GPU traversal supports (its stack has `MAX_GPU_FRAMES` frames).
-pub const MAX_GPU_RESOLUTION: u32 = 1 << 16;
-/// Stack frames of the GLSL traversal (`TRAVERSE_MAX_FRAMES` in `traverse.glsl`).
-pub const MAX_GPU_FRAMES: u32 = 16;
+/// Largest grid the renderers support: every valid `.vdag` file ([`crate::dag::MAX_RESOLUTION`],
+/// 2^21; its stack has `MAX_GPU_FRAMES` frames).
+pub const MAX_GPU_RESOLUTION: u32 = crate::dag::MAX_RESOLUTION;
+/// Stack frames of the GLSL traversal (`TRAVERSE_MAX_FRAMES` in `traverse.glsl`): root level
+/// `log2(N) - 2` plus the leaf's two sub-levels.
+pub const MAX_GPU_FRAMES: u32 = MAX_GPU_RESOLUTION.trailing_zeros();
 /// Shadow-ray start offset along the normal, as a fraction of the resolution (2^-18 N: about 32
-/// f32 ulps of the largest coordinate, 0.25 voxel at 64K^3, 3e-5 voxel at 8^3).
+/// f32 ulps of the largest coordinate, 0.25 voxel at 64K^3, 8 voxels at 2^21, 3e-5 voxel at 8^3).
 pub const SHADOW_EPSILON_PER_VOXEL_SIDE: f32 = 1.0 / 262144.0;
 
 pub use super::gpu_shared::RenderParams;

@@ -60,6 +60,17 @@ pub struct BenchColorsArgs {
     chart: PathBuf,
 }
 
+impl BenchColorsArgs {
+    /// The output files, checked before the work starts.
+    pub(super) fn outputs(&self) -> Vec<&std::path::Path> {
+        vec![
+            self.json.as_path(),
+            self.markdown.as_path(),
+            self.chart.as_path(),
+        ]
+    }
+}
+
 /// One codec on one scene at one resolution.
 #[derive(Serialize, Deserialize, Clone)]
 struct CodecRow {

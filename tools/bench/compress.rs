@@ -48,6 +48,20 @@ pub struct BenchCompressArgs {
     row_out: Option<PathBuf>,
 }
 
+impl BenchCompressArgs {
+    /// The output files, checked before the work starts (a per-scene child writes only its row).
+    pub(super) fn outputs(&self) -> Vec<&std::path::Path> {
+        match &self.row_out {
+            Some(row) => vec![row.as_path()],
+            None => vec![
+                self.json.as_path(),
+                self.markdown.as_path(),
+                self.chart.as_path(),
+            ],
+        }
+    }
+}
+
 /// Seconds spent in each stage.
 #[derive(Serialize, Deserialize, Default)]
 struct StageTimes {

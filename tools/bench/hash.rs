@@ -60,6 +60,17 @@ pub struct BenchHashArgs {
     chart: PathBuf,
 }
 
+impl BenchHashArgs {
+    /// The output files, checked before the work starts.
+    pub(super) fn outputs(&self) -> Vec<&std::path::Path> {
+        vec![
+            self.json.as_path(),
+            self.markdown.as_path(),
+            self.chart.as_path(),
+        ]
+    }
+}
+
 /// Search hit rates of Table 4.2, in percent.
 const HIT_RATES: [u32; 3] = [25, 50, 75];
 

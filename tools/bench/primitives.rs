@@ -27,6 +27,13 @@ pub struct BenchPrimitivesArgs {
     markdown: PathBuf,
 }
 
+impl BenchPrimitivesArgs {
+    /// The output files, checked before the work starts.
+    pub(super) fn outputs(&self) -> Vec<&std::path::Path> {
+        vec![self.json.as_path(), self.markdown.as_path()]
+    }
+}
+
 /// One primitive at one size.
 #[derive(Serialize)]
 struct PrimitiveRow {

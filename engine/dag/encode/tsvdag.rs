@@ -277,6 +277,57 @@ pub enum TNode {
     },
 }
 
+/// Identity, not content: two handles are equal when they name the same stored node under the
+/// same transform and translation, or the same window of the same materialised grid. That is
+/// what memoized walks (the `verify` digest) need to visit each distinct node once; a memo key
+/// holds its `Arc`, so a grid's address is never reused while it is compared against.
+impl PartialEq for TNode {
+    fn eq(&self, other: &TNode) -> bool {
+        match (self, other) {
+            (
+                TNode::Stored {
+                    index: a,
+                    transform: ta,
+                    translation: ra,
+                },
+                TNode::Stored {
+                    index: b,
+                    transform: tb,
+                    translation: rb,
+                },
+            ) => a == b && ta == tb && ra == rb,
+            (TNode::Dense { grid: a, base: ba }, TNode::Dense { grid: b, base: bb }) => {
+                Arc::ptr_eq(a, b) && ba == bb
+            }
+            _ => false,
+        }
+    }
+}
+
+impl Eq for TNode {}
+
+impl std::hash::Hash for TNode {
+    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
+        match self {
+            TNode::Stored {
+                index,
+                transform,
+                translation,
+            } => {
+                0u8.hash(state);
+                index.hash(state);
+                transform.hash(state);
+                translation.hash(state);
+            }
+            TNode::Dense { grid, base } => {
+                1u8.hash(state);
+                (Arc::as_ptr(grid) as usize).hash(state);
+                base.hash(state);
+            }
+        }
+    }
+}
+
 fn set_id(set: TransformSet) -> u32 {
     match set {
         TransformSet::None => 0,

@@ -14,8 +14,9 @@
 #define VOXDAG_RENDER_TRAVERSE_GLSL
 
 // Stack frames: depth 0 = root ... root_level = 4^3 leaf, root_level + 1 = 2^3 sub-block.
-// 16 frames hold grids up to 65536^3 (`MAX_GPU_FRAMES` / `MAX_GPU_RESOLUTION` in params.rs).
-#define TRAVERSE_MAX_FRAMES 16u
+// 21 frames hold grids up to 2^21 per side, every valid .vdag (`MAX_GPU_FRAMES` /
+// `MAX_GPU_RESOLUTION` in params.rs).
+#define TRAVERSE_MAX_FRAMES 21u
 // Inverse of a zero direction component (`PARALLEL_INV`).
 #define TRAVERSE_PARALLEL_INV 1e36
 // `t_max` of unbounded rays (`T_UNBOUNDED`).
