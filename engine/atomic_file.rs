@@ -177,9 +177,15 @@ pub fn write_atomic(
 mod tests {
     use super::*;
     use std::io::Write;
+    use std::sync::Mutex;
+
+    /// `remove_temp_files` removes every registered temporary of the process: the tests that
+    /// register temporaries (directly or through `write_atomic`) must not run at the same time.
+    static REGISTRY: Mutex<()> = Mutex::new(());
 
     #[test]
     fn writes_whole_file_or_nothing() {
+        let _serial = REGISTRY.lock().unwrap_or_else(|p| p.into_inner());
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("out.bin");
         write_atomic(&path, |w| w.write_all(b"hello")).unwrap();
@@ -205,6 +211,7 @@ mod tests {
 
     #[test]
     fn registered_temporaries_are_removed() {
+        let _serial = REGISTRY.lock().unwrap_or_else(|p| p.into_inner());
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("t.tmp");
         std::fs::write(&path, b"x").unwrap();
