@@ -414,11 +414,12 @@ fn glsl_includes_compile() {
 #extension GL_GOOGLE_include_directive : require
 layout(local_size_x = 8, local_size_y = 8) in;
 layout(std430, binding = 0) readonly buffer Words { uint words[]; };
-layout(std430, binding = 1) readonly buffer Counts { uint counts[]; };
+#extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
+layout(std430, binding = 1) readonly buffer Counts { uint64_t counts[]; };
 layout(std430, binding = 2) readonly buffer Colors { uint colors[]; };
 uint dag_word(uint i) { return words[i]; }
-uint dag_node_voxels(uint i) { return counts[i]; }
-uint dag_color(uint i) { return colors[i]; }
+uint64_t dag_node_voxels(uint i) { return counts[i]; }
+uint dag_color(uint64_t i) { return colors[uint(i)]; }
 #include "render/shade.glsl"
 layout(std430, binding = 3) readonly buffer Params { RenderParams params; };
 layout(std430, binding = 4) writeonly buffer Rgba { uint out_rgba[]; };

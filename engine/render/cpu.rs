@@ -114,7 +114,7 @@ pub fn shade_pixel_with(
     let albedo = if p.has_colors() {
         // Out-of-range indices shade white, like the GPU (which checks `color_count`).
         let rgba = match colors.color(hit.color_index) {
-            Some(c) if hit.color_index < p.color_count as u64 => c,
+            Some(c) if hit.color_index < p.color_count => c,
             _ => 0xffff_ffff,
         };
         [0, 8, 16].map(|s| srgb_to_linear(((rgba >> s) & 0xff) as f32 / 255.0))

@@ -48,7 +48,7 @@ pub struct GpuScene {
     color_format: ColorFormat,
     chunk_count: u32,
     resolution: u32,
-    color_count: u32,
+    color_count: u64,
 }
 
 impl GpuScene {
@@ -58,7 +58,7 @@ impl GpuScene {
     }
 
     /// Number of per-voxel colours (0 when the scene has none).
-    pub fn color_count(&self) -> u32 {
+    pub fn color_count(&self) -> u64 {
         self.color_count
     }
 
@@ -94,9 +94,9 @@ impl GpuRenderer {
     }
 
     /// Uploads `dag.words`, its colours (as one raw chunk) and the per-node voxel counts of
-    /// [`VoxelIndex`] (as `u32`). Errors when a count or the colour count exceeds `u32`, when the
-    /// DAG has 2^32 or more words (GPU indices are `uint`), or when a buffer exceeds the device's
-    /// allocation limit.
+    /// [`VoxelIndex`] (`u64`: colour indices of huge scenes exceed 2^32). Errors when raw colours
+    /// (one chunk) reach 2^32, when the DAG has 2^32 or more words (GPU word indices are `uint`),
+    /// or when a buffer exceeds the device's allocation limit.
     pub fn upload(&self, dag: &Svdag) -> Result<GpuScene, GpuError> {
         self.upload_with(dag, ColorSource::Raw(&dag.colors))
     }
@@ -113,29 +113,17 @@ impl GpuRenderer {
         }
         if dag.colors.len() as u64 > u32::MAX as u64 {
             return Err(invalid(format!(
-                "{} colours exceed the 2^32 limit of GPU colour indices",
+                "{} raw colours in one chunk: the GPU needs fewer than 2^32 per chunk (store them \
+                 chunked: --colors)",
                 dag.colors.len()
             )));
         }
+        // 64-bit counts: a solid 2^21 grid has 2^63 voxels, and colour indices follow them.
         let index = VoxelIndex::new(dag);
-        let mut counts = Vec::with_capacity(index.node_voxels.len());
-        // The counts only index colours: without colours they are never used, so a scene of
-        // 2^32 voxels or more (a solid 2^21 grid has 2^63) renders with zeros.
-        let colorless = match colors {
-            ColorSource::Chunked(c) => c.chunk_starts.last().is_none_or(|&n| n == 0),
-            ColorSource::Raw(raw) => raw.is_empty(),
-        };
-        for (word, &n) in index.node_voxels.iter().enumerate() {
-            let n = if colorless { 0 } else { n };
-            let n = u32::try_from(n).map_err(|_| {
-                invalid(format!(
-                    "node at word {word} holds {n} voxels, more than a GPU u32 count"
-                ))
-            })?;
-            counts.push(n);
-        }
         let words = self.ctx.upload("dag words", &dag.words)?;
-        let node_voxels = self.ctx.upload("dag node voxel counts", &counts)?;
+        let node_voxels = self
+            .ctx
+            .upload("dag node voxel counts", &index.node_voxels)?;
         // Raw colours are one chunk of the raw format: the shader has a single colour path.
         let (format, words_of_colors, starts, offsets) = match colors {
             ColorSource::Chunked(c) => {
@@ -149,9 +137,9 @@ impl GpuRenderer {
             }
         };
         let (color_count, chunk_count) = (*starts.last().expect("validated"), starts.len() - 1);
-        if color_count > u32::MAX as u64 || chunk_count as u64 >= u32::MAX as u64 {
+        if chunk_count as u64 >= u32::MAX as u64 {
             return Err(invalid(format!(
-                "{color_count} colours in {chunk_count} chunks: the GPU needs fewer than 2^32"
+                "{color_count} colours in {chunk_count} chunks: the GPU needs fewer than 2^32 chunks"
             )));
         }
         // Empty buffers are not allowed: scenes without colours get one word (never read: the
@@ -172,7 +160,7 @@ impl GpuRenderer {
             color_format: format,
             chunk_count: chunk_count as u32,
             resolution: dag.resolution,
-            color_count: color_count as u32,
+            color_count,
         })
     }
 

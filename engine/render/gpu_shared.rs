@@ -2,7 +2,7 @@
 // the engine expands this file into Rust structs, build.rs into `gen/render.glsl`.
 gpu_shared! {
     /// Frame constants shared by the CPU reference renderer and the GPU (`struct RenderParams`
-    /// in `render_params.h`): five `vec4`s then eight `uint`s, 112 bytes.
+    /// in `render_params.h`): five `vec4`s, six `uint`s, a `uint64_t`: 112 bytes.
     #[derive(PartialEq)]
     pub struct RenderParams {
         /// xyz: eye position (grid coordinates); w: `tan(fov_y / 2)`.
@@ -25,10 +25,11 @@ gpu_shared! {
         pub root_level: uint,
         /// `FLAG_HAS_COLORS | FLAG_SHADOWS`.
         pub flags: uint,
-        /// Entries of the colour buffer (0 without colours); larger colour indices shade white.
-        pub color_count: uint,
-        /// Explicit padding to a 16-byte multiple.
-        pub _pad: [uint; 2],
+        /// Explicit padding: `color_count` is 8-byte aligned.
+        pub _pad: uint,
+        /// Colours stored (0 without colours; 64-bit: huge scenes exceed 2^32 voxels); larger
+        /// colour indices shade white.
+        pub color_count: uint64_t,
     }
 
     /// Push constants of `primary.comp`: device addresses of its buffers, then the colour format.
@@ -37,7 +38,7 @@ gpu_shared! {
         pub(crate) params: uint64_t,
         /// The DAG's words.
         pub(crate) words: uint64_t,
-        /// Voxel count below each node (colour indexing).
+        /// Voxel count below each node (`u64` per DAG word, colour indexing).
         pub(crate) node_voxels: uint64_t,
         /// Encoded colour words.
         pub(crate) color_words: uint64_t,

@@ -72,9 +72,6 @@ pub enum RenderError {
     /// The grid resolution is not a power of two in `8..=MAX_GPU_RESOLUTION`.
     #[error("resolution {0} unsupported: need a power of two in 8..=2097152")]
     Resolution(u32),
-    /// More colours than a `uint` colour index can address on the GPU.
-    #[error("{0} colours exceed the 2^32 limit of GPU colour indices")]
-    TooManyColors(u64),
     /// The light direction is zero or not finite.
     #[error("light direction {0:?} is zero or not finite")]
     LightDir([f32; 3]),

@@ -52,9 +52,6 @@ impl RenderParams {
         {
             return Err(RenderError::Resolution(dag.resolution));
         }
-        if color_count > u32::MAX as u64 {
-            return Err(RenderError::TooManyColors(color_count));
-        }
         let light =
             normalize(settings.light_dir).ok_or(RenderError::LightDir(settings.light_dir))?;
         let cam = &settings.camera;
@@ -79,8 +76,8 @@ impl RenderParams {
             resolution: dag.resolution,
             root_level: dag.root_level(),
             flags,
-            color_count: color_count as u32,
-            _pad: [0; 2],
+            color_count,
+            _pad: 0,
         })
     }
 

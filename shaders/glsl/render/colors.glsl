@@ -7,7 +7,7 @@
 //   uint64_t chunk_offsets; // ChunkedColors::chunk_offsets (chunk_count + 1 u64)
 // and the fields `uint color_format` (attr::ColorFormat id) and `uint chunk_count`, before
 // including this file. Provides
-//   uint chunk_color(uint i); // RGBA8 colour i (alpha 255), i < chunk_starts[chunk_count]
+//   uint chunk_color(uint64_t i); // RGBA8 colour i (alpha 255), i < chunk_starts[chunk_count]
 #ifndef VOXDAG_RENDER_COLORS_GLSL
 #define VOXDAG_RENDER_COLORS_GLSL
 
@@ -32,20 +32,20 @@ layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer Col
     uint w[];
 };
 
-uint chunk_color(uint i) {
+uint chunk_color(uint64_t i) {
     // The last chunk whose start is <= i (ChunkedColors::chunk_of): starts[lo] <= i < starts[hi].
     ColorTableRef starts = ColorTableRef(push.chunk_starts);
     uint lo = 0u;
     uint hi = push.chunk_count;
     while (hi - lo > 1u) {
         uint mid = lo + (hi - lo) / 2u;
-        if (starts.v[mid] <= uint64_t(i)) {
+        if (starts.v[mid] <= i) {
             lo = mid;
         } else {
             hi = mid;
         }
     }
-    uint local = i - uint(starts.v[lo]);
+    uint local = uint(i - starts.v[lo]); // chunks hold far fewer than 2^32 colours
     uint64_t chunk = push.color_words + 4ul * ColorTableRef(push.chunk_offsets).v[lo];
     switch (push.color_format) {
     case COLOR_FORMAT_RAW:

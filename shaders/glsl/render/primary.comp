@@ -20,6 +20,9 @@ layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer Pa
 layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer WordsRef {
     uint w[];
 };
+layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer Words64Ref {
+    uint64_t w[];
+};
 layout(buffer_reference, std430, buffer_reference_align = 4) writeonly buffer HitsRef {
     uint h[];
 };
@@ -33,11 +36,11 @@ uint dag_word(uint i) {
     return WordsRef(push.words).w[i];
 }
 
-uint dag_node_voxels(uint i) {
-    return WordsRef(push.node_voxels).w[i];
+uint64_t dag_node_voxels(uint i) {
+    return Words64Ref(push.node_voxels).w[i];
 }
 
-uint dag_color(uint i) {
+uint dag_color(uint64_t i) {
     return chunk_color(i);
 }
 

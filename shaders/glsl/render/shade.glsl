@@ -1,7 +1,7 @@
 // Primary rays, shading, shadow ray and sky: the GLSL twin of engine/render/cpu.rs.
 //
 // The includer defines `dag_word`, `dag_node_voxels` (see traverse.glsl) and
-//   uint dag_color(uint i); // RGBA8 colour i (r | g << 8 | b << 16 | a << 24, sRGB)
+//   uint dag_color(uint64_t i); // RGBA8 colour i (r | g << 8 | b << 16 | a << 24, sRGB)
 // before including this file; this file includes traverse.glsl and shared/render_params.h.
 // Provides
 //   vec4 shade_pixel(uvec2 pixel, RenderParams p, out bool hit);

@@ -2,7 +2,7 @@
 //
 // The includer defines, BEFORE including this file:
 //   uint dag_word(uint i);        // word i of `Svdag::words`
-//   uint dag_node_voxels(uint i); // `VoxelIndex::node_voxels[i]` as uint
+//   uint64_t dag_node_voxels(uint i); // `VoxelIndex::node_voxels[i]`
 // Provides `struct Hit` and
 //   bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit);
 // `root_level` is `RenderParams::root_level` (log2(N) - 2); the grid is [0, 4 << root_level)^3.
@@ -27,7 +27,7 @@ struct Hit {
     float t;          // entry parameter (origin + t * dir), >= 0
     uvec3 voxel;      // voxel coordinates
     ivec3 normal;     // entry face normal, pointing against the ray
-    uint color_index; // depth-first Morton index of the voxel (index into the colours)
+    uint64_t color_index; // depth-first Morton index of the voxel (index into the colours)
 };
 
 // Per-ray constants of the box tests.
@@ -118,7 +118,7 @@ bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit)
     hit.t = 0.0;
     hit.voxel = uvec3(0u);
     hit.normal = ivec3(0);
-    hit.color_index = 0u;
+    hit.color_index = 0ul;
     if (any(isnan(origin)) || any(isinf(origin)) || any(isnan(dir)) || any(isinf(dir)) ||
         all(equal(dir, vec3(0.0)))) {
         return false;
@@ -176,7 +176,7 @@ bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit)
             hit.normal = traverse_normal(dir, t_near, axis);
             // Colour index: voxels of the preceding siblings on the path, then the rank inside
             // the leaf.
-            uint color = 0u;
+            uint64_t color = 0ul;
             for (uint d = 0u; d < leaf_depth; d++) {
                 uint st = stack_state[d];
                 uint cd = ((st >> 8u) - 1u) ^ r.mirror;
@@ -190,10 +190,10 @@ bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit)
                         (((stack_state[leaf_depth + 1u] >> 8u) - 1u) ^ r.mirror);
             uint lo = dag_word(leaf);
             if (code < 32u) {
-                color += uint(bitCount(lo & ((1u << code) - 1u)));
+                color += uint64_t(bitCount(lo & ((1u << code) - 1u)));
             } else {
                 uint hi = dag_word(leaf + 1u);
-                color += uint(bitCount(lo)) + uint(bitCount(hi & ((1u << (code - 32u)) - 1u)));
+                color += uint64_t(bitCount(lo)) + uint64_t(bitCount(hi & ((1u << (code - 32u)) - 1u)));
             }
             hit.color_index = color;
             return true;
