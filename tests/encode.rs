@@ -594,13 +594,6 @@ fn shared_meshes_sat_every_mode() {
     }
 }
 
-fn voxdag_cli(args: &[&str]) -> std::process::Output {
-    std::process::Command::new(env!("CARGO_BIN_EXE_voxdag"))
-        .args(args)
-        .output()
-        .expect("run voxdag")
-}
-
 /// `voxdag build --encoding ..` then `voxdag verify`: ok for good files, an error (exit 1, no
 /// panic) for corrupt ones, and the first differing voxel with `--against`.
 #[test]
@@ -636,9 +629,9 @@ fn cli_build_and_verify() {
             &out,
         ];
         args.extend(extra);
-        let o = voxdag_cli(&args);
+        let o = common::voxdag_cli(&args);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let v = voxdag_cli(&["verify", &out, "--against", &path("b-svdag32-0.vdag")]);
+        let v = common::voxdag_cli(&["verify", &out, "--against", &path("b-svdag32-0.vdag")]);
         let stdout = String::from_utf8_lossy(&v.stdout);
         assert!(
             v.status.success() && stdout.starts_with("ok"),
@@ -648,7 +641,7 @@ fn cli_build_and_verify() {
         files.push(out);
     }
     // stats --json carries the encoded sizes.
-    let s = voxdag_cli(&["stats", "--json", &files[2]]);
+    let s = common::voxdag_cli(&["stats", "--json", &files[2]]);
     assert!(s.status.success());
     let json: serde_json::Value = serde_json::from_slice(&s.stdout).unwrap();
     for key in ["svdag32", "ssvdag", "tsvdag", "tsvdag_base", "tsvdag_lut"] {
@@ -657,7 +650,7 @@ fn cli_build_and_verify() {
     // A different scene: the first differing voxel is named.
     let teapot = path("teapot.vdag");
     let teapot_obj = data.join("meshes/teapot.obj");
-    assert!(voxdag_cli(&[
+    assert!(common::voxdag_cli(&[
         "-q",
         "build",
         teapot_obj.to_str().unwrap(),
@@ -668,7 +661,7 @@ fn cli_build_and_verify() {
     ])
     .status
     .success());
-    let v = voxdag_cli(&["verify", &files[2], "--against", &teapot]);
+    let v = common::voxdag_cli(&["verify", &files[2], "--against", &teapot]);
     assert!(!v.status.success());
     assert!(String::from_utf8_lossy(&v.stderr).contains("first differing voxel ("));
     // Corrupt payloads (CRC fixed so the payload checks are reached): errors, never panics.
@@ -686,7 +679,7 @@ fn cli_build_and_verify() {
             b[len - 4..].copy_from_slice(&crc.to_le_bytes());
             let bad = path("bad.vdag");
             std::fs::write(&bad, &b).unwrap();
-            let v = voxdag_cli(&["verify", &bad]);
+            let v = common::voxdag_cli(&["verify", &bad]);
             let stderr = String::from_utf8_lossy(&v.stderr);
             assert!(!stderr.contains("panicked"), "{stderr}");
             if !v.status.success() {

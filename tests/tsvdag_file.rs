@@ -99,13 +99,6 @@ fn compact_translations_need_version_2() {
     }
 }
 
-fn voxdag_cli(args: &[&str]) -> std::process::Output {
-    std::process::Command::new(env!("CARGO_BIN_EXE_voxdag"))
-        .args(args)
-        .output()
-        .expect("run voxdag")
-}
-
 /// `voxdag build --encoding tsvdag` writes S+A+T by default, in the smallest mode unless one is
 /// pinned; every file verifies against the svdag32 build, and `stats --json` names the mode.
 #[test]
@@ -118,7 +111,7 @@ fn cli_writes_sat_files_in_every_mode() {
     let bunny = bunny.to_str().unwrap();
     let path = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
     let reference = path("ref.vdag");
-    let o = voxdag_cli(&["-q", "build", bunny, "-r", "128", "-o", &reference]);
+    let o = common::voxdag_cli(&["-q", "build", bunny, "-r", "128", "-o", &reference]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let mut sizes = Vec::new();
     for (flags, mode) in [
@@ -143,9 +136,9 @@ fn cli_writes_sat_files_in_every_mode() {
             &out,
         ];
         args.extend(&flags);
-        let o = voxdag_cli(&args);
+        let o = common::voxdag_cli(&args);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let v = voxdag_cli(&["verify", &out, "--against", &reference]);
+        let v = common::voxdag_cli(&["verify", &out, "--against", &reference]);
         assert!(
             v.status.success() && String::from_utf8_lossy(&v.stdout).starts_with("ok"),
             "{flags:?}: {}",
@@ -156,7 +149,7 @@ fn cli_writes_sat_files_in_every_mode() {
             panic!("{flags:?}: not tsvdag");
         };
         assert!(e.translations, "{flags:?}: sat is the default");
-        let s = voxdag_cli(&["stats", "--json", &out]);
+        let s = common::voxdag_cli(&["stats", "--json", &out]);
         assert!(s.status.success());
         let json: serde_json::Value = serde_json::from_slice(&s.stdout).unwrap();
         assert_eq!(json["encoding"], "tsvdag");
@@ -171,7 +164,7 @@ fn cli_writes_sat_files_in_every_mode() {
     }
     // The default is the smallest of the three pinned modes.
     assert_eq!(sizes[6], sizes[..3].iter().copied().min().unwrap());
-    let conflict = voxdag_cli(&[
+    let conflict = common::voxdag_cli(&[
         "-q",
         "build",
         bunny,

@@ -44,6 +44,14 @@ pub fn build_scene(path: &Path, resolution: Option<u32>) -> Svdag {
     Svdag::from_voxels(&voxels).expect("build SVDAG")
 }
 
+/// Runs the `voxdag` binary of this build with `args` and returns what it printed and its status.
+pub fn voxdag_cli(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_voxdag"))
+        .args(args)
+        .output()
+        .expect("run voxdag")
+}
+
 /// A GPU context with validation on; fails (never skips) when no Vulkan device exists.
 pub fn gpu() -> Arc<GpuContext> {
     ensure_runtime_dir();
