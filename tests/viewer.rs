@@ -177,7 +177,11 @@ fn find_window(display: &str, viewer: &mut Child) -> String {
             return id.trim().to_string();
         }
         if let Some(status) = viewer.try_wait().unwrap() {
-            panic!("the viewer exited ({status}) before its window appeared");
+            let mut stderr = String::new();
+            if let Some(mut e) = viewer.stderr.take() {
+                let _ = std::io::Read::read_to_string(&mut e, &mut stderr);
+            }
+            panic!("the viewer exited ({status}) before its window appeared: {stderr}");
         }
         assert!(
             start.elapsed() < Duration::from_secs(60),
