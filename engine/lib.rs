@@ -4,7 +4,8 @@
 //! `scene` (import + voxelize) -> `dag` (SVO -> SVDAG, file format, CPU queries)
 //! -> `attr` (per-voxel colours in chunks, colour codecs) -> `gpu` (Vulkan device layer)
 //! -> `render` (GPU traversal, CPU reference renderer), `attr_gpu` (colour codec passes) and
-//! `hash` (GPU slab hash tables, allocator and garbage collection for editing).
+//! `hash` (GPU slab hash tables, allocator and garbage collection for editing), `edit` (the hash
+//! DAG stored in those tables and the edit tools).
 //! `compute` holds the GPU primitives (prefix sum, stream compaction, radix sort) that
 //! GPU-driven passes build on.
 
@@ -20,6 +21,7 @@ pub mod attr_gpu;
 pub mod color;
 pub mod compute;
 pub mod dag;
+pub mod edit;
 pub mod gpu;
 pub mod hash;
 pub mod render;
