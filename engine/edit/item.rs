@@ -303,7 +303,7 @@ impl Leaf {
                 leaf.materials[voxel] = (words[2 + rank / 8] >> (4 * (rank % 8)) & 0xf) as u8;
             }
             let last = words[words.len() - 1];
-            if count % 8 != 0 && last >> (4 * (count % 8)) != 0 {
+            if !count.is_multiple_of(8) && last >> (4 * (count % 8)) != 0 {
                 return Err(ItemError::Leaf("non-zero unused material nibbles"));
             }
         }
