@@ -305,6 +305,7 @@ impl GpuGarbageCollector {
         let push = table.push_constants(counters.address(), live.address(), count);
         let buckets = table.config().buckets;
         cmd.fill_buffer(counters, 0);
+        table.record_gc_side_effects(cmd);
         if let Some(p) = profiler.as_deref_mut() {
             p.begin_pass(cmd, "hash gc mark");
         }

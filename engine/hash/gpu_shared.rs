@@ -24,6 +24,9 @@ gpu_shared! {
         pub super_blocks: uint64_t,
         /// Address of the bucket heads (`u32` link per bucket).
         pub heads: uint64_t,
+        /// Address of the insert hints (`u32` link per bucket: a slab of the bucket's chain
+        /// every slab before which was full, or 0 = start at the head).
+        pub tails: uint64_t,
         /// Address of the `HashStatus` block.
         pub status: uint64_t,
         /// Address of the items (`item_words` words each).
@@ -38,6 +41,10 @@ gpu_shared! {
         pub blocks: uint,
         /// Seed for the random block choice (changes every pass).
         pub seed: uint,
+        /// `FLAG_*` bits of `engine/hash/layout.rs` (`HASH_FLAG_*` in `hash_layout.h`).
+        pub flags: uint,
+        /// Padding to 8 bytes.
+        pub pad: uint,
     }
 
     /// GC counters written by the mark and sweep passes (at `HashPush::items` during GC).

@@ -33,6 +33,9 @@ pub const SLAB_NEXT: u32 = 0;
 pub const SLAB_ACTIVE: u32 = 1;
 /// Slab header word 2 (Ticket Board, Acceleration Hash): occupancy mask, bit s = slot s used.
 pub const SLAB_OCCUPANCY: u32 = 2;
+/// `HashPush::flags` bit: garbage collection may have cleared slots below occupied ones, so an
+/// Atomic64 insert scans every slot of a slab instead of trusting that its items form a prefix.
+pub const FLAG_HOLES: u32 = 1;
 
 /// Words of the status block (see [`HashStatus`]).
 pub const STATUS_WORDS: u32 = 5;

@@ -11,12 +11,12 @@
 //! submission. Only if a round reports items left out for lack of a slab does
 //! [`GpuHashTable::finish_insert`] grow the pool and run another round for them.
 
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::Arc;
 
 use super::alloc::SlabPool;
 use super::layout::{
-    Handle, HashPush, HashStatus, HashVariant, SlabLayout, HANDLE_INVALID, HANDLE_MISS,
+    Handle, HashPush, HashStatus, HashVariant, SlabLayout, FLAG_HOLES, HANDLE_INVALID, HANDLE_MISS,
     MAX_SUPER_BLOCKS, SLABS_PER_SUPER_BLOCK, SLAB_SLOTS,
 };
 use super::reference::TableImage;
@@ -94,6 +94,8 @@ pub struct GpuHashTable {
     layout: SlabLayout,
     pool: SlabPool,
     heads: Buffer,
+    /// Insert hints, one link per bucket (`HashPush::tails`): zeroed at creation and by GC.
+    tails: Buffer,
     search: ComputePipeline,
     insert: ComputePipeline,
     read: ComputePipeline,
@@ -106,6 +108,8 @@ pub struct GpuHashTable {
     status: HashStatus,
     /// Seed of the next pass's random block choice.
     pass_seed: AtomicU32,
+    /// Whether a garbage collection was recorded on this table ([`FLAG_HOLES`]).
+    holes: AtomicBool,
 }
 
 /// An insert recorded by [`GpuHashTable::record_insert`]: the status block before and after its
@@ -173,8 +177,14 @@ impl GpuHashTable {
             4 * config.buckets as u64,
             MemLocation::GpuOnly,
         )?;
+        let tails = ctx.create_buffer(
+            "hash insert hints",
+            4 * config.buckets as u64,
+            MemLocation::GpuOnly,
+        )?;
         let mut cmd = ctx.begin_commands("hash heads init")?;
         cmd.fill_buffer(&heads, 0);
+        cmd.fill_buffer(&tails, 0);
         // No wait: later submissions on the queue are ordered after it.
         cmd.submit_async()?;
         let pool = SlabPool::new(ctx, layout, config.initial_super_blocks)?;
@@ -184,6 +194,7 @@ impl GpuHashTable {
             layout,
             pool,
             heads,
+            tails,
             search,
             insert,
             read,
@@ -192,6 +203,7 @@ impl GpuHashTable {
             team,
             status: HashStatus::default(),
             pass_seed: AtomicU32::new(0x2545_f491),
+            holes: AtomicBool::new(false),
         })
     }
 
@@ -220,6 +232,14 @@ impl GpuHashTable {
         self.heads.address()
     }
 
+    /// Records what a garbage collection of this table needs besides its passes: clears the
+    /// insert hints (GC unlinks slabs they may name) and marks the table as possibly holding
+    /// holes (Atomic64 inserts then scan whole slabs).
+    pub(crate) fn record_gc_side_effects<'a>(&'a self, cmd: &mut Commands<'a>) {
+        cmd.fill_buffer(&self.tails, 0);
+        self.holes.store(true, Ordering::Relaxed);
+    }
+
     /// Specialization constants of every hash pass: workgroup size, subgroup size, variant id,
     /// item words, team size (ids 0..=4 in `hash/common.glsl`).
     pub fn spec_constants(&self) -> [u32; 5] {
@@ -242,6 +262,7 @@ impl GpuHashTable {
         HashPush {
             super_blocks: self.pool.table_address(),
             heads: self.heads.address(),
+            tails: self.tails.address(),
             status: self.pool.status_address(),
             items,
             handles,
@@ -249,12 +270,18 @@ impl GpuHashTable {
             buckets: self.config.buckets,
             blocks: self.pool.block_count(),
             seed: self.pass_seed.load(Ordering::Relaxed),
+            flags: if self.holes.load(Ordering::Relaxed) {
+                FLAG_HOLES
+            } else {
+                0
+            },
+            pad: 0,
         }
     }
 
     /// Device memory of the table (heads and pool), in bytes.
     pub fn gpu_bytes(&self) -> u64 {
-        self.heads.size() + self.pool.gpu_bytes()
+        self.heads.size() + self.tails.size() + self.pool.gpu_bytes()
     }
 
     /// Workgroups for `count` items at one item per team (grid-stride beyond the limit).

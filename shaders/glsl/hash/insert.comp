@@ -1,9 +1,9 @@
 #version 460
 // Slab hash insert pass: places every item whose handle is still HASH_MISS and writes its new
 // handle. Items are assumed absent (no search here; duplicates inside a batch get separate
-// slots). One item per team (a subgroup, or one lane) at a time: walk the bucket's chain, claim a free slot in the
-// first slab that has one, else allocate a slab and link it at the end with a CAS. When no
-// slab can be allocated the handle stays HASH_MISS and status.exhausted counts it: the host
+// slots). One item per team (a subgroup, or one lane) at a time: walk the bucket's chain from
+// its hint, claim a free slot in the first slab that has one, else allocate a slab and link it
+// at the end with a CAS. When no slab can be allocated the handle stays HASH_MISS and status.exhausted counts it: the host
 // grows the pool and runs the pass again (only HASH_MISS items are retried).
 // Driven by engine/hash/table.rs.
 #extension GL_EXT_buffer_reference : require
@@ -59,7 +59,7 @@ uint claim_atomic64_single(uint64_t slab_addr, uint first, uint item[HASH_MAX_IT
 
 // Atomic64, one lane alone: the first empty slot of a slab whose items form a prefix (inserts
 // claim the lowest empty slot; only GC punches holes): a binary search of 5 loads instead of a
-// scan of up to 32. With holes it may skip some, which the thorough walk then fills.
+// scan of up to 32. Only without holes (HASH_FLAG_HOLES clear).
 uint first_empty_atomic64(uint64_t slab_addr) {
     uint lo = 0u;
     uint hi = HASH_SLAB_SLOTS;
@@ -116,41 +116,40 @@ uint claim_ticket(HashWords words) {
 
 // Atomic64 has no occupancy mask: whether a slab's last slot is empty. Slots are claimed lowest
 // first and only cleared by garbage collection, so a taken last slot means a full slab unless GC
-// punched holes since.
+// punched holes since (HASH_FLAG_HOLES).
 bool last_slot_empty(uint64_t slab_addr) {
     return slot_empty_atomic64(slab_addr, HASH_SLAB_SLOTS - 1u);
 }
 
 // Inserts one item; returns its handle, or HASH_MISS when the pool is exhausted or the chain
 // loops (counted in status.exhausted / status.broken_chains). Words other teams may be writing
-// (links, slots) are read by the leader and broadcast, so the team never diverges.
+// (links, slots, hints) are read by the leader and broadcast, so the team never diverges.
+// The walk starts at the bucket's hint (push.tails): the slab that last took an item of the
+// bucket. Every slab before it was full when an insert walked past it, and only garbage
+// collection (which clears the hints) empties a slot, so the walk skips nothing it could use;
+// without the hint every insert walked the whole chain (3-4 slabs at load factor 96).
 uint insert_item(uint item[HASH_MAX_ITEM_WORDS], uint h, uint rng) {
+    uint bucket = h % push.buckets;
+    HashWords tails = HashWords(push.tails);
     HashWords link_words = HashWords(push.heads);
-    uint link_index = h % push.buckets;
-    uint link = team_from_leader(link_words.w[link_index]);
-    // Atomic64 walks the chain twice before allocating: first trying only slabs whose last
-    // slot is empty (one load per full slab instead of 32 prefixes), then every slab (holes left
-    // by garbage collection).
-    bool thorough = VARIANT != HASH_ATOMIC64;
+    uint link_index = bucket;
+    uint start = team_from_leader(tails.w[bucket]);
+    uint link = start != 0u ? start : team_from_leader(link_words.w[link_index]);
+    // Atomic64 has no occupancy mask. Without holes (no GC since the table was built) the items
+    // of a slab form a prefix: a taken last slot means a full slab (one load instead of 32) and
+    // a binary search finds the first empty slot. After GC (push.flags) every slot is scanned.
+    bool thorough = VARIANT != HASH_ATOMIC64 || (push.flags & HASH_FLAG_HOLES) != 0u;
     // Each step of a walk follows one link or links a new slab (a lost race means the chain
     // grew): a walk of more than 2 * allocated + 2 steps goes round a loop. The bound is
     // re-read (others allocate meanwhile) before the walk is declared broken.
     uint max_links = team_from_leader(hash_allocated_slabs(push.status, false));
-    uint links = 0u;
-    for (uint step = 0u;; ++step, ++links) {
-        if (links > 2u * max_links + 2u) {
+    for (uint step = 0u;; ++step) {
+        if (step > 2u * max_links + 2u) {
             max_links = team_from_leader(team_leader() ? hash_allocated_slabs(push.status, true) : 0u);
         }
-        if (links > 2u * max_links + 2u || hash_link_outside(link, push.blocks)) {
+        if (step > 2u * max_links + 2u || hash_link_outside(link, push.blocks)) {
             if (team_leader()) hash_report_broken_chain(push.status);
             return HASH_MISS;
-        }
-        if (link == 0u && !thorough) {
-            links = 0u;
-            thorough = true;
-            link_words = HashWords(push.heads);
-            link_index = h % push.buckets;
-            link = team_from_leader(link_words.w[link_index]);
         }
         if (link == 0u) {
             // End of the chain: allocate a zeroed slab and link it with a CAS.
@@ -207,6 +206,10 @@ uint insert_item(uint item[HASH_MAX_ITEM_WORDS], uint h, uint rng) {
             }
         }
         if (slot != HASH_MISS) {
+            // A racing insert may store an earlier slab of the chain: still a valid hint.
+            if (link != start && team_leader()) {
+                tails.w[bucket] = link;
+            }
             return (slab << 5u) | slot;
         }
         link_words = words;

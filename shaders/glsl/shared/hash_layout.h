@@ -27,6 +27,9 @@
 #define HASH_SLAB_ACTIVE 1u     // owned by garbage collection; zero otherwise
 #define HASH_SLAB_OCCUPANCY 2u  // Ticket Board and Acceleration Hash only
 
+// HashPush::flags bits (FLAG_* in engine/hash/layout.rs).
+#define HASH_FLAG_HOLES 1u      // GC may have punched holes: Atomic64 inserts scan whole slabs
+
 #define HASH_SEED 0x9747b28cu
 #define HASH_SECONDARY_SALT 0x85ebca6bu
 
