@@ -11,8 +11,8 @@ use raw_window_handle::{HasDisplayHandle, HasWindowHandle};
 use serde::Serialize;
 use voxdag::dag::Svdag;
 use voxdag::gpu::{
-    GpuContext, GpuOptions, Image, OverlayFrame, PassTiming, Presenter, PresenterOptions, Profiler,
-    Surface,
+    GpuContext, GpuOptions, Image, OverlayFrame, PassTiming, Presenter, PresenterOptions,
+    PresenterStats, Profiler, Surface,
 };
 use voxdag::render::cpu::ColorSource;
 use voxdag::render::gpu::{GpuRenderer, GpuScene, RenderFrame};
@@ -35,6 +35,37 @@ const MOTION_HOLD: Duration = Duration::from_millis(300);
 const MIN_SCALE: f32 = 0.1;
 /// Frames left out of the frame-rate statistics (pipeline warm-up, first swapchain).
 const WARMUP_FRAMES: usize = 5;
+/// The timed phases of one frame-loop iteration, in order (`--stats-json` `cpu_phases`). The
+/// three marked "wait" block on the GPU or the presentation engine and are not CPU-loop cost.
+const PHASES: [&str; 12] = [
+    "slot wait (wait)",
+    "acquire (wait)",
+    "profiler resolve",
+    "input + camera",
+    "egui layout",
+    "egui tessellate",
+    "render record",
+    "overlay textures",
+    "overlay record",
+    "submit",
+    "present (wait)",
+    "other",
+];
+/// Indices into [`PHASES`] of the waits.
+const WAIT_PHASES: [usize; 3] = [0, 1, 10];
+
+/// The presenter's cumulative times that split `end_frame` and the waits, as
+/// (slot wait, acquire, textures, record, submit, present).
+fn presenter_times(stats: &PresenterStats) -> [Duration; 6] {
+    [
+        stats.slot_wait,
+        stats.acquire,
+        stats.textures,
+        stats.record,
+        stats.submit,
+        stats.present,
+    ]
+}
 
 /// `voxdag view`.
 pub fn view(args: &ViewArgs) -> Result<()> {
@@ -119,6 +150,9 @@ struct ViewReport {
     /// mean after the warm-up: unlike `cpu_ms_*`, not inflated when other threads (lavapipe's,
     /// other processes) preempt it, but it includes driver work done inside submit and present.
     thread_cpu_ms_mean: f64,
+    /// The frame loop split into [`PHASES`] (wall ms per frame after the warm-up; waits
+    /// included, marked "(wait)"): where `cpu_ms_*` goes.
+    cpu_phases: Vec<PhaseStat>,
     /// Mean GPU time per pass (ms) after the warm-up.
     gpu_ms: Vec<(String, f64)>,
     /// Window size at exit.
@@ -137,6 +171,17 @@ struct ViewReport {
     frames_in_flight: usize,
     /// Vulkan validation warnings and errors.
     validation_messages: usize,
+}
+
+/// Wall time of one frame-loop phase per frame.
+#[derive(Clone, Debug, Serialize)]
+struct PhaseStat {
+    /// Phase name (see [`PHASES`]).
+    name: String,
+    /// Mean ms per frame.
+    mean_ms: f64,
+    /// Median ms per frame.
+    median_ms: f64,
 }
 
 impl ViewReport {
@@ -316,6 +361,8 @@ struct Running {
     /// Per presented frame: interval since the previous one (ms), CPU loop cost (ms), on-CPU
     /// time of the thread (ms).
     samples: Vec<(f64, f64, f64)>,
+    /// Per presented frame: wall ms of each of [`PHASES`].
+    phase_samples: Vec<[f64; PHASES.len()]>,
     gpu_sums: Vec<(String, f64, usize)>,
     extents: Vec<([u32; 2], usize)>,
     frames: usize,
@@ -475,6 +522,7 @@ impl App<'_> {
             internal: [0, 0],
             scale: 1.0,
             samples: Vec::new(),
+            phase_samples: Vec::new(),
             gpu_sums: Vec::new(),
             extents: Vec::new(),
             frames: 0,
@@ -564,13 +612,22 @@ impl Running {
     fn redraw(&mut self, args: &ViewArgs) -> Result<()> {
         let start = Instant::now();
         let thread_start = thread_cpu_ns();
-        let waited_before = self.presenter.stats().wait;
+        let presenter_before = presenter_times(self.presenter.stats());
+        let mut phases = [0.0f64; PHASES.len()];
+        let mut mark = start;
+        let mut lap = |phase: usize| {
+            let now = Instant::now();
+            phases[phase] += (now - mark).as_secs_f64() * 1e3;
+            mark = now;
+        };
         let dt = self
             .last_frame
             .map_or(0.0, |t| t.elapsed().as_secs_f32().min(0.1));
         let Some(frame) = self.presenter.begin_frame()? else {
             return Ok(());
         };
+        // Slot wait + acquire, split below from the presenter's times.
+        lap(0);
         // The slot's previous frame has finished: its pass times are the latest complete ones.
         let passes = {
             let profiler = &mut self.slots[frame.index].profiler;
@@ -582,6 +639,7 @@ impl Running {
             self.note_passes(&passes);
             self.last_passes = passes;
         }
+        lap(2);
         let extent = frame.extent;
         let slot = &mut self.slots[frame.index];
         if slot.target.width() != extent[0] || slot.target.height() != extent[1] {
@@ -603,13 +661,16 @@ impl Running {
         self.scale = scale;
         self.internal = internal;
         let settings = RenderSettings::new(internal[0], internal[1], self.input.camera);
+        lap(3);
 
         let raw_input = self.egui_state.take_egui_input(&self.window);
         let egui = self.egui.clone();
         let output = egui.run_ui(raw_input, |ui| self.overlay_ui(ui, extent));
         self.egui_state
             .handle_platform_output(&self.window, output.platform_output);
+        lap(4);
         let primitives = self.egui.tessellate(output.shapes, output.pixels_per_point);
+        lap(5);
 
         let last = args.frames.is_some_and(|n| self.frames + 1 >= n as usize);
         let screenshot = last && args.screenshot.is_some();
@@ -624,6 +685,7 @@ impl Running {
             None,
             Some(&mut slot.profiler),
         )?;
+        lap(6);
         self.presenter.end_frame(
             cmd,
             &slot.target,
@@ -641,14 +703,30 @@ impl Running {
             Some((e, n)) if *e == extent => *n += 1,
             _ => self.extents.push((extent, 1)),
         }
-        let now = Instant::now();
-        let waited = (self.presenter.stats().wait - waited_before).as_secs_f64() * 1e3;
-        let cpu = ((now - start).as_secs_f64() * 1e3 - waited).max(0.0);
+        // end_frame, split below from the presenter's times.
+        lap(8);
+        let now = mark;
+        // end_frame and begin_frame's parts, from the presenter's counters.
+        let presenter_after = presenter_times(self.presenter.stats());
+        let part = |i: usize| (presenter_after[i] - presenter_before[i]).as_secs_f64() * 1e3;
+        let (slot_wait, acquire) = (part(0), part(1));
+        phases[0] = slot_wait;
+        phases[1] = acquire;
+        phases[7] = part(2);
+        phases[8] = part(3);
+        phases[9] = part(4);
+        phases[10] = part(5);
+        let total = (now - start).as_secs_f64() * 1e3;
+        let timed: f64 = phases[..11].iter().sum();
+        phases[11] = (total - timed).max(0.0);
+        let waited: f64 = WAIT_PHASES.iter().map(|&i| phases[i]).sum();
+        let cpu = (total - waited).max(0.0);
         let on_cpu = thread_cpu_ns().saturating_sub(thread_start) as f64 * 1e-6;
         if let Some(prev) = self.last_frame {
             let interval = (now - prev).as_secs_f64() * 1e3;
             self.frame_ms = interval;
             self.samples.push((interval, cpu, on_cpu));
+            self.phase_samples.push(phases);
         }
         self.cpu_ms = cpu;
         self.last_frame = Some(now);
@@ -744,6 +822,28 @@ impl Running {
         let frame_ms_mean = kept.iter().map(|s| s.0).sum::<f64>() / n;
         let mut cpu: Vec<f64> = kept.iter().map(|s| s.1).collect();
         cpu.sort_by(f64::total_cmp);
+        let mean_median = |mut v: Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            let mean = v.iter().sum::<f64>() / v.len().max(1) as f64;
+            (mean, v.get(v.len() / 2).copied().unwrap_or(0.0))
+        };
+        let phase_rows: Vec<&[f64; PHASES.len()]> = if self.phase_samples.len() > WARMUP_FRAMES {
+            self.phase_samples.iter().skip(WARMUP_FRAMES).collect()
+        } else {
+            self.phase_samples.iter().collect()
+        };
+        let cpu_phases = PHASES
+            .iter()
+            .enumerate()
+            .map(|(i, name)| {
+                let (mean_ms, median_ms) = mean_median(phase_rows.iter().map(|p| p[i]).collect());
+                PhaseStat {
+                    name: name.to_string(),
+                    mean_ms,
+                    median_ms,
+                }
+            })
+            .collect();
         let stats = self.presenter.stats();
         ViewReport {
             frames: self.frames,
@@ -756,6 +856,7 @@ impl Running {
             cpu_ms_mean: cpu.iter().sum::<f64>() / n,
             cpu_ms_median: cpu.get(cpu.len() / 2).copied().unwrap_or(0.0),
             thread_cpu_ms_mean: kept.iter().map(|s| s.2).sum::<f64>() / n,
+            cpu_phases,
             gpu_ms: self
                 .gpu_sums
                 .iter()

@@ -66,6 +66,18 @@ pub struct PresenterStats {
     pub swapchain_creations: u64,
     /// Time blocked waiting for a frame slot's timeline value, for a swapchain image and in present.
     pub wait: Duration,
+    /// Part of `wait`: waiting for frame slots' previous frames (`begin_frame`).
+    pub slot_wait: Duration,
+    /// Part of `wait`: `vkAcquireNextImageKHR` (and swapchain rebuilds).
+    pub acquire: Duration,
+    /// Part of `wait`: `vkQueuePresentKHR` (lavapipe copies the image to the X server in it).
+    pub present: Duration,
+    /// `end_frame`: applying egui texture uploads and frees.
+    pub textures: Duration,
+    /// `end_frame`: recording the blit, the screenshot copy and the egui overlay.
+    pub record: Duration,
+    /// `end_frame`: ending the command buffer and `vkQueueSubmit`.
+    pub submit: Duration,
     /// Present mode in use, e.g. `FIFO`.
     pub present_mode: String,
     /// Swapchain images.
@@ -292,8 +304,12 @@ impl Presenter {
         if let Some(done) = self.slots[index].in_flight.take() {
             done.wait()?;
         }
+        let acquire_start = Instant::now();
         let result = self.acquire(index);
-        self.stats.wait += start.elapsed();
+        let end = Instant::now();
+        self.stats.slot_wait += acquire_start - start;
+        self.stats.acquire += end - acquire_start;
+        self.stats.wait += end - start;
         let Some(image) = result? else {
             return Ok(None);
         };
@@ -544,10 +560,13 @@ impl Presenter {
                 s.slot = slot;
             }
         }
+        let textures_start = Instant::now();
         let overlay = match overlay {
             Some(o) => Some(self.apply_textures(o)?),
             None => None,
         };
+        let record_start = Instant::now();
+        self.stats.textures += record_start - textures_start;
         if let Some(p) = profiler.as_deref_mut() {
             p.begin_pass(&mut cmd, "present");
         }
@@ -734,12 +753,15 @@ impl Presenter {
         if let Some(p) = profiler {
             p.end_pass(&mut cmd);
         }
+        let submit_start = Instant::now();
+        self.stats.record += submit_start - record_start;
         // Waits for the slot's acquired image at the blit, signals the image's present semaphore
         // (binary: presentation cannot wait on a timeline) and the context's timeline value.
         let submission = cmd.submit_async_with(
             &[(self.slots[slot].acquired, vk::PipelineStageFlags::TRANSFER)],
             &[rendered],
         )?;
+        self.stats.submit += submit_start.elapsed();
         self.slots[slot].in_flight = Some(submission);
         self.frame += 1;
         self.stats.frames += 1;
@@ -794,7 +816,9 @@ impl Presenter {
             // SAFETY: the image was acquired and its frame submitted to signal `rendered`.
             unsafe { self.loader.queue_present(*queue, &info) }
         };
-        self.stats.wait += start.elapsed();
+        let elapsed = start.elapsed();
+        self.stats.present += elapsed;
+        self.stats.wait += elapsed;
         match result {
             Ok(false) => Ok(()),
             Ok(true) | Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => {
