@@ -348,3 +348,48 @@ fn team_modes_collect_a_large_table_exactly_and_report_their_times() {
     }
     assert_clean(&ctx);
 }
+
+/// After a collection, inserts fill the slots it freed before they allocate: GC clears the
+/// insert hints (which would start the walk past the holes) and, for Atomic64, makes inserts scan
+/// whole slabs (its items no longer form a prefix). One bucket of 3 full slabs, every other item
+/// in an odd slot collected (no slab empties), then as many new items as were freed: still 3 slabs.
+#[test]
+fn inserts_after_gc_fill_the_freed_slots_first() {
+    let ctx = common::gpu();
+    let mut rng = common::Rng(0x51);
+    for team in TEAMS {
+        for variant in HashVariant::ALL {
+            for words in [1, 3] {
+                let what = format!("{variant:?} {words} words {team:?}");
+                let mut table = GpuHashTable::new(&ctx, &config(variant, words, 1, team)).unwrap();
+                let first = items(&mut rng, words, 96, &HashSet::new());
+                let (handles, _) = table.insert(&flat(&first), None).unwrap();
+                assert_eq!(table.download().unwrap().walk().unwrap().slabs, 3, "{what}");
+                // Even slots stay: every slab keeps 16 items.
+                let live: Vec<Handle> = handles
+                    .iter()
+                    .filter(|h| h.slot() % 2 == 0)
+                    .copied()
+                    .collect();
+                let gc = GpuGarbageCollector::new(&ctx, &table).unwrap();
+                let report = gc.collect(&mut table, &live, None).unwrap();
+                assert_eq!((report.freed_items, report.freed_slabs), (48, 0), "{what}");
+                let avoid: HashSet<Vec<u32>> = first.iter().cloned().collect();
+                let second = items(&mut rng, words, 48, &avoid);
+                let (new_handles, _) = table.insert(&flat(&second), None).unwrap();
+                let walk = table.download().unwrap().walk().unwrap();
+                assert_eq!(
+                    walk.slabs, 3,
+                    "{what}: inserts allocated instead of filling holes"
+                );
+                assert_eq!(walk.items.len(), 96, "{what}");
+                assert_eq!(
+                    table.read_items(&new_handles).unwrap(),
+                    flat(&second),
+                    "{what}"
+                );
+            }
+        }
+    }
+    assert_clean(&ctx);
+}

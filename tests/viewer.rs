@@ -7,20 +7,52 @@ mod common;
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
+use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use common::{compare, failure_dir, repo, save_png};
 
-/// A private Xvfb server, killed on drop.
+/// A private Xvfb server, terminated on drop.
 struct Xvfb {
     child: Child,
     display: String,
 }
 
+/// Serialises the Xvfb start-ups of this test binary (its tests run in parallel). An X server
+/// picking a display with `-displayfd` takes `/tmp/.X<n>-lock`; a stale lock (left by a server
+/// killed with SIGKILL, as these tests did) is removed by whichever starting server sees it, and
+/// two servers starting at once can both remove it and both take display n. The test whose server
+/// lost the socket then fails with the viewer's "Failed to open connection to X server" before its
+/// window appears (reproduced once in 15 runs of this file on the loaded machine).
+static XVFB_START: Mutex<()> = Mutex::new(());
+
 impl Xvfb {
-    /// Starts `Xvfb -displayfd 1`: the server picks a free display number and prints it once it
-    /// accepts connections.
+    /// Starts `Xvfb -displayfd 1` (the server picks a free display number and prints it once it
+    /// accepts connections) and checks that a client can connect; a server that cannot be
+    /// reached (another process raced it for the display) is replaced, at most 3 times.
     fn start() -> Xvfb {
+        let _one_at_a_time = XVFB_START.lock().unwrap_or_else(|e| e.into_inner());
+        let mut failures = Vec::new();
+        for _ in 0..3 {
+            let x = Xvfb::spawn();
+            let probe = Command::new("xdotool")
+                .arg("getdisplaygeometry")
+                .env("DISPLAY", &x.display)
+                .output()
+                .unwrap_or_else(|e| panic!("cannot run xdotool ({e}): run tools/setup.sh"));
+            if probe.status.success() {
+                return x;
+            }
+            failures.push(format!(
+                "{}: {}",
+                x.display,
+                String::from_utf8_lossy(&probe.stderr).trim()
+            ));
+        }
+        panic!("no Xvfb server accepted a connection: {failures:?}");
+    }
+
+    fn spawn() -> Xvfb {
         let mut child = Command::new("Xvfb")
             .args([
                 "-displayfd",
@@ -53,8 +85,20 @@ impl Xvfb {
 }
 
 impl Drop for Xvfb {
+    /// SIGTERM, so the server removes its lock file and socket (SIGKILL after 5 s).
     fn drop(&mut self) {
-        let _ = self.child.kill();
+        // SAFETY: signalling our own child process, not yet reaped (its pid is still ours).
+        unsafe {
+            libc::kill(self.child.id() as libc::pid_t, libc::SIGTERM);
+        }
+        let start = Instant::now();
+        while matches!(self.child.try_wait(), Ok(None)) {
+            if start.elapsed() > Duration::from_secs(5) {
+                let _ = self.child.kill();
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
         let _ = self.child.wait();
     }
 }
