@@ -362,7 +362,7 @@ fn inserts_after_gc_fill_the_freed_slots_first() {
             for words in [1, 3] {
                 let what = format!("{variant:?} {words} words {team:?}");
                 let mut table = GpuHashTable::new(&ctx, &config(variant, words, 1, team)).unwrap();
-                let first = items(&mut rng, words, 96, &HashSet::new());
+                let first = items(&mut rng, words as usize, 96, &HashSet::new());
                 let (handles, _) = table.insert(&flat(&first), None).unwrap();
                 assert_eq!(table.download().unwrap().walk().unwrap().slabs, 3, "{what}");
                 // Even slots stay: every slab keeps 16 items.
@@ -375,7 +375,7 @@ fn inserts_after_gc_fill_the_freed_slots_first() {
                 let report = gc.collect(&mut table, &live, None).unwrap();
                 assert_eq!((report.freed_items, report.freed_slabs), (48, 0), "{what}");
                 let avoid: HashSet<Vec<u32>> = first.iter().cloned().collect();
-                let second = items(&mut rng, words, 48, &avoid);
+                let second = items(&mut rng, words as usize, 48, &avoid);
                 let (new_handles, _) = table.insert(&flat(&second), None).unwrap();
                 let walk = table.download().unwrap().walk().unwrap();
                 assert_eq!(
