@@ -153,6 +153,9 @@ struct ViewReport {
     /// The frame loop split into [`PHASES`] (wall ms per frame after the warm-up; waits
     /// included, marked "(wait)"): where `cpu_ms_*` goes.
     cpu_phases: Vec<PhaseStat>,
+    /// egui passes per frame (mean after the warm-up): above 1 when egui discarded a pass and ran
+    /// the UI again (e.g. an auto-sized window whose size changed), which multiplies its layout cost.
+    egui_passes_mean: f64,
     /// Mean GPU time per pass (ms) after the warm-up.
     gpu_ms: Vec<(String, f64)>,
     /// Window size at exit.
@@ -363,6 +366,9 @@ struct Running {
     samples: Vec<(f64, f64, f64)>,
     /// Per presented frame: wall ms of each of [`PHASES`].
     phase_samples: Vec<[f64; PHASES.len()]>,
+    /// Times the overlay UI ran (egui passes), in total and per presented frame.
+    egui_passes: usize,
+    egui_pass_samples: Vec<usize>,
     gpu_sums: Vec<(String, f64, usize)>,
     extents: Vec<([u32; 2], usize)>,
     frames: usize,
@@ -523,6 +529,8 @@ impl App<'_> {
             scale: 1.0,
             samples: Vec::new(),
             phase_samples: Vec::new(),
+            egui_passes: 0,
+            egui_pass_samples: Vec::new(),
             gpu_sums: Vec::new(),
             extents: Vec::new(),
             frames: 0,
@@ -663,6 +671,7 @@ impl Running {
         let settings = RenderSettings::new(internal[0], internal[1], self.input.camera);
         lap(3);
 
+        let passes_before = self.egui_passes;
         let raw_input = self.egui_state.take_egui_input(&self.window);
         let egui = self.egui.clone();
         let output = egui.run_ui(raw_input, |ui| self.overlay_ui(ui, extent));
@@ -727,6 +736,8 @@ impl Running {
             self.frame_ms = interval;
             self.samples.push((interval, cpu, on_cpu));
             self.phase_samples.push(phases);
+            self.egui_pass_samples
+                .push(self.egui_passes - passes_before);
         }
         self.cpu_ms = cpu;
         self.last_frame = Some(now);
@@ -774,6 +785,7 @@ impl Running {
 
     /// The egui overlay: frame rate, resolution, render scale, GPU pass times, controls.
     fn overlay_ui(&mut self, ui: &mut egui::Ui, extent: [u32; 2]) {
+        self.egui_passes += 1;
         let ctx = ui.ctx().clone();
         egui::Window::new("voxdag")
             .default_pos([8.0, 8.0])
@@ -857,6 +869,15 @@ impl Running {
             cpu_ms_median: cpu.get(cpu.len() / 2).copied().unwrap_or(0.0),
             thread_cpu_ms_mean: kept.iter().map(|s| s.2).sum::<f64>() / n,
             cpu_phases,
+            egui_passes_mean: {
+                let kept: Vec<usize> = self
+                    .egui_pass_samples
+                    .iter()
+                    .skip(WARMUP_FRAMES)
+                    .copied()
+                    .collect();
+                kept.iter().sum::<usize>() as f64 / kept.len().max(1) as f64
+            },
             gpu_ms: self
                 .gpu_sums
                 .iter()
