@@ -4,6 +4,9 @@
 //! bottom-level BVH over its triangles. Every function is deterministic (same input, same
 //! nodes, same f32 operations), which the in-core/out-of-core equality relies on.
 
+// Per-axis index loops over several arrays at once read clearer than zipped iterators.
+#![allow(clippy::needless_range_loop)]
+
 /// A triangle as three vertices (world space, f32).
 pub type Tri = [[f32; 3]; 3];
 

@@ -386,7 +386,7 @@ pub fn prepare(
     });
     // Buckets by the top code bits.
     let mut bits = 0u32;
-    while bits < 9 && total * TRI_BYTES >> bits > options.bucket_bytes {
+    while bits < 9 && (total * TRI_BYTES) >> bits > options.bucket_bytes {
         bits += 1;
     }
     let nb = 1usize << bits;
