@@ -385,7 +385,7 @@ mod tests {
             .collect();
         let bvh = Bvh::build(&boxes);
         let mut seen = vec![0; boxes.len()];
-        for n in &bvh.nodes {
+        for n in bvh.nodes.iter().filter(|n| n.count > 0) {
             for &p in &bvh.order[n.first as usize..(n.first + n.count) as usize] {
                 seen[p as usize] += 1;
                 let b = &boxes[p as usize];
