@@ -24,6 +24,7 @@ pub mod dag;
 pub mod edit;
 pub mod gpu;
 pub mod hash;
+pub mod ooc;
 pub mod render;
 pub mod safety;
 pub mod scene;

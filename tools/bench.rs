@@ -3,6 +3,7 @@
 mod colors;
 mod compress;
 mod hash;
+mod ooc;
 mod primitives;
 
 use std::io::Write;
@@ -37,6 +38,8 @@ pub enum BenchCommand {
     Hash(hash::BenchHashArgs),
     /// Table 5.1 / Figure 5.6: colour codecs' size, RMSE and encode time; GPU lossless throughput.
     Colors(colors::BenchColorsArgs),
+    /// Figures 6.2/6.3: out-of-core path tracing, disk bytes and batching events with/without proxies.
+    Ooc(ooc::BenchOocArgs),
     /// GPU primitives (scan, compaction, radix sort) vs their CPU references in the same run.
     Primitives(primitives::BenchPrimitivesArgs),
 }
@@ -97,6 +100,7 @@ pub fn run(command: BenchCommand, quiet: bool) -> Result<()> {
         BenchCommand::Hash(args) => args.outputs(),
         BenchCommand::Colors(args) => args.outputs(),
         BenchCommand::Primitives(args) => args.outputs(),
+        BenchCommand::Ooc(args) => args.outputs(),
     };
     check_outputs(&outputs)?;
     match command {
@@ -106,6 +110,7 @@ pub fn run(command: BenchCommand, quiet: bool) -> Result<()> {
         BenchCommand::Hash(args) => hash::bench_hash(&args, quiet),
         BenchCommand::Colors(args) => colors::bench_colors(&args),
         BenchCommand::Primitives(args) => primitives::bench_primitives(&args),
+        BenchCommand::Ooc(args) => ooc::bench_ooc(&args, quiet),
     }
 }
 

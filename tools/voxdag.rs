@@ -3,6 +3,7 @@
 mod bench;
 mod commands;
 mod limited_alloc;
+mod ooc;
 mod view;
 
 use std::path::PathBuf;
@@ -42,6 +43,9 @@ enum Command {
     /// Run benchmarks and write JSON plus a Markdown table.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
+    /// Out-of-core path tracing of triangle scenes: prepare, generate, render.
+    #[command(subcommand)]
+    Ooc(ooc::OocCommand),
     /// Build, render and describe the bundled default scene (assets/avocado) into an output folder.
     Demo(DemoArgs),
 }
@@ -323,6 +327,7 @@ fn main() {
         Command::View(args) => view::view(&args),
         Command::Bench(cmd) => bench::run(cmd, cli.quiet),
         Command::Demo(args) => commands::demo(&args, cli.quiet),
+        Command::Ooc(cmd) => ooc::run(cmd, cli.quiet),
     };
     if let Err(err) = result {
         voxdag::atomic_file::remove_temp_files();

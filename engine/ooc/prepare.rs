@@ -1,0 +1,572 @@
+//! Scene preparation: stream triangles (meshes with instance transforms, and optionally a
+//! generated terrain), group them into spatially compact batching points and write the scene
+//! directory with its proxies.
+//!
+//! Grouping: each triangle's centroid gets a 30-bit Morton code over the scene bounds. The
+//! triangles are first spread over `2^B` bucket files by the top `B` bits (so a scene far larger
+//! than memory is never held at once), then each bucket is sorted by code and split recursively
+//! at the highest differing code bit (as an LBVH would) until a range holds at most
+//! `batch_triangles` triangles: one batching point per range.
+
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+
+use indicatif::ProgressBar;
+use rayon::prelude::*;
+
+use super::format::{self, PointEntry, GEOMETRY_HEADER, TRI_BYTES};
+use super::geom::{Aabb, Tri};
+use super::proxy::{voxelize_point, Grid, ProxyBuilder};
+use super::OocError;
+use crate::dag::Svdag;
+use crate::scene::morton;
+
+/// An indexed triangle mesh in model space.
+#[derive(Clone, Debug, Default)]
+pub struct SourceMesh {
+    /// Vertex positions.
+    pub positions: Vec<[f32; 3]>,
+    /// Triangles as vertex index triples (validated).
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl SourceMesh {
+    /// Positions and triangles of an imported mesh.
+    pub fn from_mesh(mesh: &crate::scene::Mesh) -> Result<SourceMesh, OocError> {
+        mesh.validate()?;
+        Ok(SourceMesh {
+            positions: mesh.positions.clone(),
+            triangles: mesh.triangles.clone(),
+        })
+    }
+
+    fn bounds(&self) -> Aabb {
+        let mut b = Aabb::EMPTY;
+        for p in &self.positions {
+            b.grow(*p);
+        }
+        b
+    }
+}
+
+/// A copy of a mesh: `p' = M p + t` with `M` given row-major with `t` as the 4th column.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Instance {
+    /// Index into [`SceneSource::meshes`].
+    pub mesh: u32,
+    /// Affine transform, row-major 3x4.
+    pub transform: [[f64; 4]; 3],
+}
+
+impl Instance {
+    fn apply(&self, p: [f32; 3]) -> [f32; 3] {
+        let m = &self.transform;
+        [0, 1, 2].map(|r| {
+            (m[r][0] * p[0] as f64 + m[r][1] * p[1] as f64 + m[r][2] * p[2] as f64 + m[r][3]) as f32
+        })
+    }
+}
+
+/// A procedural height-field terrain of `2 cells^2` triangles over `[0, size]^2` in x/z (y up).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Terrain {
+    /// Cells per side.
+    pub cells: u32,
+    /// Side length in world units.
+    pub size: f64,
+    /// Height amplitude.
+    pub height: f64,
+    /// Noise seed.
+    pub seed: u64,
+}
+
+/// splitmix64 finaliser: a well-mixed hash of a 64-bit value.
+pub fn mix64(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// A uniform value in [0, 1) from a hash.
+fn unit(h: u64) -> f64 {
+    (h >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+}
+
+impl Terrain {
+    /// Lattice value noise with smooth interpolation, 5 octaves.
+    pub fn height_at(&self, x: f64, z: f64) -> f64 {
+        let mut sum = 0.0;
+        let mut amp = 0.5;
+        let mut freq = 4.0 / self.size;
+        for o in 0..5u64 {
+            let (fx, fz) = (x * freq, z * freq);
+            let (ix, iz) = (fx.floor(), fz.floor());
+            let (tx, tz) = (fx - ix, fz - iz);
+            let (sx, sz) = (tx * tx * (3.0 - 2.0 * tx), tz * tz * (3.0 - 2.0 * tz));
+            let lattice = |a: f64, b: f64| {
+                let h =
+                    mix64(self.seed ^ mix64(o ^ mix64((a as i64 as u64) ^ mix64(b as i64 as u64))));
+                unit(h) * 2.0 - 1.0
+            };
+            let v00 = lattice(ix, iz);
+            let v10 = lattice(ix + 1.0, iz);
+            let v01 = lattice(ix, iz + 1.0);
+            let v11 = lattice(ix + 1.0, iz + 1.0);
+            let a = v00 + (v10 - v00) * sx;
+            let b = v01 + (v11 - v01) * sx;
+            sum += amp * (a + (b - a) * sz);
+            amp *= 0.5;
+            freq *= 2.0;
+        }
+        sum * self.height
+    }
+
+    fn vertex(&self, i: u32, j: u32) -> [f32; 3] {
+        let step = self.size / self.cells as f64;
+        let (x, z) = (i as f64 * step, j as f64 * step);
+        [x as f32, self.height_at(x, z) as f32, z as f32]
+    }
+
+    /// The triangles of row `j` of cells.
+    fn row(&self, j: u32, out: &mut Vec<Tri>) {
+        for i in 0..self.cells {
+            let a = self.vertex(i, j);
+            let b = self.vertex(i + 1, j);
+            let c = self.vertex(i, j + 1);
+            let d = self.vertex(i + 1, j + 1);
+            out.push([a, c, b]);
+            out.push([b, c, d]);
+        }
+    }
+}
+
+/// Everything a scene is made of, generated on demand in chunks (never all at once).
+#[derive(Clone, Debug, Default)]
+pub struct SceneSource {
+    /// Meshes in model space.
+    pub meshes: Vec<SourceMesh>,
+    /// Placed copies of the meshes.
+    pub instances: Vec<Instance>,
+    /// An optional terrain.
+    pub terrain: Option<Terrain>,
+}
+
+impl SceneSource {
+    /// Total triangles.
+    pub fn triangle_count(&self) -> u64 {
+        let inst: u64 = self
+            .instances
+            .iter()
+            .map(|i| self.meshes[i.mesh as usize].triangles.len() as u64)
+            .sum();
+        inst + self
+            .terrain
+            .map_or(0, |t| 2 * t.cells as u64 * t.cells as u64)
+    }
+
+    /// Bounds of all triangles (the transformed corners of each mesh's bounds, which hold its
+    /// transformed vertices; the terrain's sampled heights).
+    pub fn bounds(&self) -> Aabb {
+        let mesh_bounds: Vec<Aabb> = self.meshes.iter().map(SourceMesh::bounds).collect();
+        let mut b = Aabb::EMPTY;
+        for inst in &self.instances {
+            let mb = &mesh_bounds[inst.mesh as usize];
+            for c in 0..8 {
+                let p = [0, 1, 2].map(|k| if c >> k & 1 == 0 { mb.lo[k] } else { mb.hi[k] });
+                // Rounding of the corner may fall inside; widen by a relative ulp margin.
+                let q = inst.apply(p);
+                b.grow(q.map(|v| v - v.abs() * 1e-6 - 1e-6));
+                b.grow(q.map(|v| v + v.abs() * 1e-6 + 1e-6));
+            }
+        }
+        if let Some(t) = &self.terrain {
+            let h = t.height as f32;
+            b.grow([0.0, -h, 0.0]);
+            b.grow([t.size as f32, h, t.size as f32]);
+        }
+        b
+    }
+
+    /// Calls `f` with consecutive chunks of all triangles in a fixed order.
+    pub fn for_each_chunk(
+        &self,
+        mut f: impl FnMut(&[Tri]) -> Result<(), OocError>,
+    ) -> Result<(), OocError> {
+        let mut buf: Vec<Tri> = Vec::with_capacity(1 << 16);
+        if let Some(t) = &self.terrain {
+            for j in 0..t.cells {
+                t.row(j, &mut buf);
+                if buf.len() >= 1 << 15 {
+                    f(&buf)?;
+                    buf.clear();
+                }
+            }
+        }
+        for inst in &self.instances {
+            let m = &self.meshes[inst.mesh as usize];
+            let pos: Vec<[f32; 3]> = m.positions.iter().map(|&p| inst.apply(p)).collect();
+            for tri in &m.triangles {
+                buf.push(tri.map(|i| pos[i as usize]));
+                if buf.len() >= 1 << 15 {
+                    f(&buf)?;
+                    buf.clear();
+                }
+            }
+        }
+        if !buf.is_empty() {
+            f(&buf)?;
+        }
+        Ok(())
+    }
+
+    /// A landscape: a terrain of about a tenth of `triangles`, the rest copies of `meshes`
+    /// (scaled, rotated about y and set on the terrain), all from `seed`.
+    pub fn landscape(
+        meshes: Vec<SourceMesh>,
+        triangles: u64,
+        seed: u64,
+    ) -> Result<SceneSource, OocError> {
+        if meshes.is_empty() || meshes.iter().any(|m| m.triangles.is_empty()) {
+            return Err(OocError::Invalid(
+                "the landscape needs meshes with triangles".into(),
+            ));
+        }
+        let terrain_tris = (triangles / 10).max(2);
+        let cells = ((terrain_tris as f64 / 2.0).sqrt().ceil() as u32).max(1);
+        let size = 1000.0;
+        let terrain = Terrain {
+            cells,
+            size,
+            height: 60.0,
+            seed,
+        };
+        let bounds: Vec<Aabb> = meshes.iter().map(SourceMesh::bounds).collect();
+        let mut instances = Vec::new();
+        let mut total = 2 * cells as u64 * cells as u64;
+        let mut k = 0u64;
+        while total < triangles {
+            let h = |d: u64| unit(mix64(seed ^ mix64(k * 16 + d)));
+            let mesh = (h(0) * meshes.len() as f64) as usize % meshes.len();
+            let mb = &bounds[mesh];
+            let ext = (0..3)
+                .map(|a| (mb.hi[a] - mb.lo[a]) as f64)
+                .fold(0.0, f64::max)
+                .max(1e-9);
+            let scale = size * (0.01 + 0.03 * h(1)) / ext;
+            let angle = h(2) * std::f64::consts::TAU;
+            let (x, z) = (h(3) * size, h(4) * size);
+            let y = terrain.height_at(x, z);
+            let c = mb.center();
+            let (s, co) = (angle.sin() * scale, angle.cos() * scale);
+            // p' = R_y(angle) * scale * (p - centre_xz, p.y - min y) + (x, y, z)
+            let (cx, cz, miny) = (c[0] as f64, c[2] as f64, mb.lo[1] as f64);
+            instances.push(Instance {
+                mesh: mesh as u32,
+                transform: [
+                    [co, 0.0, s, x - co * cx - s * cz],
+                    [0.0, scale, 0.0, y - scale * miny - 0.002 * size],
+                    [-s, 0.0, co, z + s * cx - co * cz],
+                ],
+            });
+            total += meshes[mesh].triangles.len() as u64;
+            k += 1;
+        }
+        Ok(SceneSource {
+            meshes,
+            instances,
+            terrain: Some(terrain),
+        })
+    }
+}
+
+/// Options of [`prepare`].
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PrepareOptions {
+    /// Target triangles per batching point (points hold at most this many).
+    pub batch_triangles: u32,
+    /// Proxy resolutions to build (powers of two, 8..=4096): one `proxies-R.bin` each.
+    pub proxy_resolutions: Vec<u32>,
+    /// Bytes of triangles held in memory at once while grouping (sets the bucket count).
+    pub bucket_bytes: u64,
+}
+
+impl Default for PrepareOptions {
+    fn default() -> Self {
+        PrepareOptions {
+            batch_triangles: 100_000,
+            proxy_resolutions: vec![128],
+            bucket_bytes: 1 << 29,
+        }
+    }
+}
+
+/// What [`prepare`] wrote.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct PrepareSummary {
+    /// Triangles written.
+    pub triangles: u64,
+    /// Batching points.
+    pub points: u32,
+    /// Bytes of `geometry.bin`.
+    pub geometry_bytes: u64,
+    /// Per proxy resolution: (resolution, words of the shared DAG, bytes in memory).
+    pub proxies: Vec<(u32, u64, u64)>,
+}
+
+/// Morton code of a triangle's centroid over `bounds` (10 bits per axis).
+fn centroid_code(t: &Tri, lo: [f32; 3], inv: [f32; 3]) -> u32 {
+    let q = [0, 1, 2].map(|k| {
+        let c = (t[0][k] + t[1][k] + t[2][k]) / 3.0;
+        (((c - lo[k]) * inv[k]).max(0.0) as u32).min(1023)
+    });
+    morton::encode(q[0], q[1], q[2]) as u32
+}
+
+/// Splits the sorted `codes[lo..hi]` into ranges of at most `k` at the highest differing bit.
+fn split_points(codes: &[u32], lo: usize, hi: usize, k: usize, out: &mut Vec<(usize, usize)>) {
+    if hi - lo <= k {
+        out.push((lo, hi));
+        return;
+    }
+    let (a, b) = (codes[lo], codes[hi - 1]);
+    let mid = if a == b {
+        (lo + hi) / 2
+    } else {
+        let bit = 31 - (a ^ b).leading_zeros();
+        lo + codes[lo..hi].partition_point(|c| c >> bit & 1 == 0)
+    };
+    split_points(codes, lo, mid, k, out);
+    split_points(codes, mid, hi, k, out);
+}
+
+fn tri_bytes(t: &Tri, out: &mut Vec<u8>) {
+    for v in t {
+        for c in v {
+            out.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+}
+
+/// Writes the scene directory `dir` for `source` (see the module docs).
+pub fn prepare(
+    source: &SceneSource,
+    dir: &Path,
+    options: &PrepareOptions,
+    progress: &ProgressBar,
+) -> Result<PrepareSummary, OocError> {
+    if options.batch_triangles == 0 || options.batch_triangles > format::MAX_POINT_TRIANGLES {
+        return Err(OocError::Invalid(format!(
+            "--batch-triangles must be in 1..={}",
+            format::MAX_POINT_TRIANGLES
+        )));
+    }
+    for &r in &options.proxy_resolutions {
+        if !r.is_power_of_two() || !(8..=4096).contains(&r) {
+            return Err(OocError::Invalid(format!(
+                "proxy resolution {r} is not a power of two in 8..=4096"
+            )));
+        }
+    }
+    let total = source.triangle_count();
+    if total == 0 {
+        return Err(OocError::Invalid("the scene has no triangles".into()));
+    }
+    std::fs::create_dir_all(dir).map_err(|e| OocError::io(dir, e))?;
+    let bounds = source.bounds();
+    let lo = bounds.lo;
+    let inv = [0, 1, 2].map(|k| {
+        let e = bounds.hi[k] - bounds.lo[k];
+        if e > 0.0 {
+            1024.0 / e
+        } else {
+            0.0
+        }
+    });
+    // Buckets by the top code bits.
+    let mut bits = 0u32;
+    while bits < 9 && (total * TRI_BYTES) >> bits > options.bucket_bytes {
+        bits += 1;
+    }
+    let nb = 1usize << bits;
+    let bucket_dir = dir.join(".buckets");
+    let mut in_memory: Vec<Tri> = Vec::new();
+    let bucket_path = |b: usize| bucket_dir.join(format!("{b}.tmp"));
+    progress.set_length(2 * total);
+    progress.set_message("grouping");
+    if bits == 0 {
+        in_memory = crate::safety::try_vec("scene triangles", total)?;
+        source.for_each_chunk(|c| {
+            in_memory.extend_from_slice(c);
+            progress.inc(c.len() as u64);
+            Ok(())
+        })?;
+    } else {
+        std::fs::create_dir_all(&bucket_dir).map_err(|e| OocError::io(&bucket_dir, e))?;
+        let mut writers = (0..nb)
+            .map(|b| {
+                let p = bucket_path(b);
+                File::create(&p)
+                    .map(|f| BufWriter::with_capacity(1 << 16, f))
+                    .map_err(|e| OocError::io(&p, e))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut rec = Vec::with_capacity(36);
+        source.for_each_chunk(|c| {
+            for t in c {
+                let b = (centroid_code(t, lo, inv) >> (30 - bits)) as usize;
+                rec.clear();
+                tri_bytes(t, &mut rec);
+                writers[b]
+                    .write_all(&rec)
+                    .map_err(|e| OocError::io(&bucket_path(b), e))?;
+            }
+            progress.inc(c.len() as u64);
+            Ok(())
+        })?;
+        for (b, w) in writers.into_iter().enumerate() {
+            w.into_inner()
+                .map_err(|e| OocError::io(&bucket_path(b), e.into_error()))?;
+        }
+    }
+    progress.set_message("points");
+    let geometry_path = dir.join(format::GEOMETRY_FILE);
+    let tmp_path: PathBuf = dir.join(".geometry.bin.tmp");
+    let mut geo = BufWriter::with_capacity(
+        1 << 20,
+        File::create(&tmp_path).map_err(|e| OocError::io(&tmp_path, e))?,
+    );
+    let mut head = Vec::new();
+    head.extend_from_slice(format::GEOMETRY_MAGIC);
+    head.extend_from_slice(&format::FORMAT_VERSION.to_le_bytes());
+    head.extend_from_slice(&0u32.to_le_bytes());
+    geo.write_all(&head)
+        .map_err(|e| OocError::io(&tmp_path, e))?;
+    let mut offset = GEOMETRY_HEADER;
+    let mut entries: Vec<PointEntry> = Vec::new();
+    let mut builders: Vec<ProxyBuilder> = options
+        .proxy_resolutions
+        .iter()
+        .map(|&r| ProxyBuilder::new(r))
+        .collect();
+    let result = (|| -> Result<(), OocError> {
+        for b in 0..nb {
+            let mut tris = if bits == 0 {
+                std::mem::take(&mut in_memory)
+            } else {
+                let p = bucket_path(b);
+                let len = std::fs::metadata(&p)
+                    .map_err(|e| OocError::io(&p, e))?
+                    .len();
+                let mut bytes = Vec::new();
+                BufReader::new(File::open(&p).map_err(|e| OocError::io(&p, e))?)
+                    .read_to_end(&mut bytes)
+                    .map_err(|e| OocError::io(&p, e))?;
+                std::fs::remove_file(&p).map_err(|e| OocError::io(&p, e))?;
+                let mut tris = crate::safety::try_vec::<Tri>("bucket triangles", len / TRI_BYTES)?;
+                for c in bytes.chunks_exact(TRI_BYTES as usize) {
+                    let f: Vec<f32> = c
+                        .chunks_exact(4)
+                        .map(|v| f32::from_le_bytes(v.try_into().expect("4 bytes")))
+                        .collect();
+                    tris.push([[f[0], f[1], f[2]], [f[3], f[4], f[5]], [f[6], f[7], f[8]]]);
+                }
+                tris
+            };
+            if tris.is_empty() {
+                continue;
+            }
+            let mut keyed: Vec<(u32, Tri)> = tris
+                .drain(..)
+                .map(|t| (centroid_code(&t, lo, inv), t))
+                .collect();
+            keyed.sort_by_key(|k| k.0); // stable: equal codes keep input order
+            let codes: Vec<u32> = keyed.iter().map(|k| k.0).collect();
+            let tris: Vec<Tri> = keyed.into_iter().map(|k| k.1).collect();
+            let mut ranges = Vec::new();
+            split_points(
+                &codes,
+                0,
+                codes.len(),
+                options.batch_triangles as usize,
+                &mut ranges,
+            );
+            // Per point: bounds, bytes, checksum and its proxies, in parallel.
+            let per_point: Vec<(PointEntry, Vec<u8>, Vec<Svdag>)> = ranges
+                .par_iter()
+                .map(
+                    |&(s, e)| -> Result<(PointEntry, Vec<u8>, Vec<Svdag>), OocError> {
+                        let pts = &tris[s..e];
+                        let mut pb = Aabb::EMPTY;
+                        for t in pts {
+                            pb.union(&Aabb::of_tri(t));
+                        }
+                        let mut bytes = Vec::with_capacity(pts.len() * TRI_BYTES as usize);
+                        for t in pts {
+                            tri_bytes(t, &mut bytes);
+                        }
+                        let dags = options
+                            .proxy_resolutions
+                            .iter()
+                            .map(|&r| Svdag::from_voxels(&voxelize_point(pts, &Grid::new(&pb, r))))
+                            .collect::<Result<Vec<_>, _>>()?;
+                        let entry = PointEntry {
+                            offset: 0,
+                            triangles: pts.len() as u32,
+                            crc: crc32fast::hash(&bytes),
+                            bounds: pb,
+                        };
+                        Ok((entry, bytes, dags))
+                    },
+                )
+                .collect::<Result<_, OocError>>()?;
+            for (mut entry, bytes, dags) in per_point {
+                entry.offset = offset;
+                offset += bytes.len() as u64;
+                geo.write_all(&bytes)
+                    .map_err(|e| OocError::io(&tmp_path, e))?;
+                for (builder, dag) in builders.iter_mut().zip(&dags) {
+                    builder.add(dag);
+                }
+                progress.inc(entry.triangles as u64);
+                entries.push(entry);
+            }
+        }
+        Ok(())
+    })();
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp_path);
+        let _ = std::fs::remove_dir_all(&bucket_dir);
+        return Err(e);
+    }
+    let _ = std::fs::remove_dir_all(&bucket_dir);
+    let file = geo
+        .into_inner()
+        .map_err(|e| OocError::io(&tmp_path, e.into_error()))?;
+    file.sync_all().map_err(|e| OocError::io(&tmp_path, e))?;
+    drop(file);
+    std::fs::rename(&tmp_path, &geometry_path).map_err(|e| OocError::io(&geometry_path, e))?;
+    let mut scene_bounds = Aabb::EMPTY;
+    for e in &entries {
+        scene_bounds.union(&e.bounds);
+    }
+    let mut proxies = Vec::new();
+    for builder in builders {
+        let set = builder.finish();
+        let path = dir.join(format::proxy_file(set.resolution));
+        set.write(&path)?;
+        proxies.push((set.resolution, set.words.len() as u64, set.bytes()));
+    }
+    let index = format::index_bytes(&entries, total, &scene_bounds, offset);
+    let index_path = dir.join(format::INDEX_FILE);
+    crate::atomic_file::write_atomic(&index_path, |w| w.write_all(&index))
+        .map_err(|e| OocError::io(&index_path, e))?;
+    progress.finish_and_clear();
+    Ok(PrepareSummary {
+        triangles: total,
+        points: entries.len() as u32,
+        geometry_bytes: offset,
+        proxies,
+    })
+}

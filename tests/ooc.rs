@@ -1,0 +1,396 @@
+//! Out-of-core path tracing: the batched renderer equals the in-core one bit for bit (proxies on
+//! and off, several budgets), proxies are conservative, corrupt scene files are errors naming
+//! file and offset.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use indicatif::ProgressBar;
+use voxdag::ooc::prepare::{Instance, SourceMesh};
+use voxdag::ooc::{
+    format, prepare, render_in_core, render_out_of_core, Grid, OocError, OocScene, PrepareOptions,
+    ProxySet, RenderOptions, SceneSource,
+};
+use voxdag::scene::{self, ImportOptions};
+
+fn avocado() -> SourceMesh {
+    let path = common::repo().join("assets/avocado/Avocado.gltf");
+    let mesh = scene::load_mesh(&path, &ImportOptions::default()).expect("load avocado");
+    SourceMesh::from_mesh(&mesh).unwrap()
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("voxdag-ooc-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn prepared(source: &SceneSource, name: &str, k: u32, resolutions: &[u32]) -> PathBuf {
+    let dir = scratch(name);
+    let options = PrepareOptions {
+        batch_triangles: k,
+        proxy_resolutions: resolutions.to_vec(),
+        ..Default::default()
+    };
+    prepare(source, &dir, &options, &ProgressBar::hidden()).expect("prepare");
+    dir
+}
+
+fn bits(image: &voxdag::ooc::Image) -> Vec<[u32; 3]> {
+    image.pixels.iter().map(|p| p.map(f32::to_bits)).collect()
+}
+
+/// Every triangle of every point lies in the union of its proxy voxels: each voxel the closed
+/// triangle overlaps is set, and so is the cell of each vertex and of the centroid.
+fn check_conservative(dir: &Path, resolution: u32) -> usize {
+    let scene = OocScene::open(dir).unwrap();
+    let set = ProxySet::read(
+        &dir.join(format::proxy_file(resolution)),
+        scene.points.len() as u32,
+    )
+    .unwrap();
+    let mut checked = 0;
+    for (i, p) in scene.points.iter().enumerate() {
+        let grid = Grid::new(&p.bounds, resolution);
+        for t in scene.read_point(i as u32).unwrap() {
+            let mut any = false;
+            grid.for_overlapped(&t, |v| {
+                any = true;
+                assert!(set.contains(i as u32, v), "point {i}: voxel {v:?} missing");
+            });
+            assert!(any, "point {i}: a triangle overlaps no voxel");
+            let c = [0, 1, 2].map(|k| (t[0][k] + t[1][k] + t[2][k]) / 3.0);
+            for v in [t[0], t[1], t[2], c] {
+                let cell = grid.cell(grid.to_grid(v));
+                assert!(
+                    set.contains(i as u32, cell),
+                    "point {i}: vertex cell {cell:?} missing"
+                );
+            }
+            checked += 1;
+        }
+    }
+    checked
+}
+
+#[test]
+fn out_of_core_equals_in_core_bit_for_bit() {
+    let source = SceneSource::landscape(vec![avocado()], 60_000, 7).unwrap();
+    let dir = prepared(&source, "equal", 3000, &[32]);
+    let scene = OocScene::open(&dir).unwrap();
+    assert!(scene.points.len() > 10, "{} points", scene.points.len());
+    let proxies = ProxySet::read(&dir.join("proxies-32.bin"), scene.points.len() as u32).unwrap();
+    let base = RenderOptions {
+        width: 40,
+        height: 30,
+        spp: 2,
+        seed: 3,
+        max_bounces: 2,
+        rays_in_flight: 512,
+        ..Default::default()
+    };
+    let (reference, ref_stats) = render_in_core(&scene, &base, &ProgressBar::hidden()).unwrap();
+    assert!(ref_stats.rays > ref_stats.paths, "paths bounce");
+    assert!(
+        reference.pixels.iter().any(|p| *p != reference.pixels[0]),
+        "a flat image"
+    );
+    let largest = scene.points.iter().map(|p| p.bytes()).max().unwrap();
+    for budget_points in [2u64, 6, 1000] {
+        for with_proxies in [false, true] {
+            let opts = RenderOptions {
+                memory_budget: proxies.bytes() + budget_points * 3 * largest,
+                ..base.clone()
+            };
+            let set = with_proxies.then_some(&proxies);
+            let (image, stats) =
+                render_out_of_core(&scene, set, &opts, &ProgressBar::hidden()).unwrap();
+            assert_eq!(
+                bits(&image),
+                bits(&reference),
+                "budget {budget_points} points, proxies {with_proxies}"
+            );
+            assert_eq!(stats.rays, ref_stats.rays);
+            assert!(stats.peak_cache_bytes <= opts.memory_budget - stats.proxy_bytes);
+            assert_eq!(stats.cache_hits + stats.cache_misses, stats.batching_events);
+            if budget_points == 2 {
+                assert!(
+                    stats.cache_misses > scene.points.len() as u64 / 2,
+                    "{stats:?}"
+                );
+            }
+            if with_proxies {
+                assert!(stats.proxy_culls > 0, "{stats:?}");
+            }
+        }
+    }
+}
+
+#[test]
+fn proxies_are_conservative_on_assets() {
+    let source = SceneSource::landscape(vec![avocado()], 20_000, 1).unwrap();
+    let dir = prepared(&source, "conservative", 1500, &[8, 128]);
+    assert!(check_conservative(&dir, 128) > 0);
+    assert!(check_conservative(&dir, 8) > 0);
+    // A single untransformed avocado: one point.
+    let one = SceneSource {
+        meshes: vec![avocado()],
+        instances: vec![Instance {
+            mesh: 0,
+            transform: [
+                [1.0, 0.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0, 0.0],
+                [0.0, 0.0, 1.0, 0.0],
+            ],
+        }],
+        terrain: None,
+    };
+    let dir = prepared(&one, "conservative-one", 100_000, &[128]);
+    assert_eq!(OocScene::open(&dir).unwrap().points.len(), 1);
+    assert!(check_conservative(&dir, 128) > 0);
+}
+
+#[test]
+fn proxies_are_conservative_on_shared_meshes() {
+    let Some(data) = common::shared_data() else {
+        return;
+    };
+    for name in ["bunny", "dragon", "buddha", "horse", "teapot"] {
+        let path = data.join(format!("meshes/{name}.obj"));
+        let mesh = scene::load_mesh(&path, &ImportOptions::default()).unwrap();
+        let source = SceneSource {
+            meshes: vec![SourceMesh::from_mesh(&mesh).unwrap()],
+            instances: vec![Instance {
+                mesh: 0,
+                transform: [
+                    [1.0, 0.0, 0.0, 0.0],
+                    [0.0, 1.0, 0.0, 0.0],
+                    [0.0, 0.0, 1.0, 0.0],
+                ],
+            }],
+            terrain: None,
+        };
+        let dir = prepared(&source, name, 20_000, &[64]);
+        let n = check_conservative(&dir, 64);
+        assert_eq!(n, mesh.triangles.len(), "{name}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
+
+#[test]
+fn proxy_nodes_are_shared_across_points() {
+    let source = SceneSource::landscape(vec![avocado()], 20_000, 2).unwrap();
+    let dir = prepared(&source, "shared", 1000, &[64]);
+    let scene = OocScene::open(&dir).unwrap();
+    let set = ProxySet::read(&dir.join("proxies-64.bin"), scene.points.len() as u32).unwrap();
+    let mut separate = 0;
+    for (i, p) in scene.points.iter().enumerate() {
+        let grid = Grid::new(&p.bounds, 64);
+        let tris = scene.read_point(i as u32).unwrap();
+        let dag =
+            voxdag::dag::Svdag::from_voxels(&voxdag::ooc::proxy::voxelize_point(&tris, &grid))
+                .unwrap();
+        separate += dag.words.len();
+    }
+    assert!(
+        set.words.len() < separate,
+        "{} vs {separate}",
+        set.words.len()
+    );
+}
+
+fn expect_format_error(result: Result<impl std::fmt::Debug, OocError>, file: &str) -> u64 {
+    match result {
+        Err(OocError::Format { path, offset, .. }) => {
+            assert!(path.ends_with(file), "{path:?}");
+            offset
+        }
+        other => panic!("expected a format error in {file}, got {other:?}"),
+    }
+}
+
+#[test]
+fn corrupt_scene_files_are_errors_with_file_and_offset() {
+    let source = SceneSource::landscape(vec![avocado()], 10_000, 3).unwrap();
+    let dir = prepared(&source, "corrupt", 2000, &[16]);
+    let scene = OocScene::open(&dir).unwrap();
+    let n = scene.points.len() as u32;
+    let p1 = scene.points[1];
+    drop(scene);
+    let geometry = dir.join("geometry.bin");
+    let original = std::fs::read(&geometry).unwrap();
+    // A flipped byte inside point 1's region: its checksum fails, naming the region's offset.
+    let mut bad = original.clone();
+    bad[p1.offset as usize + 5] ^= 0x40;
+    std::fs::write(&geometry, &bad).unwrap();
+    let scene = OocScene::open(&dir).unwrap();
+    assert!(scene.read_point(0).is_ok());
+    assert_eq!(
+        expect_format_error(scene.read_point(1), "geometry.bin"),
+        p1.offset
+    );
+    // The renderers stop with that error rather than drawing a wrong image.
+    let opts = RenderOptions {
+        width: 16,
+        height: 16,
+        spp: 1,
+        ..Default::default()
+    };
+    assert!(render_in_core(&scene, &opts, &ProgressBar::hidden()).is_err());
+    drop(scene);
+    // Truncated geometry: the index names the expected size.
+    std::fs::write(&geometry, &original[..original.len() - 7]).unwrap();
+    let offset = expect_format_error(OocScene::open(&dir), "geometry.bin");
+    assert_eq!(offset, original.len() as u64 - 7);
+    std::fs::write(&geometry, &original).unwrap();
+    // Truncated and corrupt index.
+    let index = dir.join("index.bin");
+    let idx = std::fs::read(&index).unwrap();
+    std::fs::write(&index, &idx[..idx.len() - 10]).unwrap();
+    expect_format_error(OocScene::open(&dir), "index.bin");
+    let mut bad = idx.clone();
+    bad[70] ^= 1;
+    std::fs::write(&index, &bad).unwrap();
+    expect_format_error(OocScene::open(&dir), "index.bin");
+    std::fs::write(&index, &idx).unwrap();
+    // Corrupt and truncated proxies.
+    let proxies = dir.join("proxies-16.bin");
+    let px = std::fs::read(&proxies).unwrap();
+    let mut bad = px.clone();
+    bad[40] ^= 2;
+    std::fs::write(&proxies, &bad).unwrap();
+    expect_format_error(ProxySet::read(&proxies, n), "proxies-16.bin");
+    std::fs::write(&proxies, &px[..px.len() / 2]).unwrap();
+    expect_format_error(ProxySet::read(&proxies, n), "proxies-16.bin");
+    // The CLI prints one line naming the file and the offset.
+    std::fs::write(&proxies, &px).unwrap();
+    std::fs::write(&geometry, &original[..original.len() - 7]).unwrap();
+    let out_png = dir.join("x.png");
+    let out = common::voxdag_cli(&[
+        "ooc",
+        "render",
+        dir.to_str().unwrap(),
+        "--size",
+        "8x8",
+        "--spp",
+        "1",
+        "--out",
+        out_png.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("geometry.bin")
+            && err.contains(&format!("byte offset {}", original.len() - 7)),
+        "{err}"
+    );
+    assert!(!out_png.exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn cli_generate_prepare_render() {
+    let dir = scratch("cli");
+    let avocado = common::repo().join("assets/avocado/Avocado.gltf");
+    let scene_dir = dir.join("scene");
+    let out = common::voxdag_cli(&[
+        "-q",
+        "ooc",
+        "generate",
+        "--triangles",
+        "8k",
+        "--seed",
+        "5",
+        "--meshes",
+        avocado.to_str().unwrap(),
+        "--batch-triangles",
+        "1000",
+        "--proxy-resolution",
+        "16,32",
+        "-o",
+        scene_dir.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let inst = dir.join("instances.txt");
+    std::fs::write(&inst, "# two copies\n0 10 0 0 0\n0 10 5 0 0 90\n").unwrap();
+    let prepared_dir = dir.join("prepared");
+    let out = common::voxdag_cli(&[
+        "-q",
+        "ooc",
+        "prepare",
+        avocado.to_str().unwrap(),
+        "--instances",
+        inst.to_str().unwrap(),
+        "--batch-triangles",
+        "300",
+        "-o",
+        prepared_dir.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut pngs = Vec::new();
+    for (name, extra) in [
+        ("in", vec!["--in-core"]),
+        (
+            "on",
+            vec![
+                "--proxies",
+                "on",
+                "--proxy-resolution",
+                "32",
+                "--memory-budget",
+                "300K",
+            ],
+        ),
+        ("off", vec!["--proxies", "off", "--memory-budget", "300K"]),
+    ] {
+        let png = dir.join(format!("{name}.png"));
+        let report = dir.join(format!("{name}.json"));
+        let mut args = vec![
+            "-q",
+            "ooc",
+            "render",
+            scene_dir.to_str().unwrap(),
+            "--size",
+            "24x16",
+            "--spp",
+            "2",
+            "--out",
+            png.to_str().unwrap(),
+            "--report",
+            report.to_str().unwrap(),
+        ];
+        args.extend(extra);
+        let out = common::voxdag_cli(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let json: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
+        for key in [
+            "disk_bytes_read",
+            "batching_events",
+            "cache_hits",
+            "cache_misses",
+            "rays_per_s",
+            "wall_s",
+        ] {
+            assert!(json.get(key).is_some(), "{key} missing");
+        }
+        pngs.push(std::fs::read(&png).unwrap());
+    }
+    assert_eq!(pngs[0], pngs[1]);
+    assert_eq!(pngs[0], pngs[2]);
+    let _ = std::fs::remove_dir_all(&dir);
+}
