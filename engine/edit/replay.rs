@@ -48,10 +48,10 @@ pub enum ReplayError {
 /// One replay action, with HashDAG's fields (unscaled).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Action {
-    /// Camera position.
-    SetLocation([f32; 3]),
+    /// Camera position (HashDAG keeps the camera in doubles).
+    SetLocation([f64; 3]),
     /// Camera rotation (3x3, rows).
-    SetRotation([f32; 9]),
+    SetRotation([f64; 9]),
     /// The application's tool state (path, copy source path, copy destination path, radius,
     /// tool id); recorded, not applied.
     SetToolParameters {
@@ -160,6 +160,16 @@ fn number(field: &str) -> Result<f32, String> {
     Ok(v)
 }
 
+fn number64(field: &str) -> Result<f64, String> {
+    let v: f64 = field
+        .parse()
+        .map_err(|_| format!("{field:?} is not a number"))?;
+    if !v.is_finite() {
+        return Err(format!("{field:?} is not a finite number"));
+    }
+    Ok(v)
+}
+
 fn unsigned(field: &str) -> Result<u32, String> {
     let v: f64 = field
         .parse()
@@ -204,13 +214,13 @@ fn parse_action(line: &str) -> Result<Action, String> {
     Ok(match name {
         "SetLocation" => {
             expect(&[3])?;
-            Action::SetLocation(vec3(f)?)
+            Action::SetLocation([number64(f[0])?, number64(f[1])?, number64(f[2])?])
         }
         "SetRotation" => {
             expect(&[9])?;
-            let mut m = [0f32; 9];
+            let mut m = [0f64; 9];
             for (v, field) in m.iter_mut().zip(f.iter()) {
-                *v = number(field)?;
+                *v = number64(field)?;
             }
             Action::SetRotation(m)
         }
@@ -287,17 +297,22 @@ fn float(v: f32) -> String {
     format!("{v:.6}")
 }
 
+/// [`float`] of a double (the camera).
+fn double(v: f64) -> String {
+    format!("{v:.6}")
+}
+
 impl Action {
     /// The line HashDAG's `write_csv` writes for this action (without `\n`).
     pub fn to_csv(&self) -> String {
         let mut fields: Vec<String> = Vec::new();
         let name = match self {
             Action::SetLocation(p) => {
-                fields.extend(p.iter().map(|&v| float(v)));
+                fields.extend(p.iter().map(|&v| double(v)));
                 "SetLocation"
             }
             Action::SetRotation(m) => {
-                fields.extend(m.iter().map(|&v| float(v)));
+                fields.extend(m.iter().map(|&v| double(v)));
                 "SetRotation"
             }
             Action::SetToolParameters {
