@@ -406,3 +406,27 @@ fn failed_edit_changes_nothing() {
     assert_eq!(editor.dag().item_count(), items);
     assert_eq!(editor.live_roots(), &[root]);
 }
+
+#[test]
+fn full_table_fails_the_edit_and_keeps_the_previous_root() {
+    let svdag = scene(1, 64);
+    let map = map_of(&svdag, true);
+    let (mut dag, root) = from_scratch(&map, true, None);
+    let used = dag.item_count() as u32;
+    // Room for only a few new items: a large edit cannot finish.
+    dag.set_item_limit(used / 4);
+    let mut editor = CpuEditor::new(dag, root, 8);
+    let tool = Tool::Paint {
+        center: [32.0; 3],
+        radius: 30.0,
+        material: 3,
+    };
+    let err = editor.edit(&tool).unwrap_err();
+    assert!(err.to_string().contains("is full"), "{err}");
+    assert_eq!(editor.dag().item_count() as u32, used);
+    assert_eq!(editor.live_roots(), &[root]);
+    assert_eq!(editor.dag().voxels(editor.root()).unwrap(), map.sorted());
+    // GC after the failed edit keeps the scene.
+    editor.gc().unwrap();
+    assert_eq!(editor.dag().voxels(editor.root()).unwrap(), map.sorted());
+}

@@ -35,7 +35,11 @@ fn real_files_parse_and_write_back_unmodified() {
                 assert_eq!(a, b, "{name}:{}", i + 1);
             }
             // (Some files lack the final newline, which our writer always ends with.)
-            assert_eq!(ours.trim_end_matches('\n'), text.trim_end_matches('\n'), "{name}");
+            assert_eq!(
+                ours.trim_end_matches('\n'),
+                text.trim_end_matches('\n'),
+                "{name}"
+            );
         }
         // Whatever the quirks, writing and reading again gives the same actions.
         let again = Replay::parse(&replay.to_csv(), "again").unwrap();

@@ -30,10 +30,12 @@ pub const MAX_TABLE_ITEMS: u32 = 1 << POINTER_HANDLE_BITS;
 #[derive(Debug, Error)]
 pub enum EditError {
     /// A table has no free handle left (the edit was not applied).
-    #[error("hash DAG table of {words}-word items is full ({MAX_TABLE_ITEMS} items)")]
+    #[error("hash DAG table of {words}-word items is full ({limit} items)")]
     TableFull {
         /// Item size of the full table.
         words: u32,
+        /// Items the table may hold.
+        limit: u32,
     },
     /// The grid side is not a power of two in `8..=2^21`.
     #[error("invalid resolution {0}")]
@@ -94,6 +96,8 @@ pub struct HashDag {
     resolution: u32,
     materials: bool,
     tables: Vec<Table>,
+    /// Most items per table (handles below it); `MAX_TABLE_ITEMS` unless lowered.
+    item_limit: u32,
 }
 
 /// Items found missing during a parallel edit, inserted into the tables afterwards.
@@ -138,9 +142,11 @@ impl<'a> Inserter<'a> {
             table.free[table.free.len() - pending.reused]
         } else {
             let handle = table.used.len() as u64 + pending.fresh as u64;
-            if handle >= MAX_TABLE_ITEMS as u64 {
+            let limit = self.dag.item_limit;
+            if handle >= limit as u64 {
                 return Err(EditError::TableFull {
                     words: words.len() as u32,
+                    limit,
                 });
             }
             pending.fresh += 1;
@@ -244,7 +250,14 @@ impl HashDag {
             tables: (MIN_ITEM_WORDS..=MAX_ITEM_WORDS)
                 .map(|w| Table::new(w as usize))
                 .collect(),
+            item_limit: MAX_TABLE_ITEMS,
         })
+    }
+
+    /// Caps every table at `limit` items (at most `MAX_TABLE_ITEMS`), e.g. to bound memory;
+    /// an edit that needs more fails with [`EditError::TableFull`] and changes nothing.
+    pub fn set_item_limit(&mut self, limit: u32) {
+        self.item_limit = limit.min(MAX_TABLE_ITEMS);
     }
 
     /// Grid side length.
