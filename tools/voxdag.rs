@@ -2,6 +2,7 @@
 
 mod bench;
 mod commands;
+mod edit;
 mod limited_alloc;
 mod ooc;
 mod view;
@@ -48,6 +49,8 @@ enum Command {
     Ooc(ooc::OocCommand),
     /// Build, render and describe the bundled default scene (assets/avocado) into an output folder.
     Demo(DemoArgs),
+    /// Apply a HashDAG replay (edits, undo/redo) to a scene and save the result.
+    Edit(edit::EditArgs),
 }
 
 /// Arguments of `voxdag build`.
@@ -328,6 +331,7 @@ fn main() {
         Command::Bench(cmd) => bench::run(cmd, cli.quiet),
         Command::Demo(args) => commands::demo(&args, cli.quiet),
         Command::Ooc(cmd) => ooc::run(cmd, cli.quiet),
+        Command::Edit(args) => edit::edit(&args),
     };
     if let Err(err) = result {
         voxdag::atomic_file::remove_temp_files();

@@ -1,4 +1,7 @@
 //! Editing: the hash DAG (every node of the scene in the per-size slab hash tables), its item
 //! format, and the edit tools built on it (dissertation ch. 4).
 
+pub mod cpu;
 pub mod item;
+pub mod replay;
+pub mod tool;
