@@ -54,7 +54,16 @@ fn main() {
         // Track the source even when compilation fails so that fixing it reruns the script.
         println!("cargo:rerun-if-changed={}", src.display());
         tracked.insert(src.clone());
-        let (bytes, deps) = compile(&glslc, &manifest, &glsl_dir, &gen_root, src, &out_dir, &stem, &[]);
+        let (bytes, deps) = compile(
+            &glslc,
+            &manifest,
+            &glsl_dir,
+            &gen_root,
+            src,
+            &out_dir,
+            &stem,
+            &[],
+        );
         // Shaders that include the DAG traversal get one variant per DAG format.
         let traverses = deps.iter().any(|p| p.ends_with("render/traverse.glsl"));
         for p in deps {

@@ -292,7 +292,10 @@ impl GpuRenderer {
             )));
         }
         let first_hit_need = w as u64 * h as u64 * std::mem::size_of::<FirstHit>() as u64;
-        for (buffer, need) in [(hits, w as u64 * h as u64 * 4), (first_hits, first_hit_need)] {
+        for (buffer, need) in [
+            (hits, w as u64 * h as u64 * 4),
+            (first_hits, first_hit_need),
+        ] {
             let Some(hits) = buffer else { continue };
             if hits.size() < need {
                 return Err(GpuError::OutOfRange {
@@ -328,12 +331,7 @@ impl GpuRenderer {
         let groups = [w.div_ceil(WORKGROUP[0]), h.div_ceil(WORKGROUP[1]), 1];
         // begin_pass orders its begin timestamp before the dispatch (lavapipe flush).
         cmd.begin_pass(&mut profiler, "primary rays");
-        let result = cmd.dispatch(
-            pipeline,
-            groups,
-            bytemuck::bytes_of(&push),
-            Some(target),
-        );
+        let result = cmd.dispatch(pipeline, groups, bytemuck::bytes_of(&push), Some(target));
         cmd.end_pass(&mut profiler);
         result
     }

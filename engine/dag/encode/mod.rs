@@ -21,7 +21,9 @@ mod tsvdag;
 
 pub use huffman::{length_limited_code_lengths, Huffman};
 pub use ssvdag::SsvdagEncoding;
-pub use traverse::{contains, occupied_bounds, raycast, to_svdag, voxel_digest, EncodedHit, TreeView, VoxelIter};
+pub use traverse::{
+    contains, occupied_bounds, raycast, to_svdag, voxel_digest, EncodedHit, TreeView, VoxelIter,
+};
 pub use tsvdag::{
     reorient, GraphLevel, GraphPointer, TransformGraph, TranslationCoding, TsvdagEncoding,
     TsvdagOptions, TsvdagTuning, MAX_TRANSLATION_LEVEL,

@@ -354,7 +354,11 @@ pub fn occupied_bounds<V: TreeView>(view: &V) -> Result<Option<([u32; 3], [u32; 
             if let Some(child) = child {
                 let o = octant as u32;
                 let offset = [o & 1, (o >> 1) & 1, o >> 2];
-                stack.push((child, level - 1, [0, 1, 2].map(|a| corner[a] + offset[a] * half)));
+                stack.push((
+                    child,
+                    level - 1,
+                    [0, 1, 2].map(|a| corner[a] + offset[a] * half),
+                ));
             }
         }
     }
