@@ -178,7 +178,7 @@ fn compile(
         .map(|p| if p.is_absolute() { p } else { manifest.join(p) })
         .collect();
     let bytes = std::fs::read(&spv).unwrap_or_else(|e| panic!("reading {}: {e}", spv.display()));
-    if bytes.len() % 4 != 0 || bytes.len() < 20 {
+    if !bytes.len().is_multiple_of(4) || bytes.len() < 20 {
         panic!(
             "{}: not a SPIR-V module ({} bytes)",
             spv.display(),

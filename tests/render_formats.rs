@@ -53,7 +53,7 @@ fn copies_scene() -> Svdag {
         for cy in 1..4u32 {
             for cx in 0..4u32 {
                 cell += 1;
-                if cell % 3 == 0 {
+                if cell.is_multiple_of(3) {
                     continue;
                 }
                 let t = Transform::from_index((cell * 7 % 48) as usize).unwrap();

@@ -22,7 +22,8 @@ mod tsvdag;
 pub use huffman::{length_limited_code_lengths, Huffman};
 pub use ssvdag::SsvdagEncoding;
 pub use traverse::{
-    contains, occupied_bounds, raycast, to_svdag, voxel_digest, EncodedHit, TreeView, VoxelIter,
+    contains, occupied_bounds, raycast, to_svdag, voxel_digest, Bounds, EncodedHit, TreeView,
+    VoxelIter,
 };
 pub use tsvdag::{
     reorient, GraphLevel, GraphPointer, TransformGraph, TranslationCoding, TsvdagEncoding,
@@ -209,7 +210,7 @@ impl EncodedDag {
     }
 
     /// Bounding box of the occupied coarse nodes (as `Svdag::occupied_bounds`).
-    pub fn occupied_bounds(&self) -> Result<Option<([u32; 3], [u32; 3])>, EncodeError> {
+    pub fn occupied_bounds(&self) -> Result<Option<Bounds>, EncodeError> {
         match self {
             EncodedDag::Svdag32(d) => Ok(d.occupied_bounds()),
             EncodedDag::Ssvdag(d) => occupied_bounds(d),

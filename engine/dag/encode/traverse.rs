@@ -328,10 +328,13 @@ impl TreeView for Svdag {
     }
 }
 
+/// An axis-aligned box `(min, max)` in grid coordinates (max exclusive).
+pub type Bounds = ([u32; 3], [u32; 3]);
+
 /// Bounding box `(min, max)` of the occupied nodes `root_level - 6` levels down (the same
 /// coarse boxes as `Svdag::occupied_bounds`, so cameras framed from either agree), read from
 /// the encoded DAG; `None` for an empty scene.
-pub fn occupied_bounds<V: TreeView>(view: &V) -> Result<Option<([u32; 3], [u32; 3])>, EncodeError> {
+pub fn occupied_bounds<V: TreeView>(view: &V) -> Result<Option<Bounds>, EncodeError> {
     let top = root_level(view.resolution());
     let stop_level = top.saturating_sub(6);
     let Some(root) = view.root()? else {
