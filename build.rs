@@ -7,6 +7,12 @@
 //! tests, and say so in their docs. Includes are tracked through glslc's `-MD` depfiles so cargo reruns
 //! this script when any source or header changes. Any glslc error or warning fails the build.
 //!
+//! Shaders that include `render/traverse.glsl` are compiled once per DAG format of
+//! `engine/render/traversal_variants.rs` (with that entry's `-D` defines): `NAME` is svdag32,
+//! `NAME_SSVDAG`, `NAME_TSVDAG_BASE`, ... the others, and `NAME_BY_FORMAT` lists them all in
+//! `render::TraversalFormat::index` order. Any new shader using the traversal gets its variants
+//! without further setup.
+//!
 //! Before compiling, it writes `$OUT_DIR/glsl/gen/<room>.glsl` from each room's `gpu_shared.rs`
 //! (the one definition of the structs Rust and GLSL share; see engine/gpu_shared.rs) and puts
 //! `$OUT_DIR/glsl` on glslc's include path.
@@ -21,6 +27,7 @@ fn main() {
     let glsl_dir = manifest.join("shaders").join("glsl");
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rerun-if-env-changed=GLSLC");
+    println!("cargo:rerun-if-changed=engine/render/traversal_variants.rs");
     let glslc = std::env::var("GLSLC").unwrap_or_else(|_| "glslc".to_string());
     let gen_root = out_dir.join("glsl");
     write_shared_layouts(&manifest, &gen_root.join("gen"));
@@ -44,57 +51,22 @@ fn main() {
             panic!("two shaders map to the same constant name {name}: rename one of them");
         }
         let stem = rel.to_string_lossy().replace(['/', '\\'], "_");
-        let spv = out_dir.join(format!("{stem}.spv"));
-        let dep = out_dir.join(format!("{stem}.d"));
-        let output = Command::new(&glslc)
-            .current_dir(&manifest)
-            .arg("--target-env=vulkan1.2")
-            .arg("-O")
-            .arg("-Werror")
-            .arg("-MD")
-            .arg("-MF")
-            .arg(&dep)
-            .arg("-I")
-            .arg(&glsl_dir)
-            .arg("-I")
-            .arg(&gen_root)
-            .arg("-o")
-            .arg(&spv)
-            .arg(src)
-            .output();
-        let output = match output {
-            Ok(o) => o,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => panic!(
-                "`{glslc}` not found: voxdag compiles its shaders with glslc. \
-                 Install it (Debian/Ubuntu: `apt-get install glslc`) or set GLSLC=/path/to/glslc"
-            ),
-            Err(e) => panic!("cannot run `{glslc}`: {e}"),
-        };
         // Track the source even when compilation fails so that fixing it reruns the script.
         println!("cargo:rerun-if-changed={}", src.display());
         tracked.insert(src.clone());
-        if !output.status.success() {
-            panic!(
-                "glslc failed on {}:\n{}{}",
-                src.display(),
-                String::from_utf8_lossy(&output.stdout),
-                String::from_utf8_lossy(&output.stderr)
-            );
-        }
-        if !output.stderr.is_empty() {
-            // -Werror turns warnings into errors; anything printed on success is still surfaced.
-            panic!(
-                "glslc printed diagnostics for {}:\n{}",
-                src.display(),
-                String::from_utf8_lossy(&output.stderr)
-            );
-        }
-        for path in parse_depfile(&dep) {
-            let p = if path.is_absolute() {
-                path
-            } else {
-                manifest.join(path)
-            };
+        let (bytes, deps) = compile(
+            &glslc,
+            &manifest,
+            &glsl_dir,
+            &gen_root,
+            src,
+            &out_dir,
+            &stem,
+            &[],
+        );
+        // Shaders that include the DAG traversal get one variant per DAG format.
+        let traverses = deps.iter().any(|p| p.ends_with("render/traverse.glsl"));
+        for p in deps {
             // Generated headers are rewritten by every run; their sources are tracked instead.
             if p.starts_with(&out_dir) {
                 continue;
@@ -103,39 +75,139 @@ fn main() {
                 println!("cargo:rerun-if-changed={}", p.display());
             }
         }
-        let bytes =
-            std::fs::read(&spv).unwrap_or_else(|e| panic!("reading {}: {e}", spv.display()));
-        if bytes.len() % 4 != 0 || bytes.len() < 20 {
-            panic!(
-                "{}: not a SPIR-V module ({} bytes)",
-                spv.display(),
-                bytes.len()
-            );
-        }
         let rel_str = rel.to_string_lossy().replace('\\', "/");
-        let _ = writeln!(generated, "/// SPIR-V of `shaders/glsl/{rel_str}`.");
-        if rel_str.starts_with("test/") {
+        emit_const(&mut generated, &name, &rel_str, "", &bytes);
+        if traverses {
+            let mut variant_names = vec![name.clone()];
+            for (variant, defines) in TRAVERSAL_VARIANTS.iter().skip(1) {
+                let vname = format!("{name}_{}", variant.to_uppercase());
+                let vstem = format!("{stem}.{variant}");
+                let (bytes, _) = compile(
+                    &glslc, &manifest, &glsl_dir, &gen_root, src, &out_dir, &vstem, defines,
+                );
+                emit_const(
+                    &mut generated,
+                    &vname,
+                    &rel_str,
+                    &format!(" compiled for the `{variant}` DAG format"),
+                    &bytes,
+                );
+                variant_names.push(vname);
+            }
             let _ = writeln!(
                 generated,
-                "///\n/// Test-only shader, compiled into the library for the GPU-layer tests \
-                 (`tests/gpu_layer.rs`)."
+                "/// `shaders/glsl/{rel_str}` per DAG format, indexed by \
+                 `render::TraversalFormat::index` (entry 0: svdag32 = `{name}`).\n\
+                 pub const {name}_BY_FORMAT: [&[u32]; {}] = [{}];\n",
+                variant_names.len(),
+                variant_names.join(", ")
             );
         }
-        let _ = writeln!(generated, "pub const {name}: &[u32] = &[");
-        for chunk in bytes.chunks(4 * 8) {
-            generated.push_str("   ");
-            for w in chunk.chunks(4) {
-                let word = u32::from_le_bytes([w[0], w[1], w[2], w[3]]);
-                let _ = write!(generated, " 0x{word:08x},");
-            }
-            generated.push('\n');
-        }
-        generated.push_str("];\n\n");
         names.push(name);
     }
     // Directories: picks up new or removed shader files.
     track_dirs(&manifest.join("shaders"));
     std::fs::write(out_dir.join("shaders.rs"), generated).expect("writing shaders.rs");
+}
+
+/// The DAG formats of the traversal variants (shared with engine/render/format.rs).
+const TRAVERSAL_VARIANTS: [(&str, &[&str]); 10] = include!("engine/render/traversal_variants.rs");
+
+/// Compiles `src` with `defines` to `$OUT_DIR/<stem>.spv`; returns the SPIR-V bytes and the
+/// files it includes (from glslc's depfile). Any glslc error or diagnostic panics.
+#[allow(clippy::too_many_arguments)]
+fn compile(
+    glslc: &str,
+    manifest: &Path,
+    glsl_dir: &Path,
+    gen_root: &Path,
+    src: &Path,
+    out_dir: &Path,
+    stem: &str,
+    defines: &[&str],
+) -> (Vec<u8>, Vec<PathBuf>) {
+    let spv = out_dir.join(format!("{stem}.spv"));
+    let dep = out_dir.join(format!("{stem}.d"));
+    let mut command = Command::new(glslc);
+    command
+        .current_dir(manifest)
+        .arg("--target-env=vulkan1.2")
+        .arg("-O")
+        .arg("-Werror");
+    for d in defines {
+        command.arg(format!("-D{d}"));
+    }
+    let output = command
+        .arg("-MD")
+        .arg("-MF")
+        .arg(&dep)
+        .arg("-I")
+        .arg(glsl_dir)
+        .arg("-I")
+        .arg(gen_root)
+        .arg("-o")
+        .arg(&spv)
+        .arg(src)
+        .output();
+    let output = match output {
+        Ok(o) => o,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => panic!(
+            "`{glslc}` not found: voxdag compiles its shaders with glslc. \
+             Install it (Debian/Ubuntu: `apt-get install glslc`) or set GLSLC=/path/to/glslc"
+        ),
+        Err(e) => panic!("cannot run `{glslc}`: {e}"),
+    };
+    if !output.status.success() {
+        panic!(
+            "glslc failed on {} (defines {defines:?}):\n{}{}",
+            src.display(),
+            String::from_utf8_lossy(&output.stdout),
+            String::from_utf8_lossy(&output.stderr)
+        );
+    }
+    if !output.stderr.is_empty() {
+        // -Werror turns warnings into errors; anything printed on success is still surfaced.
+        panic!(
+            "glslc printed diagnostics for {} (defines {defines:?}):\n{}",
+            src.display(),
+            String::from_utf8_lossy(&output.stderr)
+        );
+    }
+    let deps = parse_depfile(&dep)
+        .into_iter()
+        .map(|p| if p.is_absolute() { p } else { manifest.join(p) })
+        .collect();
+    let bytes = std::fs::read(&spv).unwrap_or_else(|e| panic!("reading {}: {e}", spv.display()));
+    if !bytes.len().is_multiple_of(4) || bytes.len() < 20 {
+        panic!(
+            "{}: not a SPIR-V module ({} bytes)",
+            spv.display(),
+            bytes.len()
+        );
+    }
+    (bytes, deps)
+}
+
+/// Appends `pub const NAME: &[u32]` with the SPIR-V words and its doc lines.
+fn emit_const(generated: &mut String, name: &str, rel_str: &str, what: &str, bytes: &[u8]) {
+    let _ = writeln!(generated, "/// SPIR-V of `shaders/glsl/{rel_str}`{what}.");
+    if rel_str.starts_with("test/") {
+        let _ = writeln!(
+            generated,
+            "///\n/// Test-only shader, compiled into the library for the GPU-layer tests \
+             (`tests/gpu_layer.rs`)."
+        );
+    }
+    let _ = writeln!(generated, "pub const {name}: &[u32] = &[");
+    for chunk in bytes.chunks(4 * 8) {
+        generated.push_str("   ");
+        for w in chunk.chunks(4) {
+            let word = u32::from_le_bytes([w[0], w[1], w[2], w[3]]);
+            let _ = write!(generated, " 0x{word:08x},");
+        }
+        generated.push('\n');
+    }
+    generated.push_str("];\n\n");
 }
 
 /// One field of a shared struct: its GLSL declaration and doc lines.

@@ -5,6 +5,7 @@ mod compress;
 mod hash;
 mod ooc;
 mod primitives;
+mod render_formats;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -89,6 +90,14 @@ pub struct BenchRenderArgs {
     /// Markdown output file.
     #[arg(long, default_value = "out/bench-render.md")]
     markdown: PathBuf,
+    /// Also time these DAG formats, traversed directly, against svdag32 in the same run
+    /// (comma-separated: ssvdag, tsvdag-sa-base, tsvdag-sa-lut, tsvdag-sa-huffman,
+    /// tsvdag-sat-base, tsvdag-sat-lut, tsvdag-sat-huffman).
+    #[arg(long, value_delimiter = ',')]
+    formats: Vec<String>,
+    /// Frames timed per format (the median is reported).
+    #[arg(long, default_value_t = 5)]
+    frames: u32,
 }
 
 /// Runs one benchmark.
@@ -233,6 +242,9 @@ struct RenderBench {
     cpu_mrays_s: f64,
     gpu_over_cpu: f64,
     hit_mask_mismatch_pixels: usize,
+    /// Per DAG format (`--formats`), svdag32 first.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    formats: Vec<render_formats::FormatBench>,
 }
 
 /// `voxdag bench render`: 1 primary ray per pixel, no shadows, on both renderers.
@@ -280,6 +292,11 @@ fn bench_render(args: &BenchRenderArgs, quiet: bool) -> Result<()> {
     drop(scene);
     drop(renderer);
     drop(profiler);
+    let formats = if args.formats.is_empty() {
+        Vec::new()
+    } else {
+        render_formats::bench_formats(&context, &dag, &args.formats, &settings, args.frames)?
+    };
     drop(context);
 
     let index = VoxelIndex::new(&dag);
@@ -308,8 +325,9 @@ fn bench_render(args: &BenchRenderArgs, quiet: bool) -> Result<()> {
         cpu_mrays_s: rays / cpu_ms / 1e3,
         gpu_over_cpu: cpu_ms / gpu_pass_ms,
         hit_mask_mismatch_pixels: mismatch,
+        formats,
     };
-    let md = format!(
+    let mut md = format!(
         "| scene | N | image | device | GPU pass ms | GPU Mrays/s | CPU ms ({} threads) | CPU Mrays/s | GPU/CPU |\n|---|---|---|---|---|---|---|---|---|\n| {} | {} | {}x{} | {} | {:.1} | {:.2} | {:.1} | {:.2} | {:.2}x |\n",
         result.cpu_threads,
         result.scene,
@@ -323,6 +341,9 @@ fn bench_render(args: &BenchRenderArgs, quiet: bool) -> Result<()> {
         result.cpu_mrays_s,
         result.gpu_over_cpu
     );
+    if !result.formats.is_empty() {
+        md.push_str(&render_formats::markdown(&result.formats, args.frames));
+    }
     print!("{md}");
     eprintln!(
         "peak RSS {:.0} MiB, GPU wall {}",

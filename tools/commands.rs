@@ -279,8 +279,7 @@ pub fn load_svdag_stored(path: &Path) -> Result<(Svdag, Option<StoredColors>)> {
     let kind = file.encoded.kind();
     if kind != voxdag::dag::encode::EncodingKind::Svdag32 {
         log::info!(
-            "{}: decoding the {} encoding to svdag32 on the CPU (GPU traversal of compact \
-             encodings comes with the path tracer)",
+            "{}: decoding the {} encoding to svdag32 on the CPU",
             path.display(),
             kind.name()
         );
@@ -780,9 +779,17 @@ fn free_space(output: &Path) -> Option<u64> {
     Some((stat.f_bavail as u64).saturating_mul(stat.f_frsize as u64))
 }
 
-/// Builds render settings from the CLI camera flags.
-fn render_settings(args: &RenderArgs, dag: &Svdag) -> RenderSettings {
-    let mut camera = Camera::frame(dag);
+/// Builds render settings from the CLI camera flags; the default camera frames `bounds` (the
+/// occupied coarse nodes) or, for an empty scene, the whole grid of side `resolution`.
+fn render_settings(
+    args: &RenderArgs,
+    bounds: Option<([u32; 3], [u32; 3])>,
+    resolution: u32,
+) -> RenderSettings {
+    let mut camera = match bounds {
+        Some((min, max)) => Camera::orbit(min.map(|v| v as f32), max.map(|v| v as f32)),
+        None => Camera::orbit_default(resolution),
+    };
     if let Some(eye) = args.eye {
         camera.eye = eye;
     }
@@ -797,7 +804,8 @@ fn render_settings(args: &RenderArgs, dag: &Svdag) -> RenderSettings {
     settings
 }
 
-/// `voxdag render`.
+/// `voxdag render`: the GPU traverses the file's encoding as it is (svdag32, SSVDAG or TSVDAG
+/// in any mode); `--cpu` decodes compact encodings to svdag32 for the CPU reference.
 pub fn render(args: &RenderArgs) -> Result<()> {
     if let Some(fov) = args.fov {
         if !(1.0..=179.0).contains(&fov) {
@@ -808,22 +816,32 @@ pub fn render(args: &RenderArgs) -> Result<()> {
     if let Some(trace) = &args.trace {
         check_output(trace)?;
     }
-    let (dag, stored) = load_svdag_stored(&args.file)?;
-    // Encoded colours are decoded per hit from their chunks, as an engine would keep them.
-    let colors = match &stored {
-        Some(s) => ColorSource::Chunked(&s.chunks),
-        None => ColorSource::Raw(&dag.colors),
-    };
-    let settings = render_settings(args, &dag);
-    let start = Instant::now();
+    let start;
     let image = if args.cpu {
+        let (dag, stored) = load_svdag_stored(&args.file)?;
+        // Encoded colours are decoded per hit from their chunks, as an engine would keep them.
+        let colors = match &stored {
+            Some(s) => ColorSource::Chunked(&s.chunks),
+            None => ColorSource::Raw(&dag.colors),
+        };
+        let settings = render_settings(args, dag.occupied_bounds(), dag.resolution);
+        start = Instant::now();
         let index = VoxelIndex::new(&dag);
         render_cpu_with(&dag, &index, colors, &settings)?
     } else {
+        let mut file = VdagFile::load(&args.file)?;
+        let stored = file.stored_colors.take();
+        let colors = match &stored {
+            Some(s) => ColorSource::Chunked(&s.chunks),
+            None => ColorSource::Raw(&file.colors),
+        };
+        let bounds = file.encoded.occupied_bounds()?;
+        let settings = render_settings(args, bounds, file.encoded.resolution());
+        start = Instant::now();
         let context = GpuContext::new(&GpuOptions::default())?;
         let image = render_gpu(
             &context,
-            &dag,
+            &file.encoded,
             colors,
             &settings,
             args.profile,
@@ -846,7 +864,7 @@ pub fn render(args: &RenderArgs) -> Result<()> {
 /// Renders on the GPU, printing the profile table and writing the trace when asked.
 fn render_gpu(
     context: &Arc<GpuContext>,
-    dag: &Svdag,
+    dag: &EncodedDag,
     colors: ColorSource,
     settings: &RenderSettings,
     print_profile: bool,
@@ -854,7 +872,7 @@ fn render_gpu(
 ) -> Result<voxdag::render::RenderOutput> {
     let renderer = GpuRenderer::new(context)?;
     let mut profiler = Profiler::new(context)?;
-    let scene = profiler.cpu_span("upload", || renderer.upload_with(dag, colors))?;
+    let scene = profiler.cpu_span("upload", || renderer.upload_encoded(dag, colors))?;
     let image = renderer.render(&scene, settings, Some(&mut profiler))?;
     if print_profile {
         print!("{}", profiler.table());

@@ -8,15 +8,17 @@
 //! Buffers are reached through device addresses passed as push constants, so the DAG may exceed
 //! `maxStorageBufferRange` (up to `maxMemoryAllocationSize` per buffer).
 
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
 use super::cpu::ColorSource;
-use super::gpu_shared::PrimaryPush;
+use super::format::{GpuDagData, TraversalFormat};
+use super::gpu_shared::{FirstHit, PrimaryPush};
 use super::params::{RenderParams, FLAG_HAS_COLORS};
 use super::{RenderOutput, RenderSettings};
 use crate::attr::ColorFormat;
-use crate::dag::{Svdag, VoxelIndex};
+use crate::dag::encode::EncodedDag;
+use crate::dag::Svdag;
 use crate::gpu::{
     shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, Image,
     MemLocation, Profiler,
@@ -31,15 +33,18 @@ pub struct RenderFrame {
     params: Buffer,
 }
 
-/// Renders SVDAGs on the GPU; holds the compiled pipeline.
+/// Renders DAGs on the GPU; holds the compiled pipelines (svdag32 at creation, the other
+/// formats' variants when a scene of that format is first uploaded).
 pub struct GpuRenderer {
     ctx: Arc<GpuContext>,
-    primary: ComputePipeline,
+    primary: Vec<OnceLock<ComputePipeline>>,
 }
 
 /// An SVDAG uploaded to the GPU: its words, per-node voxel counts and colour chunks (encoded
 /// words and both chunk tables, `attr::ChunkedColors`).
 pub struct GpuScene {
+    format: TraversalFormat,
+    dag_info: Buffer,
     words: Buffer,
     node_voxels: Buffer,
     color_words: Buffer,
@@ -62,9 +67,20 @@ impl GpuScene {
         self.color_count
     }
 
+    /// The DAG format the scene is traversed in.
+    pub fn format(&self) -> TraversalFormat {
+        self.format
+    }
+
+    /// Device memory held by the scene's node data (words, voxel counts, info block), in bytes.
+    pub fn dag_bytes(&self) -> u64 {
+        self.words.size() + self.node_voxels.size() + self.dag_info.size()
+    }
+
     /// Device memory held by the scene's buffers, in bytes.
     pub fn gpu_bytes(&self) -> u64 {
-        self.words.size()
+        self.dag_info.size()
+            + self.words.size()
             + self.node_voxels.size()
             + self.color_words.size()
             + self.chunk_starts.size()
@@ -78,23 +94,38 @@ impl GpuScene {
 }
 
 impl GpuRenderer {
-    /// Builds the primary-ray pipeline.
+    /// Builds the primary-ray pipeline (svdag32; the other formats' on first upload).
     pub fn new(ctx: &Arc<GpuContext>) -> Result<GpuRenderer, GpuError> {
-        let primary = ctx.create_compute_pipeline(&ComputePipelineDesc {
-            name: "primary rays",
-            spirv: shaders::RENDER_PRIMARY,
-            spec_constants: &WORKGROUP,
-            push_constant_size: std::mem::size_of::<PrimaryPush>() as u32,
-            storage_image: true,
-        })?;
-        Ok(GpuRenderer {
+        let renderer = GpuRenderer {
             ctx: Arc::clone(ctx),
-            primary,
-        })
+            primary: (0..shaders::RENDER_PRIMARY_BY_FORMAT.len())
+                .map(|_| OnceLock::new())
+                .collect(),
+        };
+        renderer.ensure_pipeline(TraversalFormat::Svdag32)?;
+        Ok(renderer)
+    }
+
+    /// Creates the primary-ray pipeline of `format` unless it exists.
+    fn ensure_pipeline(&self, format: TraversalFormat) -> Result<(), GpuError> {
+        let slot = &self.primary[format.index()];
+        if slot.get().is_none() {
+            let name = format!("primary rays ({})", format.name());
+            let pipeline = self.ctx.create_compute_pipeline(&ComputePipelineDesc {
+                name: &name,
+                spirv: shaders::RENDER_PRIMARY_BY_FORMAT[format.index()],
+                spec_constants: &WORKGROUP,
+                push_constant_size: std::mem::size_of::<PrimaryPush>() as u32,
+                storage_image: true,
+            })?;
+            // Another thread may have won the race: its pipeline is the same.
+            let _ = slot.set(pipeline);
+        }
+        Ok(())
     }
 
     /// Uploads `dag.words`, its colours (as one raw chunk) and the per-node voxel counts of
-    /// [`VoxelIndex`] (`u64`: colour indices of huge scenes exceed 2^32). Errors when raw colours
+    /// `VoxelIndex` (`u64`: colour indices of huge scenes exceed 2^32). Errors when raw colours
     /// (one chunk) reach 2^32, when the DAG has 2^32 or more words (GPU word indices are `uint`),
     /// or when a buffer exceeds the device's allocation limit.
     pub fn upload(&self, dag: &Svdag) -> Result<GpuScene, GpuError> {
@@ -104,6 +135,24 @@ impl GpuRenderer {
     /// [`GpuRenderer::upload`] with colours from `colors`: encoded chunks are uploaded as they
     /// are and decoded by the shader per hit.
     pub fn upload_with(&self, dag: &Svdag, colors: ColorSource) -> Result<GpuScene, GpuError> {
+        self.upload_data(&GpuDagData::svdag32(dag), colors)
+    }
+
+    /// Uploads a DAG in any encoding as it is (SSVDAG and TSVDAG are traversed directly by
+    /// their shader variant, see `render::format`), with colours from `colors` (one per voxel
+    /// in Morton order, raw or chunked).
+    pub fn upload_encoded(
+        &self,
+        dag: &EncodedDag,
+        colors: ColorSource,
+    ) -> Result<GpuScene, GpuError> {
+        let data = GpuDagData::new(dag)
+            .map_err(|e| GpuError::InvalidArgument(format!("DAG layout for the GPU: {e}")))?;
+        self.upload_data(&data, colors)
+    }
+
+    /// Uploads a laid-out DAG and its colours.
+    pub fn upload_data(&self, dag: &GpuDagData, colors: ColorSource) -> Result<GpuScene, GpuError> {
         let invalid = |m: String| GpuError::InvalidArgument(m);
         if dag.words.is_empty() || dag.words.len() as u64 > u32::MAX as u64 {
             return Err(invalid(format!(
@@ -111,19 +160,19 @@ impl GpuRenderer {
                 dag.words.len()
             )));
         }
-        if dag.colors.len() as u64 > u32::MAX as u64 {
-            return Err(invalid(format!(
-                "{} raw colours in one chunk: the GPU needs fewer than 2^32 per chunk (store them \
-                 chunked: --colors)",
-                dag.colors.len()
-            )));
+        if let ColorSource::Raw(raw) = colors {
+            if raw.len() as u64 > u32::MAX as u64 {
+                return Err(invalid(format!(
+                    "{} raw colours in one chunk: the GPU needs fewer than 2^32 per chunk (store \
+                     them chunked: --colors)",
+                    raw.len()
+                )));
+            }
         }
-        // 64-bit counts: a solid 2^21 grid has 2^63 voxels, and colour indices follow them.
-        let index = VoxelIndex::new(dag);
+        self.ensure_pipeline(dag.format)?;
         let words = self.ctx.upload("dag words", &dag.words)?;
-        let node_voxels = self
-            .ctx
-            .upload("dag node voxel counts", &index.node_voxels)?;
+        let node_voxels = self.ctx.upload("dag node voxel counts", &dag.node_voxels)?;
+        let dag_info = self.ctx.upload("dag format info", &dag.info)?;
         // Raw colours are one chunk of the raw format: the shader has a single colour path.
         let (format, words_of_colors, starts, offsets) = match colors {
             ColorSource::Chunked(c) => {
@@ -152,6 +201,8 @@ impl GpuRenderer {
         let chunk_starts = self.ctx.upload("dag colour chunk starts", &starts)?;
         let chunk_offsets = self.ctx.upload("dag colour chunk offsets", &offsets)?;
         Ok(GpuScene {
+            format: dag.format,
+            dag_info,
             words,
             node_voxels,
             color_words,
@@ -213,6 +264,22 @@ impl GpuRenderer {
         settings: &RenderSettings,
         target: &'a Image,
         hits: Option<&Buffer>,
+        profiler: Option<&mut Profiler>,
+    ) -> Result<(), GpuError> {
+        self.record_full(cmd, scene, frame, settings, target, hits, None, profiler)
+    }
+
+    /// [`GpuRenderer::record`] that also writes one [`FirstHit`] per pixel into `first_hits`.
+    #[allow(clippy::too_many_arguments)]
+    fn record_full<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        scene: &GpuScene,
+        frame: &mut RenderFrame,
+        settings: &RenderSettings,
+        target: &'a Image,
+        hits: Option<&Buffer>,
+        first_hits: Option<&Buffer>,
         mut profiler: Option<&mut Profiler>,
     ) -> Result<(), GpuError> {
         let (w, h) = (settings.width, settings.height);
@@ -224,8 +291,12 @@ impl GpuRenderer {
                 target.height()
             )));
         }
-        if let Some(hits) = hits {
-            let need = w as u64 * h as u64 * 4;
+        let first_hit_need = w as u64 * h as u64 * std::mem::size_of::<FirstHit>() as u64;
+        for (buffer, need) in [
+            (hits, w as u64 * h as u64 * 4),
+            (first_hits, first_hit_need),
+        ] {
+            let Some(hits) = buffer else { continue };
             if hits.size() < need {
                 return Err(GpuError::OutOfRange {
                     name: hits.name().to_string(),
@@ -235,6 +306,12 @@ impl GpuRenderer {
                 });
             }
         }
+        let pipeline = self.primary[scene.format.index()].get().ok_or_else(|| {
+            GpuError::InvalidArgument(format!(
+                "no pipeline for the {} format (scene not uploaded by this renderer)",
+                scene.format.name()
+            ))
+        })?;
         let params = self.params(scene, settings)?;
         self.ctx
             .write_mapped(&mut frame.params, 0, std::slice::from_ref(&params))?;
@@ -246,18 +323,15 @@ impl GpuRenderer {
             chunk_starts: scene.chunk_starts.address(),
             chunk_offsets: scene.chunk_offsets.address(),
             hits: hits.map_or(0, Buffer::address),
+            dag_info: scene.dag_info.address(),
+            first_hits: first_hits.map_or(0, Buffer::address),
             color_format: scene.color_format as u32,
             chunk_count: scene.chunk_count,
         };
         let groups = [w.div_ceil(WORKGROUP[0]), h.div_ceil(WORKGROUP[1]), 1];
         // begin_pass orders its begin timestamp before the dispatch (lavapipe flush).
         cmd.begin_pass(&mut profiler, "primary rays");
-        let result = cmd.dispatch(
-            &self.primary,
-            groups,
-            bytemuck::bytes_of(&push),
-            Some(target),
-        );
+        let result = cmd.dispatch(pipeline, groups, bytemuck::bytes_of(&push), Some(target));
         cmd.end_pass(&mut profiler);
         result
     }
@@ -268,8 +342,28 @@ impl GpuRenderer {
         &self,
         scene: &GpuScene,
         settings: &RenderSettings,
-        mut profiler: Option<&mut Profiler>,
+        profiler: Option<&mut Profiler>,
     ) -> Result<RenderOutput, GpuError> {
+        Ok(self.render_inner(scene, settings, false, profiler)?.0)
+    }
+
+    /// Renders one image and returns the primary rays' first hits too (one [`FirstHit`] per
+    /// pixel, row-major): the exact traversal result every DAG format must reproduce.
+    pub fn render_first_hits(
+        &self,
+        scene: &GpuScene,
+        settings: &RenderSettings,
+    ) -> Result<(RenderOutput, Vec<FirstHit>), GpuError> {
+        self.render_inner(scene, settings, true, None)
+    }
+
+    fn render_inner(
+        &self,
+        scene: &GpuScene,
+        settings: &RenderSettings,
+        want_first_hits: bool,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<(RenderOutput, Vec<FirstHit>), GpuError> {
         let ctx = &self.ctx;
         let (w, h) = (settings.width, settings.height);
         let pixels = w as u64 * h as u64;
@@ -280,18 +374,25 @@ impl GpuRenderer {
         let mut frame = self.create_frame()?;
         let image = ctx.create_storage_image("render target", w, h)?;
         let hits = ctx.create_buffer("render hits", pixels * 4, MemLocation::GpuOnly)?;
+        let first_hits = if want_first_hits {
+            let size = pixels * std::mem::size_of::<FirstHit>() as u64;
+            Some(ctx.create_buffer("render first hits", size, MemLocation::GpuOnly)?)
+        } else {
+            None
+        };
         if let Some(p) = profiler.as_deref_mut() {
             p.record_cpu_span("render setup", setup_start, Instant::now());
         }
 
         let mut cmd = ctx.begin_commands("render")?;
-        self.record(
+        self.record_full(
             &mut cmd,
             scene,
             &mut frame,
             settings,
             &image,
             Some(&hits),
+            first_hits.as_ref(),
             profiler.as_deref_mut(),
         )?;
         cmd.submit()?;
@@ -307,11 +408,18 @@ impl GpuRenderer {
             p.record_cpu_span("readback image", t, t2);
             p.record_cpu_span("readback hits", t2, Instant::now());
         }
-        Ok(RenderOutput {
-            width: w,
-            height: h,
-            rgba,
-            hits,
-        })
+        let first = match &first_hits {
+            Some(b) => ctx.download::<FirstHit>(b)?,
+            None => Vec::new(),
+        };
+        Ok((
+            RenderOutput {
+                width: w,
+                height: h,
+                rgba,
+                hits,
+            },
+            first,
+        ))
     }
 }

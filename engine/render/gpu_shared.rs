@@ -48,9 +48,29 @@ gpu_shared! {
         pub(crate) chunk_offsets: uint64_t,
         /// One hit flag per pixel, or 0: no hit mask (the viewer).
         pub(crate) hits: uint64_t,
+        /// The format info block of the DAG's format (`render::format`; svdag32: one unused word).
+        pub(crate) dag_info: uint64_t,
+        /// One `FirstHit` per pixel, or 0: none written.
+        pub(crate) first_hits: uint64_t,
         /// `ColorFormat` id.
         pub(crate) color_format: uint,
         /// Number of colour chunks.
         pub(crate) chunk_count: uint,
+    }
+
+    /// The primary ray's first hit of one pixel (`GpuRenderer::render_first_hits`): what every
+    /// DAG format must reproduce exactly. 40 bytes.
+    #[derive(PartialEq, Eq, Default)]
+    pub struct FirstHit {
+        /// 1 when the ray hit a voxel (then the other fields are set), else 0 and all zero.
+        pub hit: uint,
+        /// Bits of the entry parameter `t` (f32).
+        pub t_bits: uint,
+        /// The voxel hit (x, y, z).
+        pub voxel: [uint; 3],
+        /// Entry face normal (x, y, z), pointing against the ray.
+        pub normal: [int; 3],
+        /// Depth-first Morton index of the voxel (index into the colours).
+        pub color_index: uint64_t,
     }
 }

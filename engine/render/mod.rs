@@ -6,6 +6,7 @@
 
 pub mod camera;
 pub mod cpu;
+pub mod format;
 pub mod gpu;
 mod gpu_shared;
 pub mod params;
@@ -15,6 +16,8 @@ use std::path::{Path, PathBuf};
 
 pub use camera::Camera;
 pub use cpu::render_cpu;
+pub use format::TraversalFormat;
+pub use gpu_shared::FirstHit;
 pub use params::RenderParams;
 
 /// What a render needs besides the scene.

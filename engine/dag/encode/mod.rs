@@ -21,7 +21,10 @@ mod tsvdag;
 
 pub use huffman::{length_limited_code_lengths, Huffman};
 pub use ssvdag::SsvdagEncoding;
-pub use traverse::{contains, raycast, to_svdag, voxel_digest, EncodedHit, TreeView, VoxelIter};
+pub use traverse::{
+    contains, occupied_bounds, raycast, to_svdag, voxel_digest, Bounds, EncodedHit, TreeView,
+    VoxelIter,
+};
 pub use tsvdag::{
     reorient, GraphLevel, GraphPointer, TransformGraph, TranslationCoding, TsvdagEncoding,
     TsvdagOptions, TsvdagTuning, MAX_TRANSLATION_LEVEL,
@@ -203,6 +206,15 @@ impl EncodedDag {
             EncodedDag::Svdag32(d) => raycast(d, ray, t_max),
             EncodedDag::Ssvdag(d) => raycast(d, ray, t_max),
             EncodedDag::Tsvdag(d) => raycast(d, ray, t_max),
+        }
+    }
+
+    /// Bounding box of the occupied coarse nodes (as `Svdag::occupied_bounds`).
+    pub fn occupied_bounds(&self) -> Result<Option<Bounds>, EncodeError> {
+        match self {
+            EncodedDag::Svdag32(d) => Ok(d.occupied_bounds()),
+            EncodedDag::Ssvdag(d) => occupied_bounds(d),
+            EncodedDag::Tsvdag(d) => occupied_bounds(d),
         }
     }
 

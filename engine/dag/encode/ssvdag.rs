@@ -329,3 +329,37 @@ impl TreeView for SsvdagEncoding {
         Ok(t.apply_leaf(mask))
     }
 }
+
+impl SsvdagEncoding {
+    /// Voxels below every node, by u16 position in its level's stream (the node's header word;
+    /// other positions 0), level 0 empty: what the GPU colour index sums (`render::format`).
+    pub fn stream_voxel_counts(&self) -> Result<Vec<Vec<u64>>, EncodeError> {
+        let mut counts: Vec<Vec<u64>> = vec![Vec::new(); self.levels.len()];
+        for l in 1..self.levels.len() {
+            let stream = &self.levels[l];
+            let mut here = vec![0u64; stream.len()];
+            let mut off = 0;
+            while off < stream.len() {
+                let (ptrs, end) = read_node(stream, off, 2, 0)?;
+                let mut sum = 0u64;
+                for (v, _) in ptrs.into_iter().flatten() {
+                    let target = (v >> 3) as usize;
+                    sum += if l == 1 {
+                        self.leaves
+                            .get(target)
+                            .ok_or_else(|| corrupt(0, "leaf index out of range"))?
+                            .count_ones() as u64
+                    } else {
+                        *counts[l - 1]
+                            .get(target)
+                            .ok_or_else(|| corrupt(0, "node offset out of range"))?
+                    };
+                }
+                here[off] = sum;
+                off = end;
+            }
+            counts[l] = here;
+        }
+        Ok(counts)
+    }
+}

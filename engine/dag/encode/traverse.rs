@@ -327,3 +327,43 @@ impl TreeView for Svdag {
         Ok(self.leaf_mask(*node))
     }
 }
+
+/// An axis-aligned box `(min, max)` in grid coordinates (max exclusive).
+pub type Bounds = ([u32; 3], [u32; 3]);
+
+/// Bounding box `(min, max)` of the occupied nodes `root_level - 6` levels down (the same
+/// coarse boxes as `Svdag::occupied_bounds`, so cameras framed from either agree), read from
+/// the encoded DAG; `None` for an empty scene.
+pub fn occupied_bounds<V: TreeView>(view: &V) -> Result<Option<Bounds>, EncodeError> {
+    let top = root_level(view.resolution());
+    let stop_level = top.saturating_sub(6);
+    let Some(root) = view.root()? else {
+        return Ok(None);
+    };
+    let mut min = [u32::MAX; 3];
+    let mut max = [0u32; 3];
+    let mut stack = vec![(root, top, [0u32; 3])];
+    while let Some((node, level, corner)) = stack.pop() {
+        let size = 4u32 << level;
+        if level == stop_level {
+            for a in 0..3 {
+                min[a] = min[a].min(corner[a]);
+                max[a] = max[a].max(corner[a] + size);
+            }
+            continue;
+        }
+        let half = size / 2;
+        for (octant, child) in view.children(&node, level)?.into_iter().enumerate() {
+            if let Some(child) = child {
+                let o = octant as u32;
+                let offset = [o & 1, (o >> 1) & 1, o >> 2];
+                stack.push((
+                    child,
+                    level - 1,
+                    [0, 1, 2].map(|a| corner[a] + offset[a] * half),
+                ));
+            }
+        }
+    }
+    Ok((min[0] != u32::MAX).then_some((min, max)))
+}

@@ -1533,3 +1533,84 @@ impl TreeView for TsvdagEncoding {
         }
     }
 }
+
+impl TsvdagEncoding {
+    /// Voxels below every node, by u16 position in its level's stream: at a node's header word
+    /// the voxels of the stored node, at the first word of a translated pointer the voxels the
+    /// translated subtree keeps in its cell (the destructive translation drops some), other
+    /// positions 0; level 0 empty. What the GPU colour index sums (`render::format`).
+    pub fn stream_voxel_counts(&self) -> Result<Vec<Vec<u64>>, EncodeError> {
+        let mut counts: Vec<Vec<u64>> = vec![Vec::new(); self.levels.len()];
+        let mut shifted: FxHashMap<(u32, u64, u8, [i32; 3]), u64> = FxHashMap::default();
+        for l in 1..self.levels.len() {
+            let stream = &self.levels[l];
+            let cl = l as u32 - 1;
+            let mut here = vec![0u64; stream.len()];
+            let mut off = 0;
+            while off < stream.len() {
+                let (ptrs, end) = read_node(stream, off, 3, 0)?;
+                let mut at = off + 1;
+                let mut sum = 0u64;
+                for (v, code) in ptrs.into_iter().flatten() {
+                    let (target, t, tr) = self.decode_pointer(cl, v, code)?;
+                    let n = if tr != [0; 3] {
+                        let key = (cl, target, t.index() as u8, tr);
+                        let n = match shifted.get(&key) {
+                            Some(&n) => n,
+                            None => {
+                                let grid = self.materialise(target, cl, t, tr)?;
+                                let n = grid.iter().map(|w| w.count_ones() as u64).sum();
+                                shifted.insert(key, n);
+                                n
+                            }
+                        };
+                        here[at] = n;
+                        n
+                    } else if l == 1 {
+                        self.leaves
+                            .get(target as usize)
+                            .ok_or_else(|| corrupt(0, "leaf index out of range"))?
+                            .count_ones() as u64
+                    } else {
+                        *counts[l - 1]
+                            .get(target as usize)
+                            .ok_or_else(|| corrupt(0, "node offset out of range"))?
+                    };
+                    sum += n;
+                    at += code as usize;
+                }
+                here[off] = sum;
+                off = end;
+            }
+            counts[l] = here;
+        }
+        Ok(counts)
+    }
+
+    /// Per child level with a Huffman code: `(kind, per code length 0..=15 the number of codes,
+    /// symbols sorted by (length, symbol))`, kind 0 no code, 1 one implied symbol (then the
+    /// symbol list holds it), 2 a code: the canonical decoder's tables (`Huffman::decode`).
+    pub fn huffman_tables(&self) -> Vec<(u32, [u32; 16], Vec<u16>)> {
+        let top = self.levels.len() - 1;
+        (0..top)
+            .map(|l| match self.codes.get(l).and_then(|c| c.as_ref()) {
+                None => (0, [0; 16], Vec::new()),
+                Some(h) => match h.single() {
+                    Some(s) => (1, [0; 16], vec![s]),
+                    None => {
+                        let mut count = [0u32; 16];
+                        let mut sorted: Vec<u16> = Vec::new();
+                        for (s, &len) in h.lengths.iter().enumerate() {
+                            if len > 0 {
+                                count[len as usize] += 1;
+                                sorted.push(s as u16);
+                            }
+                        }
+                        sorted.sort_by_key(|&s| (h.lengths[s as usize], s));
+                        (2, count, sorted)
+                    }
+                },
+            })
+            .collect()
+    }
+}

@@ -13,6 +13,11 @@ layout(local_size_x_id = 0, local_size_y_id = 1, local_size_z = 1) in;
 layout(set = 0, binding = 0, rgba8) uniform writeonly image2D out_image;
 
 #include "shared/render_params.h"
+#include "gen/render.glsl"
+
+struct FirstHit {
+    FIRST_HIT_MEMBERS
+};
 
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer ParamsRef {
     RenderParams params;
@@ -26,6 +31,9 @@ layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer Wor
 layout(buffer_reference, std430, buffer_reference_align = 4) writeonly buffer HitsRef {
     uint h[];
 };
+layout(buffer_reference, std430, buffer_reference_align = 8) writeonly buffer FirstHitsRef {
+    FirstHit h[];
+};
 
 // Members: `PrimaryPush` in engine/render/gpu_shared.rs.
 layout(push_constant, std430) uniform Push { PRIMARY_PUSH_MEMBERS } push;
@@ -34,6 +42,10 @@ layout(push_constant, std430) uniform Push { PRIMARY_PUSH_MEMBERS } push;
 
 uint dag_word(uint i) {
     return WordsRef(push.words).w[i];
+}
+
+uint dag_info(uint i) {
+    return WordsRef(push.dag_info).w[i];
 }
 
 uint64_t dag_node_voxels(uint i) {
@@ -54,9 +66,22 @@ void main() {
         return;
     }
     bool hit;
-    vec4 color = shade_pixel(pixel, p, hit);
+    Hit h;
+    vec4 color = shade_pixel_hit(pixel, p, hit, h);
     imageStore(out_image, ivec2(pixel), color);
+    uint i = pixel.y * p.width + pixel.x;
     if (push.hits != 0ul) {
-        HitsRef(push.hits).h[pixel.y * p.width + pixel.x] = hit ? 1u : 0u;
+        HitsRef(push.hits).h[i] = hit ? 1u : 0u;
+    }
+    if (push.first_hits != 0ul) {
+        FirstHit f;
+        f.hit = hit ? 1u : 0u;
+        f.t_bits = hit ? floatBitsToUint(h.t) : 0u;
+        for (uint k = 0u; k < 3u; k++) {
+            f.voxel[k] = hit ? h.voxel[k] : 0u;
+            f.normal[k] = hit ? h.normal[k] : 0;
+        }
+        f.color_index = hit ? h.color_index : 0ul;
+        FirstHitsRef(push.first_hits).h[i] = f;
     }
 }

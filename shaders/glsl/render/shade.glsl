@@ -5,6 +5,7 @@
 // before including this file; this file includes traverse.glsl and shared/render_params.h.
 // Provides
 //   vec4 shade_pixel(uvec2 pixel, RenderParams p, out bool hit);
+//   vec4 shade_pixel_hit(uvec2 pixel, RenderParams p, out bool hit, out Hit h);
 // returning the sRGB-encoded colour in [0, 1] (alpha 1) and whether the primary ray hit a voxel.
 #ifndef VOXDAG_RENDER_SHADE_GLSL
 #define VOXDAG_RENDER_SHADE_GLSL
@@ -53,11 +54,11 @@ void shade_primary_ray(uvec2 pixel, RenderParams p, out vec3 origin, out vec3 di
     dir = d;
 }
 
-vec4 shade_pixel(uvec2 pixel, RenderParams p, out bool hit) {
+// shade_pixel that also returns the primary ray's hit (valid when `hit`).
+vec4 shade_pixel_hit(uvec2 pixel, RenderParams p, out bool hit, out Hit h) {
     vec3 origin;
     vec3 dir;
     shade_primary_ray(pixel, p, origin, dir);
-    Hit h;
     hit = trace_ray(origin, dir, TRAVERSE_T_UNBOUNDED, p.root_level, h);
     if (!hit) {
         return shade_encode(shade_sky(dir));
@@ -85,6 +86,11 @@ vec4 shade_pixel(uvec2 pixel, RenderParams p, out bool hit) {
     }
     precise float light_sum = SHADE_AMBIENT * SHADE_AMBIENT_AXIS[axis] + direct;
     return shade_encode(albedo * light_sum);
+}
+
+vec4 shade_pixel(uvec2 pixel, RenderParams p, out bool hit) {
+    Hit h;
+    return shade_pixel_hit(pixel, p, hit, h);
 }
 
 #endif

@@ -1,8 +1,11 @@
-// SVDAG ray traversal: the GLSL twin of `Svdag::raycast` (engine/dag/raycast.rs).
+// DAG ray traversal: the GLSL twin of `Svdag::raycast` (engine/dag/raycast.rs), for every DAG
+// format: the format-specific child fetch is in render/dag_formats.glsl, one format per
+// compiled variant (build.rs compiles every shader including this file once per format).
 //
-// The includer defines, BEFORE including this file:
-//   uint dag_word(uint i);        // word i of `Svdag::words`
-//   uint64_t dag_node_voxels(uint i); // `VoxelIndex::node_voxels[i]`
+// The includer defines, BEFORE including this file (details in render/dag_formats.glsl):
+//   uint dag_word(uint i);            // the DAG's words (svdag32: `Svdag::words`)
+//   uint64_t dag_node_voxels(uint i); // voxel counts (svdag32: `VoxelIndex::node_voxels[i]`)
+//   uint dag_info(uint i);            // format info block (unused by svdag32)
 // Provides `struct Hit` and
 //   bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit);
 // `root_level` is `RenderParams::root_level` (log2(N) - 2); the grid is [0, 4 << root_level)^3.
@@ -21,6 +24,10 @@
 #define TRAVERSE_PARALLEL_INV 1e36
 // `t_max` of unbounded rays (`T_UNBOUNDED`).
 #define TRAVERSE_T_UNBOUNDED 1e30
+// Translated subtrees nest at most 3 deep (pointers into levels 2, 1, 0).
+#define TRAVERSE_MAX_SHIFTS 3u
+
+#include "render/dag_formats.glsl"
 
 // The first voxel a ray enters.
 struct Hit {
@@ -52,10 +59,10 @@ TraverseRay traverse_setup(vec3 origin, vec3 dir) {
 
 // Slab test of the cube [pos, pos + size]^3: near/far parameters and the axis of the near one
 // (ties keep the earlier axis). The near plane of axis k is the low one unless mirror bit k is set.
-void traverse_slab(TraverseRay r, uvec3 pos, uint size, out float t_near, out float t_far,
+void traverse_slab(TraverseRay r, ivec3 pos, uint size, out float t_near, out float t_far,
                    out uint axis) {
     precise vec3 lo = (vec3(pos) - r.origin) * r.inv;
-    precise vec3 hi = (vec3(pos + uvec3(size)) - r.origin) * r.inv;
+    precise vec3 hi = (vec3(pos + ivec3(size)) - r.origin) * r.inv;
     vec3 near_t;
     vec3 far_t;
     for (uint k = 0u; k < 3u; k++) {
@@ -93,26 +100,109 @@ ivec3 traverse_normal(vec3 dir, float t_near, uint entry_axis) {
     return n;
 }
 
-// 8-bit mask of the non-empty 2^3 sub-blocks of the leaf at word `ptr`.
-uint traverse_leaf_block_mask(uint ptr) {
-    uint lo = dag_word(ptr);
-    uint hi = dag_word(ptr + 1u);
-    uint mask = 0u;
-    for (uint s = 0u; s < 4u; s++) {
-        if (((lo >> (8u * s)) & 0xffu) != 0u) {
-            mask |= 1u << s;
-        }
-        if (((hi >> (8u * s)) & 0xffu) != 0u) {
-            mask |= 1u << (s + 4u);
-        }
+#if defined(TSVDAG_TRANSLATIONS)
+// Morton code of a point inside a 16^3 cell (4 bits per axis).
+uint traverse_morton16(uvec3 p) {
+    uint code = 0u;
+    for (uint b = 0u; b < 4u; b++) {
+        code |= (((p.x >> b) & 1u) | (((p.y >> b) & 1u) << 1u) | (((p.z >> b) & 1u) << 2u)) << (3u * b);
     }
-    return mask;
+    return code;
 }
 
-// Byte `s` of the 64-bit mask of the leaf at word `ptr`: the voxels of sub-block s.
-uint traverse_leaf_byte(uint ptr, uint s) {
-    return (dag_word(ptr + (s >> 2u)) >> (8u * (s & 3u))) & 0xffu;
+// Voxels of the leaf (leaf, xform) placed at `org` that lie in [lo, hi) and before Morton code
+// `target` of the cell starting at `cell`.
+uint traverse_leaf_before(uint leaf, uint xform, ivec3 org, ivec3 lo, ivec3 hi, ivec3 cell,
+                          uint target) {
+    uint count = 0u;
+    for (uint sb = 0u; sb < 8u; sb++) {
+        uint byte_mask = dag_leaf_byte(leaf, xform, sb);
+        while (byte_mask != 0u) {
+            uint vb = uint(findLSB(byte_mask));
+            byte_mask &= byte_mask - 1u;
+            ivec3 p = org + ivec3((uvec3(sb, sb >> 1u, sb >> 2u) & 1u) * 2u + (uvec3(vb, vb >> 1u, vb >> 2u) & 1u));
+            if (all(greaterThanEqual(p, lo)) && all(lessThan(p, hi)) &&
+                traverse_morton16(uvec3(p - cell)) < target) {
+                count += 1u;
+            }
+        }
+    }
+    return count;
 }
+
+// World-order rank of voxel `v` inside the translated cell [cell, cell + side) holding the
+// subtree (node, xform) of `level` placed at `org` (its translation applied): the voxels of the
+// subtree inside the cell with a smaller Morton code in the cell. Translated subtrees are at
+// most 16^3, so this walks them (nested translations clip to their own cells too).
+uint traverse_shifted_rank(uint node, uint xform, uint level, ivec3 org, ivec3 cell, uint side,
+                           ivec3 v) {
+    uint target = traverse_morton16(uvec3(v - cell));
+    ivec3 lo0 = cell;
+    ivec3 hi0 = cell + ivec3(side);
+    if (level == 0u) {
+        return traverse_leaf_before(node, xform, org, lo0, hi0, cell, target);
+    }
+    uint s_node[TRAVERSE_MAX_SHIFTS];
+    uint s_xform[TRAVERSE_MAX_SHIFTS];
+    uint s_next[TRAVERSE_MAX_SHIFTS];
+    ivec3 s_org[TRAVERSE_MAX_SHIFTS];
+    ivec3 s_lo[TRAVERSE_MAX_SHIFTS];
+    ivec3 s_hi[TRAVERSE_MAX_SHIFTS];
+    s_node[0] = node;
+    s_xform[0] = xform;
+    s_next[0] = 0u;
+    s_org[0] = org;
+    s_lo[0] = lo0;
+    s_hi[0] = hi0;
+    uint top = 0u;
+    uint count = 0u;
+    for (;;) {
+        if (s_next[top] == 8u) {
+            if (top == 0u) {
+                break;
+            }
+            top -= 1u;
+            continue;
+        }
+        uint c = s_next[top];
+        s_next[top] = c + 1u;
+        uint lvl = level - top;
+        uint mask = dag_inner_mask(s_node[top], s_xform[top], lvl);
+        if ((mask & (1u << c)) == 0u) {
+            continue;
+        }
+        int half_side = 2 << lvl;
+        ivec3 corg = s_org[top] + ivec3(uvec3(c, c >> 1u, c >> 2u) & 1u) * half_side;
+        uint child;
+        uint child_xform;
+        ivec3 shift;
+        uint at;
+        dag_child(s_node[top], s_xform[top], mask, lvl, c, child, child_xform, shift, at);
+        ivec3 lo = s_lo[top];
+        ivec3 hi = s_hi[top];
+        if (any(notEqual(shift, ivec3(0)))) {
+            lo = max(lo, corg);
+            hi = min(hi, corg + ivec3(half_side));
+            corg += shift;
+        }
+        if (any(greaterThanEqual(max(lo, corg), min(hi, corg + ivec3(half_side))))) {
+            continue;
+        }
+        if (lvl == 1u) {
+            count += traverse_leaf_before(child, child_xform, corg, lo, hi, cell, target);
+        } else {
+            top += 1u;
+            s_node[top] = child;
+            s_xform[top] = child_xform;
+            s_next[top] = 0u;
+            s_org[top] = corg;
+            s_lo[top] = lo;
+            s_hi[top] = hi;
+        }
+    }
+    return count;
+}
+#endif
 
 bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit) {
     hit.t = 0.0;
@@ -133,26 +223,57 @@ bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit)
     float t_near;
     float t_far;
     uint axis;
-    traverse_slab(r, uvec3(0u), n, t_near, t_far, axis);
+    traverse_slab(r, ivec3(0), n, t_near, t_far, axis);
     float t_enter = max(t_near, 0.0);
     if (!(t_enter < t_far && t_enter < t_max)) {
         return false;
     }
-    // Frame d: node word offset and (child mask | next ordinal << 8).
+    // Frame d: node handle and (world child mask | next ordinal << 8 | transform id << 12).
     uint stack_node[TRAVERSE_MAX_FRAMES];
     uint stack_state[TRAVERSE_MAX_FRAMES];
-    stack_node[0] = 0u;
-    stack_state[0] = dag_word(0u) & 0xffu;
+    uint root_node;
+    uint root_xform;
+    dag_root(root_level, root_node, root_xform);
+    stack_node[0] = root_node;
+    stack_state[0] = dag_inner_mask(root_node, root_xform, root_level) | (root_xform << 12u);
     uint depth = 0u;
+    // Cube of frame d: base + (cursor & ~(size_d - 1)). `base` is 0 except inside a translated
+    // subtree, whose frames are laid out from its translated origin (cursor local to it).
     uvec3 cursor = uvec3(0u);
+#if defined(TSVDAG_TRANSLATIONS)
+    // The second stack: one entry per translated subtree on the path (its depth, the outer
+    // base and cursor to restore, the outer clip box, its own origin); voxels outside the clip
+    // box (the translated cells) are dropped, as the destructive translation says.
+    ivec3 base = ivec3(0);
+    ivec3 clip_lo = ivec3(0);
+    ivec3 clip_hi = ivec3(n);
+    uint shifts = 0u;
+    uint sh_depth[TRAVERSE_MAX_SHIFTS];
+    ivec3 sh_base[TRAVERSE_MAX_SHIFTS];
+    uvec3 sh_cursor[TRAVERSE_MAX_SHIFTS];
+    ivec3 sh_lo[TRAVERSE_MAX_SHIFTS];
+    ivec3 sh_hi[TRAVERSE_MAX_SHIFTS];
+    ivec3 sh_origin[TRAVERSE_MAX_SHIFTS];
+#else
+    const ivec3 base = ivec3(0);
+#endif
     for (;;) {
         uint node = stack_node[depth];
         uint state = stack_state[depth];
-        uint next = state >> 8u;
+        uint next = (state >> 8u) & 15u;
         if (next == 8u) {
             if (depth == 0u) {
                 return false;
             }
+#if defined(TSVDAG_TRANSLATIONS)
+            if (shifts > 0u && sh_depth[shifts - 1u] == depth) {
+                shifts -= 1u;
+                base = sh_base[shifts];
+                cursor = sh_cursor[shifts];
+                clip_lo = sh_lo[shifts];
+                clip_hi = sh_hi[shifts];
+            }
+#endif
             depth -= 1u;
             continue;
         }
@@ -163,61 +284,112 @@ bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit)
         }
         uint size = n >> depth;
         uint half_size = size >> 1u;
-        uvec3 child = (cursor & ~uvec3(size - 1u)) + ((uvec3(c, c >> 1u, c >> 2u) & 1u) * half_size);
+        uvec3 child_local =
+            (cursor & ~uvec3(size - 1u)) + ((uvec3(c, c >> 1u, c >> 2u) & 1u) * half_size);
+        ivec3 child = base + ivec3(child_local);
+#if defined(TSVDAG_TRANSLATIONS)
+        if (shifts > 0u && any(greaterThanEqual(max(clip_lo, child),
+                                                min(clip_hi, child + ivec3(half_size))))) {
+            continue;
+        }
+#endif
         traverse_slab(r, child, half_size, t_near, t_far, axis);
         t_enter = max(t_near, 0.0);
         if (!(t_enter < t_far && t_enter < t_max)) {
             continue;
         }
-        cursor = child;
+        cursor = child_local;
         if (depth + 1u == voxel_depth) {
             hit.t = t_enter;
-            hit.voxel = child;
+            hit.voxel = uvec3(child);
             hit.normal = traverse_normal(dir, t_near, axis);
-            // Colour index: voxels of the preceding siblings on the path, then the rank inside
-            // the leaf.
+            // Colour index: voxels of the preceding siblings (world order) on the path, then
+            // the rank inside the leaf (or inside the outermost translated subtree).
             uint64_t color = 0ul;
-            for (uint d = 0u; d < leaf_depth; d++) {
+            uint ranked_depth = leaf_depth;
+#if defined(TSVDAG_TRANSLATIONS)
+            if (shifts > 0u) {
+                ranked_depth = sh_depth[0];
+            }
+#endif
+            for (uint d = 0u; d < ranked_depth; d++) {
                 uint st = stack_state[d];
-                uint cd = ((st >> 8u) - 1u) ^ r.mirror;
-                uint rank = uint(bitCount(st & 0xffu & ((1u << cd) - 1u)));
-                for (uint k = 0u; k < rank; k++) {
-                    color += dag_node_voxels(dag_word(stack_node[d] + 1u + k));
+                uint cd = (((st >> 8u) & 15u) - 1u) ^ r.mirror;
+                uint mask = st & 0xffu;
+                uint xf = (st >> 12u) & 63u;
+                uint level = root_level - d;
+                for (uint k = 0u; k < cd; k++) {
+                    if ((mask & (1u << k)) != 0u) {
+                        uint sib;
+                        uint sib_xform;
+                        ivec3 sib_shift;
+                        uint at;
+                        dag_child(stack_node[d], xf, mask, level, k, sib, sib_xform, sib_shift, at);
+                        color += dag_child_count(sib, level - 1u, at,
+                                                 any(notEqual(sib_shift, ivec3(0))));
+                    }
                 }
             }
-            uint leaf = stack_node[leaf_depth];
-            uint code = ((((stack_state[leaf_depth] >> 8u) - 1u) ^ r.mirror) << 3u) |
-                        (((stack_state[leaf_depth + 1u] >> 8u) - 1u) ^ r.mirror);
-            uint lo = dag_word(leaf);
-            if (code < 32u) {
-                color += uint64_t(bitCount(lo & ((1u << code) - 1u)));
-            } else {
-                uint hi = dag_word(leaf + 1u);
-                color += uint64_t(bitCount(lo)) + uint64_t(bitCount(hi & ((1u << (code - 32u)) - 1u)));
+#if defined(TSVDAG_TRANSLATIONS)
+            if (shifts > 0u) {
+                // The siblings before the translated cell are counted; add the voxel's rank
+                // among the voxels the translated subtree leaves in its cell.
+                uint d0 = sh_depth[0];
+                uint side = n >> d0;
+                ivec3 cell = sh_base[0] + ivec3(sh_cursor[0]);
+                color += uint64_t(traverse_shifted_rank(
+                    stack_node[d0], (stack_state[d0] >> 12u) & 63u, root_level - d0,
+                    sh_origin[0], cell, side, child));
+                hit.color_index = color;
+                return true;
             }
+#endif
+            uint leaf = stack_node[leaf_depth];
+            uint code = ((((stack_state[leaf_depth] >> 8u) & 15u) - 1u) ^ r.mirror) << 3u |
+                        ((((stack_state[leaf_depth + 1u] >> 8u) & 15u) - 1u) ^ r.mirror);
+            color += uint64_t(dag_leaf_rank(leaf, (stack_state[leaf_depth] >> 12u) & 63u, code));
             hit.color_index = color;
             return true;
         }
+        uint xform = (state >> 12u) & 63u;
         uint child_node;
+        uint child_xform;
         uint child_mask;
-        if (depth + 1u < leaf_depth) {
-            // Inner child: follow the pointer of octant c.
-            uint rank = uint(bitCount(state & 0xffu & ((1u << c) - 1u)));
-            child_node = dag_word(node + 1u + rank);
-            child_mask = dag_word(child_node) & 0xffu;
-        } else if (depth + 1u == leaf_depth) {
-            // Leaf child: its sub-block occupancy.
-            uint rank = uint(bitCount(state & 0xffu & ((1u << c) - 1u)));
-            child_node = dag_word(node + 1u + rank);
-            child_mask = traverse_leaf_block_mask(child_node);
+        ivec3 shift = ivec3(0);
+        if (depth + 1u <= leaf_depth) {
+            // Inner or leaf child: follow the pointer of world octant c.
+            uint at;
+            uint level = root_level - depth;
+            dag_child(node, xform, state & 0xffu, level, c, child_node, child_xform, shift, at);
+            child_mask = depth + 1u < leaf_depth
+                             ? dag_inner_mask(child_node, child_xform, level - 1u)
+                             : dag_leaf_block_mask(child_node, child_xform);
         } else {
             // Sub-block c of the leaf at `node`.
             child_node = node;
-            child_mask = traverse_leaf_byte(node, c);
+            child_xform = xform;
+            child_mask = dag_leaf_byte(node, xform, c);
         }
         depth += 1u;
         stack_node[depth] = child_node;
-        stack_state[depth] = child_mask;
+        stack_state[depth] = child_mask | (child_xform << 12u);
+#if defined(TSVDAG_TRANSLATIONS)
+        if (any(notEqual(shift, ivec3(0)))) {
+            // Enter a translated subtree: its frames start at its translated origin; only
+            // the voxels inside the cell (and any outer translated cell) count.
+            sh_depth[shifts] = depth;
+            sh_base[shifts] = base;
+            sh_cursor[shifts] = child_local;
+            sh_lo[shifts] = clip_lo;
+            sh_hi[shifts] = clip_hi;
+            clip_lo = max(clip_lo, child);
+            clip_hi = min(clip_hi, child + ivec3(half_size));
+            base = child + shift;
+            sh_origin[shifts] = base;
+            cursor = uvec3(0u);
+            shifts += 1u;
+        }
+#endif
     }
     return false;
 }
