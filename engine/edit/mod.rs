@@ -1,4 +1,6 @@
 //! Editing: the hash DAG (every node of the scene in the per-size slab hash tables), its item
 //! format, and the edit tools built on it (dissertation ch. 4).
 
+pub mod gpu;
+mod gpu_shared;
 pub mod item;
