@@ -22,7 +22,7 @@ use super::item::{
 };
 use crate::dag::{DagError, Svdag};
 use crate::gpu::{
-    shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError,
+    shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError,
     MemLocation, Profiler,
 };
 use crate::hash::dedup::{DedupError, GpuDedup};
@@ -326,9 +326,9 @@ impl GpuHashDag {
                 )?;
                 let mut cmd = ctx.begin_commands("hash dag expand")?;
                 let push = EditPush {
-                    input: words.address(),
-                    input2: offset_buf.address(),
-                    output: nodes.address(),
+                    src: words.address(),
+                    src2: offset_buf.address(),
+                    dst: nodes.address(),
                     count,
                     ..EditPush::default()
                 };
@@ -473,8 +473,8 @@ impl GpuHashDag {
                 let mut cmd = ctx.begin_commands("edit leaves")?;
                 cmd.fill_buffer(&leaves, 0);
                 let push = EditPush {
-                    input: input.address(),
-                    output: leaves.address(),
+                    src: input.address(),
+                    dst: leaves.address(),
                     count,
                     ..base_push
                 };
@@ -502,9 +502,9 @@ impl GpuHashDag {
             let mut cmd = ctx.begin_commands("edit traverse")?;
             cmd.fill_buffer(&counter, 0);
             let push = EditPush {
-                input: input.address(),
-                output: nodes.address(),
-                output2: next.address(),
+                src: input.address(),
+                dst: nodes.address(),
+                dst2: next.address(),
                 counters: counter.address(),
                 count,
                 level: level as u32,
@@ -620,10 +620,10 @@ impl GpuHashDag {
             flags |= FLAG_RESULT_INDEX;
         }
         let push = EditPush {
-            input: level.input,
-            input2: level.below,
-            output: level.results.address(),
-            output2: level.result_index.map_or(0, |b| b.address()),
+            src: level.input,
+            src2: level.below,
+            dst: level.results.address(),
+            dst2: level.result_index.map_or(0, |b| b.address()),
             tables: address_buf.address(),
             counters: counters.address(),
             count: level.count,
@@ -682,8 +682,8 @@ impl GpuHashDag {
                         profiler.as_deref_mut(),
                     )?;
                     let mark = EditPush {
-                        input: reps[s].address(),
-                        output: handles[s].address(),
+                        src: reps[s].address(),
+                        dst: handles[s].address(),
                         count,
                         ..EditPush::default()
                     };

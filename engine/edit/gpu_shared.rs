@@ -6,13 +6,13 @@ gpu_shared! {
     #[derive(Default)]
     pub(crate) struct EditPush {
         /// First input (svdag words, temporary nodes or leaves, traversal entries, dedup reps).
-        pub(crate) input: uint64_t,
+        pub(crate) src: uint64_t,
         /// Second input (node offsets, the level below's results).
-        pub(crate) input2: uint64_t,
+        pub(crate) src2: uint64_t,
         /// First output (temporary nodes, this level's results, handles).
-        pub(crate) output: uint64_t,
+        pub(crate) dst: uint64_t,
         /// Second output (the result index per node, next traversal entries, slots).
-        pub(crate) output2: uint64_t,
+        pub(crate) dst2: uint64_t,
         /// Per-size buffer addresses (`u64`s: the tables' super-block tables, or the level's
         /// item / handle / representative buffers).
         pub(crate) tables: uint64_t,

@@ -1,21 +1,21 @@
 #version 460
 // Bottom-up, one invocation per temporary node or leaf of a level: its canonical form
-// (engine/edit/item.rs). Uniform nodes become EDIT_EMPTY / EDIT_FULL | m in the results; the
+// (engine/edit/item.rs). Nodes whose children are all one empty or full value become EDIT_EMPTY / EDIT_FULL | m in the results; the
 // others append their item to the buffer of its size and leave EDIT_PENDING | size index.
-//   input    temporary nodes (8 child values) or leaves (2 mask words, + 8 material words
+//   src      temporary nodes (8 child values) or leaves (2 mask words, + 8 material words
 //            with EDIT_FLAG_MATERIALS: nibble v = material of voxel v)
-//   input2   the level below's results (EDIT_TEMP | i children read entry i)
-//   output   results (one per node; at result_index[i] with EDIT_FLAG_RESULT_INDEX)
-//   output2  result_index (u32 per node)
+//   src2     the level below's results (EDIT_TEMP | i children read entry i)
+//   dst      results (one per node; at result_index[i] with EDIT_FLAG_RESULT_INDEX)
+//   dst2     result_index (u32 per node)
 //   tables   the level's buffer addresses (EDIT_LEVEL_* in edit/common.glsl)
 //   counters 9 per-size item counts
 #include "edit/common.glsl"
 layout(local_size_x = 64) in;
 
 void main() {
-    Words input_words = Words(push.input);
-    Words below = Words(push.input2);
-    Words results = Words(push.output);
+    Words input_words = Words(push.src);
+    Words below = Words(push.src2);
+    Words results = Words(push.dst);
     Addresses tables = Addresses(push.tables);
     Words counters = Words(push.counters);
     bool leaves = (push.flags & EDIT_FLAG_LEAVES) != 0u;
@@ -60,9 +60,9 @@ void main() {
                 uint v = input_words.w[i * 8u + o];
                 c[o] = (v & EDIT_TAG_MASK) == EDIT_TEMP ? below.w[v & EDIT_INDEX_MASK] : v;
             }
-            bool uniform = !edit_is_ptr(c[0]);
-            for (uint o = 1u; o < 8u; ++o) uniform = uniform && c[o] == c[0];
-            if (uniform) {
+            bool same = !edit_is_ptr(c[0]);
+            for (uint o = 1u; o < 8u; ++o) same = same && c[o] == c[0];
+            if (same) {
                 result = c[0];
                 decided = true;
             } else {
@@ -89,7 +89,7 @@ void main() {
             Words(tables.a[EDIT_LEVEL_SLOTS]).w[i] = index;
             result = EDIT_PENDING | s;
         }
-        uint at = (push.flags & EDIT_FLAG_RESULT_INDEX) != 0u ? Words(push.output2).w[i] : i;
+        uint at = (push.flags & EDIT_FLAG_RESULT_INDEX) != 0u ? Words(push.dst2).w[i] : i;
         results.w[at] = result;
     }
 }

@@ -1,12 +1,12 @@
 #version 460
 // Edit, level 0: one workgroup per leaf entry, one invocation per voxel (bit = Morton code in
-// the leaf). output = temporary leaves (2 mask words each, zeroed before), input = entries.
+// the leaf). dst = temporary leaves (2 mask words each, zeroed before), src = entries.
 #include "edit/common.glsl"
 layout(local_size_x = 64) in;
 
 void main() {
-    Entries entries = Entries(push.input);
-    Words leaves = Words(push.output);
+    Entries entries = Entries(push.src);
+    Words leaves = Words(push.dst);
     bool remove = (push.flags & EDIT_FLAG_REMOVE) != 0u;
     uint v = gl_LocalInvocationID.x;
     uvec3 local = uvec3(v & 1u | (v >> 2u & 2u), v >> 1u & 1u | (v >> 3u & 2u), v >> 2u & 1u | (v >> 4u & 2u));

@@ -3,16 +3,16 @@
 // (push.level >= 1): the tool decides per child: fill (EDIT_FULL | 0) or clear (EDIT_EMPTY) when
 // every voxel is inside, keep the existing child when none can be, keep a homogeneous child the
 // tool cannot change, else subdivide (append the child to the next level's entries).
-//   input    entries (uvec4: min corner xyz in voxels, the existing value there)
-//   output   temporary nodes (8 child values; EDIT_TEMP | j names next entry j)
-//   output2  next level's entries; counters[0] = their count
+//   src      entries (uvec4: min corner xyz in voxels, the existing value there)
+//   dst      temporary nodes (8 child values; EDIT_TEMP | j names next entry j)
+//   dst2     next level's entries; counters[0] = their count
 #include "edit/common.glsl"
 layout(local_size_x = 64) in;
 
 void main() {
-    Entries entries = Entries(push.input);
-    Words nodes = Words(push.output);
-    Entries next = Entries(push.output2);
+    Entries entries = Entries(push.src);
+    Words nodes = Words(push.dst);
+    Entries next = Entries(push.dst2);
     Words counters = Words(push.counters);
     bool remove = (push.flags & EDIT_FLAG_REMOVE) != 0u;
     uint child_side = 2u << push.level;
