@@ -141,7 +141,11 @@ fn check_load(ctx: &Arc<GpuContext>, variant: HashVariant, name: &str, dag: &Svd
     let hd = GpuHashDag::load(ctx, &config, dag, None).unwrap();
     let expected = dag.to_voxels().codes;
     let (codes, counts) = read_back(&hd);
-    assert_eq!(codes.len(), expected.len(), "{name} {variant:?}: voxel count");
+    assert_eq!(
+        codes.len(),
+        expected.len(),
+        "{name} {variant:?}: voxel count"
+    );
     assert_eq!(codes, expected, "{name} {variant:?}: voxels");
     assert_eq!(
         counts,
@@ -152,7 +156,11 @@ fn check_load(ctx: &Arc<GpuContext>, variant: HashVariant, name: &str, dag: &Svd
     let back = image.to_svdag(hd.root()).unwrap();
     let mut geometry = dag.to_voxels();
     geometry.colors.clear();
-    assert_eq!(back, Svdag::from_voxels(&geometry).unwrap(), "{name} {variant:?}: to_svdag");
+    assert_eq!(
+        back,
+        Svdag::from_voxels(&geometry).unwrap(),
+        "{name} {variant:?}: to_svdag"
+    );
     match (expected.is_empty(), hd.root()) {
         (true, Root::Empty) => {}
         (false, Root::Node(_)) => {}
@@ -175,11 +183,8 @@ fn load_reads_back_every_scene_for_every_variant() {
         ),
         (
             "full 8".into(),
-            Svdag::from_voxels(&Voxels::from_coords(
-                8,
-                (0..512).map(|c| morton::decode(c)),
-            ))
-            .unwrap(),
+            Svdag::from_voxels(&Voxels::from_coords(8, (0..512).map(|c| morton::decode(c))))
+                .unwrap(),
         ),
         (
             "teapot 64".into(),
@@ -290,7 +295,10 @@ fn edit_on_empty_and_full_roots_and_outside_the_grid() {
             radius: 2.5,
             remove: true,
         },
-        EditTool { remove: true, ..big },
+        EditTool {
+            remove: true,
+            ..big
+        },
     ];
     for tool in &tools {
         hd.edit(tool, None).unwrap();
@@ -299,7 +307,11 @@ fn edit_on_empty_and_full_roots_and_outside_the_grid() {
         assert_eq!(codes, grid.codes(), "{tool:?}");
     }
     assert_eq!(hd.roots()[2], Root::Full(0), "the big cube fills the grid");
-    assert_eq!(hd.roots()[3], Root::Full(0), "an edit outside changes nothing");
+    assert_eq!(
+        hd.roots()[3],
+        Root::Full(0),
+        "an edit outside changes nothing"
+    );
     assert_eq!(hd.root(), Root::Empty);
     let bad = EditTool {
         radius: f32::NAN,
@@ -354,7 +366,8 @@ fn pool_exhaustion_grows_or_fails_with_the_previous_root_intact() {
             .collect(),
         colors: Vec::new(),
     };
-    let mut hd = GpuHashDag::load(&ctx, &capped, &Svdag::from_voxels(&half).unwrap(), None).unwrap();
+    let mut hd =
+        GpuHashDag::load(&ctx, &capped, &Svdag::from_voxels(&half).unwrap(), None).unwrap();
     let mut grid = Grid::from_codes(resolution, &half.codes);
     let mut failed = false;
     for step in 0..40 {
@@ -410,7 +423,12 @@ fn profiled_edit_names_its_passes() {
     assert!(report.items.iter().sum::<u32>() > 0);
     if profiler.is_available() {
         let names: Vec<&str> = profiler.passes().iter().map(|p| p.name.as_str()).collect();
-        for pass in ["edit traverse", "edit leaves", "edit build items", "hash insert"] {
+        for pass in [
+            "edit traverse",
+            "edit leaves",
+            "edit build items",
+            "hash insert",
+        ] {
             assert!(names.contains(&pass), "{pass} missing from {names:?}");
         }
     }

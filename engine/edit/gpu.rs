@@ -22,8 +22,8 @@ use super::item::{
 };
 use crate::dag::{DagError, Svdag};
 use crate::gpu::{
-    shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError,
-    MemLocation, Profiler,
+    shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, MemLocation,
+    Profiler,
 };
 use crate::hash::dedup::{DedupError, GpuDedup};
 use crate::hash::layout::SLABS_PER_SUPER_BLOCK;
@@ -151,7 +151,9 @@ impl EditTool {
         ];
         match self.shape {
             ToolShape::Cube => d.iter().all(|c| c.abs() <= self.radius),
-            ToolShape::Sphere => d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= self.radius * self.radius,
+            ToolShape::Sphere => {
+                d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= self.radius * self.radius
+            }
         }
     }
 
@@ -253,8 +255,11 @@ impl GpuHashDag {
                 storage_image: false,
             })
         };
-        let table_addresses =
-            ctx.create_buffer("hash dag tables", 8 * TABLE_COUNT as u64, MemLocation::GpuOnly)?;
+        let table_addresses = ctx.create_buffer(
+            "hash dag tables",
+            8 * TABLE_COUNT as u64,
+            MemLocation::GpuOnly,
+        )?;
         let addresses: Vec<u64> = tables.iter().map(|t| t.pool().table_address()).collect();
         let mut cmd = ctx.begin_commands("hash dag init")?;
         cmd.upload(&table_addresses, 0, &addresses)?;
@@ -480,7 +485,12 @@ impl GpuHashDag {
                 };
                 let groups = count.min(ctx.info().max_compute_workgroup_count[0]);
                 cmd.begin_pass(&mut profiler, "edit leaves");
-                cmd.dispatch(&self.leaves, [groups, 1, 1], bytemuck::bytes_of(&push), None)?;
+                cmd.dispatch(
+                    &self.leaves,
+                    [groups, 1, 1],
+                    bytemuck::bytes_of(&push),
+                    None,
+                )?;
                 cmd.end_pass(&mut profiler);
                 cmd.submit_async()?;
                 temp[0] = Some(leaves);
@@ -494,11 +504,8 @@ impl GpuHashDag {
                 32 * count as u64,
                 MemLocation::GpuOnly,
             )?;
-            let next = ctx.create_buffer(
-                "edit entries",
-                16 * capacity as u64,
-                MemLocation::GpuOnly,
-            )?;
+            let next =
+                ctx.create_buffer("edit entries", 16 * capacity as u64, MemLocation::GpuOnly)?;
             let mut cmd = ctx.begin_commands("edit traverse")?;
             cmd.fill_buffer(&counter, 0);
             let push = EditPush {
@@ -512,7 +519,12 @@ impl GpuHashDag {
                 ..base_push
             };
             cmd.begin_pass(&mut profiler, "edit traverse");
-            cmd.dispatch(&self.traverse, groups(count), bytemuck::bytes_of(&push), None)?;
+            cmd.dispatch(
+                &self.traverse,
+                groups(count),
+                bytemuck::bytes_of(&push),
+                None,
+            )?;
             cmd.end_pass(&mut profiler);
             cmd.barrier();
             let back = cmd.readback::<u32>(&counter, 0, 1)?;
@@ -534,11 +546,8 @@ impl GpuHashDag {
             let Some(input) = temp[level].as_ref() else {
                 continue;
             };
-            let results = ctx.create_buffer(
-                "edit results",
-                4 * count as u64,
-                MemLocation::GpuOnly,
-            )?;
+            let results =
+                ctx.create_buffer("edit results", 4 * count as u64, MemLocation::GpuOnly)?;
             let (items, retried) = self.merge_level(
                 &MergeLevel {
                     input: input.address(),
@@ -590,15 +599,14 @@ impl GpuHashDag {
                 MemLocation::GpuOnly,
             )?);
             reps.push(ctx.create_buffer("edit level reps", 4 * cap, MemLocation::GpuOnly)?);
-            handles.push(ctx.create_buffer(
-                "edit level handles",
-                4 * cap,
-                MemLocation::GpuOnly,
-            )?);
+            handles.push(ctx.create_buffer("edit level handles", 4 * cap, MemLocation::GpuOnly)?);
         }
         let slots = ctx.create_buffer("edit level slots", 4 * n, MemLocation::GpuOnly)?;
-        let counters =
-            ctx.create_buffer("edit level counters", 4 * COUNTERS as u64, MemLocation::GpuOnly)?;
+        let counters = ctx.create_buffer(
+            "edit level counters",
+            4 * COUNTERS as u64,
+            MemLocation::GpuOnly,
+        )?;
         let errors = ctx.create_buffer("edit level errors", 4, MemLocation::GpuOnly)?;
         let mut addresses = [0u64; LEVEL_ADDRESSES];
         for s in 0..TABLE_COUNT as usize {
@@ -849,8 +857,9 @@ impl HashDagImage {
     /// Unique stored nodes reachable from `root`, per level (index = level; uniform children
     /// are not nodes).
     pub fn level_counts(&self, root: Root) -> Result<Vec<u64>, GpuDagError> {
-        let mut seen: Vec<FxHashSet<NodePtr>> =
-            (0..=self.root_level).map(|_| FxHashSet::default()).collect();
+        let mut seen: Vec<FxHashSet<NodePtr>> = (0..=self.root_level)
+            .map(|_| FxHashSet::default())
+            .collect();
         if let Root::Node(p) = root {
             let mut stack = vec![(p, self.root_level)];
             seen[self.root_level as usize].insert(p);

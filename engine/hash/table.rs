@@ -450,7 +450,10 @@ impl GpuHashTable {
                 break;
             }
             report.retried_items += left;
-            let room = self.config.max_super_blocks.saturating_sub(self.pool.super_block_count());
+            let room = self
+                .config
+                .max_super_blocks
+                .saturating_sub(self.pool.super_block_count());
             if report.rounds >= self.config.max_insert_rounds || room == 0 {
                 return Err(HashError::Exhausted {
                     items: left,
