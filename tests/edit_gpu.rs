@@ -183,8 +183,7 @@ fn load_reads_back_every_scene_for_every_variant() {
         ),
         (
             "full 8".into(),
-            Svdag::from_voxels(&Voxels::from_coords(8, (0..512).map(|c| morton::decode(c))))
-                .unwrap(),
+            Svdag::from_voxels(&Voxels::from_coords(8, (0..512).map(morton::decode))).unwrap(),
         ),
         (
             "teapot 64".into(),

@@ -541,9 +541,9 @@ impl GpuHashDag {
         }
         // Bottom-up merge of the temporary SVO into the tables.
         let mut below: Option<Buffer> = None;
-        for level in 0..levels {
+        for (level, input) in temp.iter().enumerate() {
             let count = report.temporary_nodes[level];
-            let Some(input) = temp[level].as_ref() else {
+            let Some(input) = input.as_ref() else {
                 continue;
             };
             let results =
