@@ -258,6 +258,60 @@ fn random_edits_match_brute_force_for_every_variant() {
 }
 
 #[test]
+fn undo_and_redo_move_between_roots_and_a_new_edit_drops_the_redo_branch() {
+    let ctx = common::gpu();
+    let voxels = synthetic(32, 5);
+    let dag = Svdag::from_voxels(&voxels).unwrap();
+    let mut hd = GpuHashDag::load(
+        &ctx,
+        &GpuHashDagConfig::new(HashVariant::AccelHash8, 256),
+        &dag,
+        None,
+    )
+    .unwrap();
+    let mut grid = Grid::from_codes(32, &voxels.codes);
+    let mut states = vec![grid.codes()];
+    assert!(!hd.undo(), "nothing to undo after a load");
+    for (i, remove) in [false, true, false].into_iter().enumerate() {
+        let tool = EditTool {
+            shape: ToolShape::Sphere,
+            center: [8.0 + 7.0 * i as f32, 16.5, 12.0],
+            radius: 6.5,
+            remove,
+        };
+        hd.edit(&tool, None).unwrap();
+        grid.apply(&tool);
+        states.push(grid.codes());
+    }
+    assert!(!hd.redo(), "nothing to redo at the newest root");
+    for state in states.iter().rev().skip(1) {
+        assert!(hd.undo());
+        assert_eq!(&read_back(&hd).0, state);
+    }
+    assert!(!hd.undo());
+    assert!(hd.redo());
+    assert!(hd.redo());
+    assert_eq!(read_back(&hd).0, states[2]);
+    // A new edit from state 2 drops states 3 and 4.
+    let mut grid = Grid::from_codes(32, &states[2]);
+    let tool = EditTool {
+        shape: ToolShape::Cube,
+        center: [20.0, 20.0, 20.0],
+        radius: 5.0,
+        remove: true,
+    };
+    hd.edit(&tool, None).unwrap();
+    grid.apply(&tool);
+    assert_eq!(hd.roots().len(), 4);
+    assert!(!hd.redo());
+    assert_eq!(read_back(&hd).0, grid.codes());
+    assert!(hd.undo());
+    assert_eq!(read_back(&hd).0, states[2]);
+    drop(hd);
+    assert_clean(&ctx);
+}
+
+#[test]
 fn edit_on_empty_and_full_roots_and_outside_the_grid() {
     let ctx = common::gpu();
     let mut hd = GpuHashDag::new(

@@ -197,6 +197,8 @@ pub struct GpuHashDag {
     root_level: u32,
     with_materials: bool,
     roots: Vec<Root>,
+    /// Index of the current root in `roots` (undo moves it back, redo forward).
+    current: usize,
 }
 
 /// One level of a bottom-up merge: where its nodes are and where their results go.
@@ -279,6 +281,7 @@ impl GpuHashDag {
             root_level,
             with_materials,
             roots: vec![Root::Empty],
+            current: 0,
         })
     }
 
@@ -369,12 +372,27 @@ impl GpuHashDag {
 
     /// The current root.
     pub fn root(&self) -> Root {
-        *self.roots.last().expect("a hash DAG always has a root")
+        self.roots[self.current]
     }
 
-    /// Every root made so far, oldest first (the current one last).
+    /// The history: every live root, oldest first (the current one and, after an undo, the
+    /// redo branch after it). Garbage collection must keep all of them.
     pub fn roots(&self) -> &[Root] {
         &self.roots
+    }
+
+    /// Makes the previous root current; false when there is none.
+    pub fn undo(&mut self) -> bool {
+        let moved = self.current > 0;
+        self.current -= moved as usize;
+        moved
+    }
+
+    /// Makes the next root (undone before) current again; false when there is none.
+    pub fn redo(&mut self) -> bool {
+        let moved = self.current + 1 < self.roots.len();
+        self.current += moved as usize;
+        moved
     }
 
     /// Level of the root (grid side `4 << root_level`).
@@ -422,7 +440,7 @@ impl GpuHashDag {
     }
 
     /// Applies a sphere or cube edit to the current root; the result becomes the new current
-    /// root. All-or-nothing: stored items are never changed, so on an error the previous root
+    /// root (the redo branch is dropped). All-or-nothing: stored items are never changed, so on an error the previous root
     /// stays current and intact.
     pub fn edit(
         &mut self,
@@ -569,7 +587,10 @@ impl GpuHashDag {
         if let Some(p) = profiler {
             p.resolve()?;
         }
+        // A new edit drops the redo branch.
+        self.roots.truncate(self.current + 1);
         self.roots.push(root);
+        self.current += 1;
         Ok(report)
     }
 
