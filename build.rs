@@ -255,7 +255,7 @@ macro_rules! glsl_decl {
 
 /// Writes `gen/<room>.glsl` for every room's `gpu_shared.rs` (only when the text changed).
 fn write_shared_layouts(manifest: &Path, gen_dir: &Path) {
-    let rooms: [(&str, &str, Vec<SharedStruct>); 5] = [
+    let rooms: [(&str, &str, Vec<SharedStruct>); 6] = [
         (
             "render",
             "engine/render/gpu_shared.rs",
@@ -275,6 +275,11 @@ fn write_shared_layouts(manifest: &Path, gen_dir: &Path) {
             "compute",
             "engine/compute/gpu_shared.rs",
             include!("engine/compute/gpu_shared.rs"),
+        ),
+        (
+            "edit",
+            "engine/edit/gpu_shared.rs",
+            include!("engine/edit/gpu_shared.rs"),
         ),
         (
             "test",

@@ -2,6 +2,8 @@
 //! format, and the edit tools built on it (dissertation ch. 4).
 
 pub mod cpu;
+pub mod gpu;
+mod gpu_shared;
 pub mod item;
 pub mod replay;
 pub mod tool;

@@ -44,6 +44,9 @@ pub struct HashTableConfig {
     pub max_insert_rounds: u32,
     /// How many lanes work on one item.
     pub team: TeamMode,
+    /// Most super blocks the pool may grow to (at most [`MAX_SUPER_BLOCKS`]; the hash DAG caps
+    /// it so that handles fit its pointers).
+    pub max_super_blocks: u32,
 }
 
 /// How many lanes of a subgroup work on one item.
@@ -70,6 +73,7 @@ impl HashTableConfig {
             grow_before_insert: true,
             max_insert_rounds: 8,
             team: TeamMode::Auto,
+            max_super_blocks: MAX_SUPER_BLOCKS,
         }
     }
 }
@@ -135,9 +139,13 @@ impl GpuHashTable {
                 "a table needs at least one bucket".into(),
             ));
         }
-        if config.initial_super_blocks > MAX_SUPER_BLOCKS || config.max_insert_rounds == 0 {
+        if config.max_super_blocks == 0
+            || config.max_super_blocks > MAX_SUPER_BLOCKS
+            || config.initial_super_blocks > config.max_super_blocks
+            || config.max_insert_rounds == 0
+        {
             return Err(HashError::Config(format!(
-                "initial super blocks must be <= {MAX_SUPER_BLOCKS} and insert rounds >= 1"
+                "need initial super blocks <= max super blocks (1..={MAX_SUPER_BLOCKS}) and insert rounds >= 1"
             )));
         }
         let subgroup = ctx.info().subgroup_size;
@@ -469,7 +477,10 @@ impl GpuHashTable {
                 break;
             }
             report.retried_items += left;
-            let room = MAX_SUPER_BLOCKS - self.pool.super_block_count();
+            let room = self
+                .config
+                .max_super_blocks
+                .saturating_sub(self.pool.super_block_count());
             if report.rounds >= self.config.max_insert_rounds || room == 0 {
                 return Err(HashError::Exhausted {
                     items: left,
@@ -608,7 +619,7 @@ impl GpuHashTable {
 
     /// Grows the pool so `new_items` more items fit at the worst case: each bucket they touch
     /// may need one new slab beyond `items / 32`, with the pool kept at most 7/8 full. Stops at
-    /// [`MAX_SUPER_BLOCKS`] (the insert rounds then report what still does not fit).
+    /// `max_super_blocks` (the insert rounds then report what still does not fit).
     pub fn reserve(&mut self, new_items: u32) -> Result<(), HashError> {
         let new_slabs =
             new_items as u64 / SLAB_SLOTS as u64 + new_items.min(self.config.buckets) as u64 + 1;
@@ -622,7 +633,10 @@ impl GpuHashTable {
             .saturating_sub(self.pool.capacity_slabs())
             .div_ceil(SLABS_PER_SUPER_BLOCK as u64)
             .max(force as u64);
-        let room = (MAX_SUPER_BLOCKS - self.pool.super_block_count()) as u64;
+        let room = self
+            .config
+            .max_super_blocks
+            .saturating_sub(self.pool.super_block_count()) as u64;
         if more.min(room) > 0 {
             self.pool.grow(more.min(room) as u32)?;
         }

@@ -1,0 +1,918 @@
+//! The hash DAG on the GPU (dissertation §4.3-4.4): every node of the scene in nine slab hash
+//! tables (one per item size, `engine/edit/item.rs`), loading an `svdag32` DAG into them level by
+//! level, reading them back, and the edit pipeline for sphere and cube add / remove.
+//!
+//! Both the load and the edit end in the same bottom-up *merge* of one level at a time
+//! (`shaders/glsl/edit/`): `build_items` turns each temporary node or leaf into its canonical
+//! form (uniform ones become empty / full child values, the others append their item to the
+//! buffer of its size), then per size the batch's duplicates are found with the dedup table
+//! ([`GpuDedup`]), a search pass finds items already stored, `mark` keeps one copy of each new
+//! item, the insert round stores it, and `resolve` writes every node's pointer. The edit first
+//! walks the tool's region top-down (`traverse`, then `leaves` with one invocation per voxel),
+//! building the temporary SVO the merge consumes. See `docs/editing-gpu.md`.
+
+use std::sync::Arc;
+
+use rustc_hash::FxHashSet;
+
+use super::gpu_shared::EditPush;
+use super::item::{
+    Child, InnerNode, ItemError, Leaf, NodePtr, Root, MAX_ITEM_WORDS, MAX_TABLE_SLABS,
+    MIN_ITEM_WORDS, TABLE_COUNT,
+};
+use crate::dag::{DagError, Svdag};
+use crate::gpu::{
+    shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, MemLocation,
+    Profiler,
+};
+use crate::hash::dedup::{DedupError, GpuDedup};
+use crate::hash::layout::SLABS_PER_SUPER_BLOCK;
+use crate::hash::{GpuHashTable, Handle, HashError, HashTableConfig, HashVariant, TableImage};
+use crate::scene::Voxels;
+
+/// Child value: empty cube (GLSL `EDIT_EMPTY`).
+const VALUE_EMPTY: u32 = 0xFFFF_FFFF;
+/// Child value tag: full cube, `| material` (GLSL `EDIT_FULL`).
+const VALUE_FULL: u32 = 0xF000_0000;
+/// Tag of a value naming an entry of the level below (GLSL `EDIT_TEMP`).
+const VALUE_TEMP: u32 = 0x9000_0000;
+/// Pass flags (GLSL `EDIT_FLAG_*`).
+const FLAG_LEAVES: u32 = 1;
+const FLAG_MATERIALS: u32 = 2;
+const FLAG_REMOVE: u32 = 4;
+const FLAG_RESULT_INDEX: u32 = 8;
+/// Words of the per-level address buffer (GLSL `EDIT_LEVEL_*`): 9 items, 1 slots, 9 reps,
+/// 9 handles.
+const LEVEL_ADDRESSES: usize = 28;
+/// Counters of a merge: one item count per size.
+const COUNTERS: usize = TABLE_COUNT as usize;
+/// Invocations per workgroup of every edit pass.
+const GROUP: u32 = 64;
+
+/// Errors of the GPU hash DAG.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuDagError {
+    /// The GPU layer failed.
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    /// A hash table failed (pool exhausted, corrupt table, ...).
+    #[error(transparent)]
+    Hash(#[from] HashError),
+    /// The dedup table failed.
+    #[error(transparent)]
+    Dedup(#[from] DedupError),
+    /// The SVDAG to load or to build is invalid.
+    #[error(transparent)]
+    Dag(#[from] DagError),
+    /// A configuration or argument the hash DAG cannot take.
+    #[error("invalid hash DAG argument: {0}")]
+    Invalid(String),
+    /// The tables hold something that is not a canonical hash DAG (a bug, reported).
+    #[error("corrupt hash DAG: {0}")]
+    Corrupt(String),
+}
+
+impl From<ItemError> for GpuDagError {
+    fn from(e: ItemError) -> GpuDagError {
+        GpuDagError::Corrupt(e.to_string())
+    }
+}
+
+/// How the nine tables are built.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct GpuHashDagConfig {
+    /// Slab layout of every table (chosen at run time).
+    pub variant: HashVariant,
+    /// Buckets per table.
+    pub buckets: u32,
+    /// Super blocks per table at creation.
+    pub initial_super_blocks: u32,
+    /// Most super blocks per table (at most [`max_super_blocks`], which keeps handles in 28 bits).
+    pub max_super_blocks: u32,
+    /// Grow each table before an insert from a conservative estimate (false: only after a round
+    /// ran out; tests force exhaustion that way).
+    pub grow_before_insert: bool,
+    /// Insert rounds (pass + grow) before an insert fails.
+    pub max_insert_rounds: u32,
+}
+
+/// Super blocks that keep every handle below 2^28 ([`MAX_TABLE_SLABS`] slabs).
+pub fn max_super_blocks() -> u32 {
+    MAX_TABLE_SLABS / SLABS_PER_SUPER_BLOCK
+}
+
+impl GpuHashDagConfig {
+    /// Tables of `variant` with `buckets` buckets each, one initial super block, growth before
+    /// inserts, 8 insert rounds.
+    pub fn new(variant: HashVariant, buckets: u32) -> GpuHashDagConfig {
+        GpuHashDagConfig {
+            variant,
+            buckets,
+            initial_super_blocks: 1,
+            max_super_blocks: max_super_blocks(),
+            grow_before_insert: true,
+            max_insert_rounds: 8,
+        }
+    }
+}
+
+/// Shape of an edit tool.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ToolShape {
+    /// Voxels whose centre lies within `radius` of `center`.
+    Sphere,
+    /// Voxels whose centre lies in `[center - radius, center + radius]` on every axis.
+    Cube,
+}
+
+/// A sphere or cube edit: add (fill with material 0) or remove the voxels inside.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EditTool {
+    /// Sphere or cube.
+    pub shape: ToolShape,
+    /// Centre in voxel units (voxel (x, y, z) spans `[x, x + 1)`).
+    pub center: [f32; 3],
+    /// Sphere radius or cube half-size, in voxels.
+    pub radius: f32,
+    /// Remove (true) or add (false).
+    pub remove: bool,
+}
+
+impl EditTool {
+    /// Whether voxel (x, y, z) is inside the tool: its centre `(x + ½, y + ½, z + ½)` within
+    /// `radius` of `center` (sphere) or in `[center - radius, center + radius]` on every axis
+    /// (cube), computed in `f32` exactly as the GPU passes do (`edit/common.glsl`, no fused
+    /// multiply-add), so both agree on every voxel.
+    pub fn contains(&self, [x, y, z]: [u32; 3]) -> bool {
+        let d = [
+            (x as f32 + 0.5) - self.center[0],
+            (y as f32 + 0.5) - self.center[1],
+            (z as f32 + 0.5) - self.center[2],
+        ];
+        match self.shape {
+            ToolShape::Cube => d.iter().all(|c| c.abs() <= self.radius),
+            ToolShape::Sphere => {
+                d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= self.radius * self.radius
+            }
+        }
+    }
+
+    fn check(&self) -> Result<(), GpuDagError> {
+        let finite = self.center.iter().all(|c| c.is_finite()) && self.radius.is_finite();
+        if !finite || self.radius <= 0.0 {
+            return Err(GpuDagError::Invalid(format!(
+                "tool centre {:?} radius {} (need finite values and radius > 0)",
+                self.center, self.radius
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// What an edit did.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct EditReport {
+    /// Temporary SVO entries per level (index = level), the traversal's work.
+    pub temporary_nodes: Vec<u32>,
+    /// Items built per level before deduplication (non-uniform temporary nodes).
+    pub items: Vec<u32>,
+    /// Insert rounds beyond the first (pool growth during the edit).
+    pub retried_rounds: u32,
+}
+
+/// The scene as nine per-size slab hash tables on the GPU, with its history of roots.
+pub struct GpuHashDag {
+    ctx: Arc<GpuContext>,
+    config: GpuHashDagConfig,
+    tables: Vec<GpuHashTable>,
+    dedups: Vec<GpuDedup>,
+    /// The tables' super-block table addresses (`u64` each), read by the passes.
+    table_addresses: Buffer,
+    expand: ComputePipeline,
+    build_items: ComputePipeline,
+    mark: ComputePipeline,
+    resolve: ComputePipeline,
+    traverse: ComputePipeline,
+    leaves: ComputePipeline,
+    root_level: u32,
+    with_materials: bool,
+    roots: Vec<Root>,
+    /// Index of the current root in `roots` (undo moves it back, redo forward).
+    current: usize,
+}
+
+/// One level of a bottom-up merge: where its nodes are and where their results go.
+struct MergeLevel<'b> {
+    /// Temporary nodes (8 values) or leaves (2 words) at `input` (a device address).
+    input: u64,
+    count: u32,
+    leaves: bool,
+    /// Results of the level below (device address; 0 for leaves).
+    below: u64,
+    /// Where results go.
+    results: &'b Buffer,
+    /// Result index per node (load: the node's svdag word offset).
+    result_index: Option<&'b Buffer>,
+}
+
+impl GpuHashDag {
+    /// An empty hash DAG (root `Empty`) for a grid whose root is at `root_level` (side
+    /// `4 << root_level`), geometry only or with materials.
+    pub fn new(
+        ctx: &Arc<GpuContext>,
+        config: &GpuHashDagConfig,
+        root_level: u32,
+        with_materials: bool,
+    ) -> Result<GpuHashDag, GpuDagError> {
+        if config.max_super_blocks > max_super_blocks() {
+            return Err(GpuDagError::Invalid(format!(
+                "at most {} super blocks per table keep handles below 2^28",
+                max_super_blocks()
+            )));
+        }
+        if !(1..=19).contains(&root_level) {
+            return Err(GpuDagError::Invalid(format!(
+                "root level {root_level} (grids of 8..=2^21 voxels have root levels 1..=19)"
+            )));
+        }
+        let mut tables = Vec::new();
+        let mut dedups = Vec::new();
+        for words in MIN_ITEM_WORDS..=MAX_ITEM_WORDS {
+            let table_config = HashTableConfig {
+                initial_super_blocks: config.initial_super_blocks,
+                grow_before_insert: config.grow_before_insert,
+                max_insert_rounds: config.max_insert_rounds,
+                max_super_blocks: config.max_super_blocks,
+                ..HashTableConfig::new(config.variant, words, config.buckets)
+            };
+            tables.push(GpuHashTable::new(ctx, &table_config)?);
+            dedups.push(GpuDedup::new(ctx, words)?);
+        }
+        let pipeline = |name: &str, spirv: &[u32]| {
+            ctx.create_compute_pipeline(&ComputePipelineDesc {
+                name,
+                spirv,
+                spec_constants: &[],
+                push_constant_size: std::mem::size_of::<EditPush>() as u32,
+                storage_image: false,
+            })
+        };
+        let table_addresses = ctx.create_buffer(
+            "hash dag tables",
+            8 * TABLE_COUNT as u64,
+            MemLocation::GpuOnly,
+        )?;
+        let addresses: Vec<u64> = tables.iter().map(|t| t.pool().table_address()).collect();
+        let mut cmd = ctx.begin_commands("hash dag init")?;
+        cmd.upload(&table_addresses, 0, &addresses)?;
+        cmd.submit_async()?;
+        Ok(GpuHashDag {
+            ctx: Arc::clone(ctx),
+            config: config.clone(),
+            tables,
+            dedups,
+            table_addresses,
+            expand: pipeline("edit expand", shaders::EDIT_EXPAND)?,
+            build_items: pipeline("edit build items", shaders::EDIT_BUILD_ITEMS)?,
+            mark: pipeline("edit mark", shaders::EDIT_MARK)?,
+            resolve: pipeline("edit resolve", shaders::EDIT_RESOLVE)?,
+            traverse: pipeline("edit traverse", shaders::EDIT_TRAVERSE)?,
+            leaves: pipeline("edit leaves", shaders::EDIT_LEAVES)?,
+            root_level,
+            with_materials,
+            roots: vec![Root::Empty],
+            current: 0,
+        })
+    }
+
+    /// Loads an `svdag32` DAG (geometry only) into new tables on the GPU, level by level
+    /// bottom-up; its root becomes the current root.
+    pub fn load(
+        ctx: &Arc<GpuContext>,
+        config: &GpuHashDagConfig,
+        dag: &Svdag,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<GpuHashDag, GpuDagError> {
+        dag.validate()?;
+        if dag.words.len() >= 1 << 28 {
+            return Err(GpuDagError::Invalid(format!(
+                "{} svdag words (the loader indexes results with 28 bits)",
+                dag.words.len()
+            )));
+        }
+        let mut hd = GpuHashDag::new(ctx, config, dag.root_level(), false)?;
+        let words = ctx.upload("hash dag load words", &dag.words)?;
+        let results = ctx.create_buffer(
+            "hash dag load results",
+            4 * dag.words.len() as u64,
+            MemLocation::GpuOnly,
+        )?;
+        for level in 0..=dag.root_level() {
+            let range = dag.level_range(level);
+            let mut offsets = Vec::new();
+            let mut at = range.start;
+            while at < range.end {
+                offsets.push(at as u32);
+                at += if level == 0 {
+                    2
+                } else {
+                    1 + dag.words[at].count_ones() as usize
+                };
+            }
+            let count = offsets.len() as u32;
+            if count == 0 {
+                continue;
+            }
+            let offset_buf = ctx.upload("hash dag load offsets", &offsets)?;
+            let input = if level == 0 {
+                None
+            } else {
+                let nodes = ctx.create_buffer(
+                    "hash dag load nodes",
+                    32 * count as u64,
+                    MemLocation::GpuOnly,
+                )?;
+                let mut cmd = ctx.begin_commands("hash dag expand")?;
+                let push = EditPush {
+                    src: words.address(),
+                    src2: offset_buf.address(),
+                    dst: nodes.address(),
+                    count,
+                    ..EditPush::default()
+                };
+                cmd.begin_pass(&mut profiler, "edit expand");
+                cmd.dispatch(&hd.expand, groups(count), bytemuck::bytes_of(&push), None)?;
+                cmd.end_pass(&mut profiler);
+                cmd.submit_async()?;
+                Some(nodes)
+            };
+            let level_input = match &input {
+                Some(nodes) => nodes.address(),
+                None => words.address() + 4 * range.start as u64,
+            };
+            hd.merge_level(
+                &MergeLevel {
+                    input: level_input,
+                    count,
+                    leaves: level == 0,
+                    below: results.address(),
+                    results: &results,
+                    result_index: Some(&offset_buf),
+                },
+                profiler.as_deref_mut(),
+            )?;
+        }
+        let root = hd.ctx.read_buffer::<u32>(&results, 0, 1)?[0];
+        hd.roots = vec![root_from_value(root)?];
+        if let Some(p) = profiler {
+            p.resolve()?;
+        }
+        Ok(hd)
+    }
+
+    /// The current root.
+    pub fn root(&self) -> Root {
+        self.roots[self.current]
+    }
+
+    /// The history: every live root, oldest first (the current one and, after an undo, the
+    /// redo branch after it). Garbage collection must keep all of them.
+    pub fn roots(&self) -> &[Root] {
+        &self.roots
+    }
+
+    /// Makes the previous root current; false when there is none.
+    pub fn undo(&mut self) -> bool {
+        let moved = self.current > 0;
+        self.current -= moved as usize;
+        moved
+    }
+
+    /// Makes the next root (undone before) current again; false when there is none.
+    pub fn redo(&mut self) -> bool {
+        let moved = self.current + 1 < self.roots.len();
+        self.current += moved as usize;
+        moved
+    }
+
+    /// Level of the root (grid side `4 << root_level`).
+    pub fn root_level(&self) -> u32 {
+        self.root_level
+    }
+
+    /// Grid side in voxels.
+    pub fn resolution(&self) -> u32 {
+        4 << self.root_level
+    }
+
+    /// Whether leaves carry materials.
+    pub fn with_materials(&self) -> bool {
+        self.with_materials
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &GpuHashDagConfig {
+        &self.config
+    }
+
+    /// The table of `words`-word items.
+    pub fn table(&self, words: u32) -> Option<&GpuHashTable> {
+        self.tables.get(words.checked_sub(MIN_ITEM_WORDS)? as usize)
+    }
+
+    /// Device memory of the nine tables, in bytes.
+    pub fn gpu_bytes(&self) -> u64 {
+        self.tables.iter().map(|t| t.gpu_bytes()).sum()
+    }
+
+    /// Downloads every table (for host-side reads: voxels, counts, conversion to an SVDAG).
+    pub fn download(&self) -> Result<HashDagImage, GpuDagError> {
+        let tables = self
+            .tables
+            .iter()
+            .map(|t| t.download())
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(HashDagImage {
+            tables,
+            root_level: self.root_level,
+            with_materials: self.with_materials,
+        })
+    }
+
+    /// Applies a sphere or cube edit to the current root; the result becomes the new current
+    /// root (the redo branch is dropped). All-or-nothing: stored items are never changed, so on an error the previous root
+    /// stays current and intact.
+    pub fn edit(
+        &mut self,
+        tool: &EditTool,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<EditReport, GpuDagError> {
+        tool.check()?;
+        if self.with_materials {
+            return Err(GpuDagError::Invalid(
+                "the GPU edit tools build geometry-only leaves; this hash DAG has materials".into(),
+            ));
+        }
+        let ctx = Arc::clone(&self.ctx);
+        let flags = if tool.remove { FLAG_REMOVE } else { 0 };
+        let base_push = EditPush {
+            tables: self.table_addresses.address(),
+            flags,
+            variant: self.config.variant.id(),
+            tool: [tool.center[0], tool.center[1], tool.center[2], tool.radius],
+            shape: match tool.shape {
+                ToolShape::Sphere => 0,
+                ToolShape::Cube => 1,
+            },
+            ..EditPush::default()
+        };
+        let levels = self.root_level as usize + 1;
+        let mut report = EditReport {
+            temporary_nodes: vec![0; levels],
+            items: vec![0; levels],
+            retried_rounds: 0,
+        };
+        // Top-down: entries[l] = the level-l cubes the tool may change; temp[l] = their
+        // temporary nodes (inner levels) or leaves (level 0).
+        let root_value = value_of_root(self.root());
+        let mut entries: Vec<Option<Buffer>> = (0..levels).map(|_| None).collect();
+        let mut temp: Vec<Option<Buffer>> = (0..levels).map(|_| None).collect();
+        let first = ctx.upload("edit entries", &[0u32, 0, 0, root_value])?;
+        entries[levels - 1] = Some(first);
+        report.temporary_nodes[levels - 1] = 1;
+        let counter = ctx.create_buffer("edit traverse counter", 4, MemLocation::GpuOnly)?;
+        for level in (0..levels).rev() {
+            let count = report.temporary_nodes[level];
+            if count == 0 {
+                break;
+            }
+            let input = entries[level].as_ref().expect("entries of a visited level");
+            if level == 0 {
+                let leaves = ctx.create_buffer(
+                    "edit temporary leaves",
+                    8 * count as u64,
+                    MemLocation::GpuOnly,
+                )?;
+                let mut cmd = ctx.begin_commands("edit leaves")?;
+                cmd.fill_buffer(&leaves, 0);
+                let push = EditPush {
+                    src: input.address(),
+                    dst: leaves.address(),
+                    count,
+                    ..base_push
+                };
+                let groups = count.min(ctx.info().max_compute_workgroup_count[0]);
+                cmd.begin_pass(&mut profiler, "edit leaves");
+                cmd.dispatch(
+                    &self.leaves,
+                    [groups, 1, 1],
+                    bytemuck::bytes_of(&push),
+                    None,
+                )?;
+                cmd.end_pass(&mut profiler);
+                cmd.submit_async()?;
+                temp[0] = Some(leaves);
+                break;
+            }
+            let capacity = count.checked_mul(8).ok_or_else(|| {
+                GpuDagError::Invalid("temporary SVO larger than 2^32 entries".into())
+            })?;
+            let nodes = ctx.create_buffer(
+                "edit temporary nodes",
+                32 * count as u64,
+                MemLocation::GpuOnly,
+            )?;
+            let next =
+                ctx.create_buffer("edit entries", 16 * capacity as u64, MemLocation::GpuOnly)?;
+            let mut cmd = ctx.begin_commands("edit traverse")?;
+            cmd.fill_buffer(&counter, 0);
+            let push = EditPush {
+                src: input.address(),
+                dst: nodes.address(),
+                dst2: next.address(),
+                counters: counter.address(),
+                count,
+                level: level as u32,
+                capacity,
+                ..base_push
+            };
+            cmd.begin_pass(&mut profiler, "edit traverse");
+            cmd.dispatch(
+                &self.traverse,
+                groups(count),
+                bytemuck::bytes_of(&push),
+                None,
+            )?;
+            cmd.end_pass(&mut profiler);
+            cmd.barrier();
+            let back = cmd.readback::<u32>(&counter, 0, 1)?;
+            cmd.submit_async()?;
+            let next_count = back.read()?[0];
+            if next_count > capacity || next_count >= 1 << 28 {
+                return Err(GpuDagError::Corrupt(format!(
+                    "traversal of level {level} made {next_count} entries (room for {capacity})"
+                )));
+            }
+            report.temporary_nodes[level - 1] = next_count;
+            entries[level - 1] = Some(next);
+            temp[level] = Some(nodes);
+        }
+        // Bottom-up merge of the temporary SVO into the tables.
+        let mut below: Option<Buffer> = None;
+        for (level, input) in temp.iter().enumerate() {
+            let count = report.temporary_nodes[level];
+            let Some(input) = input.as_ref() else {
+                continue;
+            };
+            let results =
+                ctx.create_buffer("edit results", 4 * count as u64, MemLocation::GpuOnly)?;
+            let (items, retried) = self.merge_level(
+                &MergeLevel {
+                    input: input.address(),
+                    count,
+                    leaves: level == 0,
+                    below: below.as_ref().map_or(0, |b| b.address()),
+                    results: &results,
+                    result_index: None,
+                },
+                profiler.as_deref_mut(),
+            )?;
+            report.items[level] = items;
+            report.retried_rounds += retried;
+            below = Some(results);
+        }
+        let results = below.expect("the root level is always merged");
+        let root = ctx.read_buffer::<u32>(&results, 0, 1)?[0];
+        let root = root_from_value(root)?;
+        if let Some(p) = profiler {
+            p.resolve()?;
+        }
+        // A new edit drops the redo branch.
+        self.roots.truncate(self.current + 1);
+        self.roots.push(root);
+        self.current += 1;
+        Ok(report)
+    }
+
+    /// Merges one level (see the module docs); returns the items built and the extra insert
+    /// rounds run.
+    fn merge_level(
+        &mut self,
+        level: &MergeLevel<'_>,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<(u32, u32), GpuDagError> {
+        let ctx = Arc::clone(&self.ctx);
+        let n = level.count.max(1) as u64;
+        let mut items = Vec::new();
+        let mut reps = Vec::new();
+        let mut handles = Vec::new();
+        for words in MIN_ITEM_WORDS..=MAX_ITEM_WORDS {
+            // Leaves without materials are 2 words; inner nodes at most 9.
+            let possible = match (level.leaves, self.with_materials) {
+                (true, false) => words == 2,
+                (true, true) => true,
+                (false, _) => words <= 9,
+            };
+            let cap = if possible { n } else { 1 };
+            items.push(ctx.create_buffer(
+                "edit level items",
+                4 * words as u64 * cap,
+                MemLocation::GpuOnly,
+            )?);
+            reps.push(ctx.create_buffer("edit level reps", 4 * cap, MemLocation::GpuOnly)?);
+            handles.push(ctx.create_buffer("edit level handles", 4 * cap, MemLocation::GpuOnly)?);
+        }
+        let slots = ctx.create_buffer("edit level slots", 4 * n, MemLocation::GpuOnly)?;
+        let counters = ctx.create_buffer(
+            "edit level counters",
+            4 * COUNTERS as u64,
+            MemLocation::GpuOnly,
+        )?;
+        let errors = ctx.create_buffer("edit level errors", 4, MemLocation::GpuOnly)?;
+        let mut addresses = [0u64; LEVEL_ADDRESSES];
+        for s in 0..TABLE_COUNT as usize {
+            addresses[s] = items[s].address();
+            addresses[10 + s] = reps[s].address();
+            addresses[19 + s] = handles[s].address();
+        }
+        addresses[9] = slots.address();
+        let address_buf = ctx.create_buffer(
+            "edit level addresses",
+            8 * LEVEL_ADDRESSES as u64,
+            MemLocation::GpuOnly,
+        )?;
+        let mut flags = if level.leaves { FLAG_LEAVES } else { 0 };
+        if self.with_materials {
+            flags |= FLAG_MATERIALS;
+        }
+        if level.result_index.is_some() {
+            flags |= FLAG_RESULT_INDEX;
+        }
+        let push = EditPush {
+            src: level.input,
+            src2: level.below,
+            dst: level.results.address(),
+            dst2: level.result_index.map_or(0, |b| b.address()),
+            tables: address_buf.address(),
+            counters: counters.address(),
+            count: level.count,
+            level: 0,
+            flags,
+            variant: self.config.variant.id(),
+            ..EditPush::default()
+        };
+        let counts = {
+            let mut cmd = ctx.begin_commands("edit build items")?;
+            cmd.upload(&address_buf, 0, &addresses)?;
+            cmd.fill_buffer(&counters, 0);
+            cmd.fill_buffer(&errors, 0);
+            cmd.begin_pass(&mut profiler, "edit build items");
+            cmd.dispatch(
+                &self.build_items,
+                groups(level.count),
+                bytemuck::bytes_of(&push),
+                None,
+            )?;
+            cmd.end_pass(&mut profiler);
+            cmd.barrier();
+            let back = cmd.readback::<u32>(&counters, 0, COUNTERS)?;
+            cmd.submit_async()?;
+            back.read()?
+        };
+        let total: u32 = counts.iter().sum();
+        let mut retried = 0;
+        if total > 0 {
+            let max = *counts.iter().max().unwrap_or(&0);
+            let iota: Vec<u32> = (0..max).collect();
+            let values = ctx.upload("edit iota", &iota)?;
+            for (s, &count) in counts.iter().enumerate() {
+                if count == 0 {
+                    continue;
+                }
+                self.dedups[s].dedup_buffers(
+                    &items[s],
+                    &values,
+                    count,
+                    &reps[s],
+                    profiler.as_deref_mut(),
+                )?;
+                let table = &mut self.tables[s];
+                if table.config().grow_before_insert {
+                    table.reserve(count)?;
+                }
+                let pending = {
+                    let table = &self.tables[s];
+                    let mut cmd = ctx.begin_commands("edit insert")?;
+                    table.record_search(
+                        &mut cmd,
+                        &items[s],
+                        &handles[s],
+                        count,
+                        profiler.as_deref_mut(),
+                    )?;
+                    let mark = EditPush {
+                        src: reps[s].address(),
+                        dst: handles[s].address(),
+                        count,
+                        ..EditPush::default()
+                    };
+                    cmd.begin_pass(&mut profiler, "edit mark");
+                    cmd.dispatch(&self.mark, groups(count), bytemuck::bytes_of(&mark), None)?;
+                    cmd.end_pass(&mut profiler);
+                    cmd.barrier();
+                    let pending = table.record_insert_round(
+                        &mut cmd,
+                        &items[s],
+                        &handles[s],
+                        count,
+                        profiler.as_deref_mut(),
+                    )?;
+                    cmd.submit_async()?;
+                    pending
+                };
+                let report = self.tables[s].finish_insert(
+                    pending,
+                    &items[s],
+                    &handles[s],
+                    count,
+                    profiler.as_deref_mut(),
+                )?;
+                retried += report.rounds - 1;
+                if report.invalid_items != 0 {
+                    return Err(GpuDagError::Corrupt(format!(
+                        "{} items of {} words rejected by the table layout",
+                        report.invalid_items,
+                        s as u32 + MIN_ITEM_WORDS
+                    )));
+                }
+            }
+            let mut cmd = ctx.begin_commands("edit resolve")?;
+            let resolve = EditPush {
+                counters: errors.address(),
+                ..push
+            };
+            cmd.begin_pass(&mut profiler, "edit resolve");
+            cmd.dispatch(
+                &self.resolve,
+                groups(level.count),
+                bytemuck::bytes_of(&resolve),
+                None,
+            )?;
+            cmd.end_pass(&mut profiler);
+            cmd.barrier();
+            let back = cmd.readback::<u32>(&errors, 0, 1)?;
+            cmd.submit_async()?;
+            let missing = back.read()?[0];
+            if missing != 0 {
+                return Err(GpuDagError::Corrupt(format!(
+                    "{missing} nodes without a handle after the insert"
+                )));
+            }
+        }
+        Ok((total, retried))
+    }
+}
+
+/// Workgroups for one invocation per record (grid-stride beyond 65 535 groups).
+fn groups(count: u32) -> [u32; 3] {
+    [count.div_ceil(GROUP).clamp(1, 65_535), 1, 1]
+}
+
+/// The child value of a root.
+fn value_of_root(root: Root) -> u32 {
+    match root {
+        Root::Empty => VALUE_EMPTY,
+        Root::Full(m) => VALUE_FULL | m as u32,
+        Root::Node(ptr) => ptr.0,
+    }
+}
+
+/// The root a child value names.
+fn root_from_value(value: u32) -> Result<Root, GpuDagError> {
+    match child_from_value(value)? {
+        Child::Empty => Ok(Root::Empty),
+        Child::Full(m) => Ok(Root::Full(m)),
+        Child::Node(ptr) => Ok(Root::Node(ptr)),
+    }
+}
+
+fn child_from_value(value: u32) -> Result<Child, GpuDagError> {
+    if value == VALUE_EMPTY {
+        Ok(Child::Empty)
+    } else if value & 0xFFFF_FFF0 == VALUE_FULL {
+        Ok(Child::Full((value & 15) as u8))
+    } else if value < VALUE_TEMP {
+        Ok(Child::Node(NodePtr(value)))
+    } else {
+        Err(GpuDagError::Corrupt(format!("child value {value:#010x}")))
+    }
+}
+
+/// A host copy of the nine tables: reads items, enumerates voxels, counts nodes.
+pub struct HashDagImage {
+    /// Table images, index = item words - 2.
+    pub tables: Vec<TableImage>,
+    /// Level of the root.
+    pub root_level: u32,
+    /// Whether leaves carry materials.
+    pub with_materials: bool,
+}
+
+impl HashDagImage {
+    /// The item a pointer names.
+    pub fn item(&self, ptr: NodePtr) -> Result<Vec<u32>, GpuDagError> {
+        let table = self
+            .tables
+            .get(ptr.table())
+            .ok_or_else(|| GpuDagError::Corrupt(format!("pointer {:#010x}", ptr.0)))?;
+        table
+            .read(Handle(ptr.handle()))
+            .ok_or_else(|| GpuDagError::Corrupt(format!("no item at pointer {:#010x}", ptr.0)))
+    }
+
+    /// Every solid voxel under `root` as (Morton code, material), ascending by code.
+    pub fn voxels(&self, root: Root) -> Result<Vec<(u64, u8)>, GpuDagError> {
+        let mut out = Vec::new();
+        let child = match root {
+            Root::Empty => Child::Empty,
+            Root::Full(m) => Child::Full(m),
+            Root::Node(p) => Child::Node(p),
+        };
+        self.collect(child, self.root_level, 0, &mut out)?;
+        Ok(out)
+    }
+
+    fn collect(
+        &self,
+        child: Child,
+        level: u32,
+        base: u64,
+        out: &mut Vec<(u64, u8)>,
+    ) -> Result<(), GpuDagError> {
+        // A level-l cube holds 64 * 8^l voxels, contiguous in Morton order from `base`.
+        let span = 64u64 << (3 * level);
+        match child {
+            Child::Empty => {}
+            Child::Full(m) => out.extend((base..base + span).map(|c| (c, m))),
+            Child::Node(ptr) => {
+                let words = self.item(ptr)?;
+                if level == 0 {
+                    let leaf = Leaf::decode(&words, self.with_materials)?;
+                    for v in 0..64u64 {
+                        if leaf.mask >> v & 1 == 1 {
+                            out.push((base + v, leaf.materials[v as usize]));
+                        }
+                    }
+                } else {
+                    let node = InnerNode::decode(&words)?;
+                    let child_span = span / 8;
+                    for (o, c) in node.children.iter().enumerate() {
+                        self.collect(*c, level - 1, base + o as u64 * child_span, out)?;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Unique stored nodes reachable from `root`, per level (index = level; uniform children
+    /// are not nodes).
+    pub fn level_counts(&self, root: Root) -> Result<Vec<u64>, GpuDagError> {
+        let mut seen: Vec<FxHashSet<NodePtr>> = (0..=self.root_level)
+            .map(|_| FxHashSet::default())
+            .collect();
+        if let Root::Node(p) = root {
+            let mut stack = vec![(p, self.root_level)];
+            seen[self.root_level as usize].insert(p);
+            while let Some((ptr, level)) = stack.pop() {
+                if level == 0 {
+                    Leaf::decode(&self.item(ptr)?, self.with_materials)?;
+                    continue;
+                }
+                let node = InnerNode::decode(&self.item(ptr)?)?;
+                for c in node.children {
+                    if let Child::Node(q) = c {
+                        if seen[level as usize - 1].insert(q) {
+                            stack.push((q, level - 1));
+                        }
+                    }
+                }
+            }
+        }
+        Ok(seen.iter().map(|s| s.len() as u64).collect())
+    }
+
+    /// The voxels under `root` as a voxel set (materials dropped; no colours).
+    pub fn to_voxels(&self, root: Root) -> Result<Voxels, GpuDagError> {
+        Ok(Voxels {
+            resolution: 4 << self.root_level,
+            codes: self.voxels(root)?.into_iter().map(|(c, _)| c).collect(),
+            colors: Vec::new(),
+        })
+    }
+
+    /// `root` converted back to a compact `svdag32` DAG (save it with `VdagFile`'s writer).
+    pub fn to_svdag(&self, root: Root) -> Result<Svdag, GpuDagError> {
+        Ok(Svdag::from_voxels(&self.to_voxels(root)?)?)
+    }
+}

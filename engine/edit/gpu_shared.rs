@@ -1,0 +1,38 @@
+// The push constants the GPU editing passes share with their shaders, defined once (see
+// engine/gpu_shared.rs): the engine expands this file into Rust structs, build.rs into
+// `gen/edit.glsl`.
+gpu_shared! {
+    /// Push constants of every `shaders/glsl/edit/*.comp` pass (each names what it reads where).
+    #[derive(Default)]
+    pub(crate) struct EditPush {
+        /// First input (svdag words, temporary nodes or leaves, traversal entries, dedup reps).
+        pub(crate) src: uint64_t,
+        /// Second input (node offsets, the level below's results).
+        pub(crate) src2: uint64_t,
+        /// First output (temporary nodes, this level's results, handles).
+        pub(crate) dst: uint64_t,
+        /// Second output (the result index per node, next traversal entries, slots).
+        pub(crate) dst2: uint64_t,
+        /// Per-size buffer addresses (`u64`s: the tables' super-block tables, or the level's
+        /// item / handle / representative buffers).
+        pub(crate) tables: uint64_t,
+        /// Counters (`u32`s) the pass increments.
+        pub(crate) counters: uint64_t,
+        /// Records to process.
+        pub(crate) count: uint,
+        /// Tree level of the records (0 = leaves).
+        pub(crate) level: uint,
+        /// Pass flags (`EDIT_FLAG_*` in `edit/common.glsl`).
+        pub(crate) flags: uint,
+        /// Hash table variant id (all nine tables share it).
+        pub(crate) variant: uint,
+        /// Tool centre (xyz, voxels) and radius (w).
+        pub(crate) tool: vec4,
+        /// Tool shape (`EDIT_SHAPE_*`).
+        pub(crate) shape: uint,
+        /// Capacity of the output queue (records).
+        pub(crate) capacity: uint,
+        /// Padding to 16 bytes.
+        pub(crate) pad: [uint; 2],
+    }
+}
