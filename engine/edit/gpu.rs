@@ -20,6 +20,7 @@ use super::item::{
     Child, InnerNode, ItemError, Leaf, NodePtr, Root, MAX_ITEM_WORDS, MAX_TABLE_SLABS,
     MIN_ITEM_WORDS, TABLE_COUNT,
 };
+use super::tool;
 use crate::dag::{DagError, Svdag};
 use crate::gpu::{
     shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, MemLocation,
@@ -139,21 +140,12 @@ pub struct EditTool {
 }
 
 impl EditTool {
-    /// Whether voxel (x, y, z) is inside the tool: its centre `(x + ½, y + ½, z + ½)` within
-    /// `radius` of `center` (sphere) or in `[center - radius, center + radius]` on every axis
-    /// (cube), computed in `f32` exactly as the GPU passes do (`edit/common.glsl`, no fused
-    /// multiply-add), so both agree on every voxel.
-    pub fn contains(&self, [x, y, z]: [u32; 3]) -> bool {
-        let d = [
-            (x as f32 + 0.5) - self.center[0],
-            (y as f32 + 0.5) - self.center[1],
-            (z as f32 + 0.5) - self.center[2],
-        ];
+    /// Whether voxel (x, y, z) is inside the tool: the shared rules of `edit::tool`
+    /// (`in_sphere`, `in_cube`), which the GPU passes (`edit/common.glsl`) compute the same way.
+    pub fn contains(&self, voxel: [u32; 3]) -> bool {
         match self.shape {
-            ToolShape::Cube => d.iter().all(|c| c.abs() <= self.radius),
-            ToolShape::Sphere => {
-                d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= self.radius * self.radius
-            }
+            ToolShape::Cube => tool::in_cube(self.center, self.radius, voxel),
+            ToolShape::Sphere => tool::in_sphere(self.center, self.radius, voxel),
         }
     }
 

@@ -106,15 +106,18 @@ void edit_children(uint v, out uint children[8]) {
     }
 }
 
-// ---- tools (voxel-centre inclusion, exactly as engine/edit/gpu.rs's `EditTool::contains`) ----
+// ---- tools (voxel-centre inclusion, exactly as engine/edit/tool.rs's `in_sphere` / `in_cube`) ----
 
 // Whether the voxel with integer corner p is inside the tool. `precise`: no fused
 // multiply-add, so the CPU twin's f32 arithmetic gives the same answer bit for bit.
 bool edit_voxel_inside(uvec3 p) {
-    precise vec3 d = (vec3(p) + 0.5) - push.tool.xyz;
     if (push.shape == EDIT_SHAPE_CUBE) {
-        return all(lessThanEqual(abs(d), vec3(push.tool.w)));
+        precise vec3 centre = vec3(p) + 0.5;
+        precise vec3 lo = push.tool.xyz - push.tool.w;
+        precise vec3 hi = push.tool.xyz + push.tool.w;
+        return all(lessThanEqual(lo, centre)) && all(lessThanEqual(centre, hi));
     }
+    precise vec3 d = (vec3(p) + 0.5) - push.tool.xyz;
     precise float d2 = d.x * d.x + d.y * d.y + d.z * d.z;
     precise float r2 = push.tool.w * push.tool.w;
     return d2 <= r2;
