@@ -849,9 +849,8 @@ impl DenseBox {
     fn cell(&self, p: [usize; 3], d: usize) -> Option<usize> {
         let mut index = 0;
         let mut scale = 1;
-        for ax in 0..3 {
-            let len = self.dims[ax];
-            let v = p[ax] as isize - self.lo[ax] as isize;
+        for (ax, (&len, (&pa, &lo))) in self.dims.iter().zip(p.iter().zip(&self.lo)).enumerate() {
+            let v = pa as isize - lo as isize;
             let local = if (d >> ax) & 1 == 0 {
                 if v >= len as isize {
                     return None;
