@@ -426,6 +426,36 @@ fn shared_meshes() {
     }
 }
 
+/// The faster search (deduplicated table keys, per-item bounding boxes, gap filter) never stores
+/// more elements per level than the search it replaced, whose counts are recorded here, and its
+/// pointers decode exactly.
+#[test]
+fn shared_meshes_not_worse_than_previous_search() {
+    let Some(data) = common::shared_data() else {
+        return;
+    };
+    // `TransformDag::level_counts` of the previous search (commit 77c92bd) at 256^3.
+    let previous: [(&str, [u64; 7]); 3] = [
+        ("bunny.obj", [1694, 2516, 738, 195, 42, 8, 1]),
+        ("dragon.obj", [2488, 1899, 522, 129, 29, 8, 1]),
+        ("buddha.obj", [2369, 1418, 387, 87, 16, 8, 1]),
+    ];
+    for (mesh, before) in previous {
+        let dag = common::build_scene(&data.join("meshes").join(mesh), Some(256));
+        let t = build_transform_dag(&dag, TransformSet::All, true);
+        check_decodes(&t, &dag.to_voxels());
+        let sat = t.level_counts();
+        println!("{mesh} 256: sat {sat:?}, previous search {before:?}");
+        assert_eq!(sat.len(), before.len());
+        for (l, (&now, &was)) in sat.iter().zip(&before).enumerate() {
+            assert!(
+                now <= was,
+                "{mesh} level {l}: {now} elements, previously {was}"
+            );
+        }
+    }
+}
+
 /// The counts reported by `symmetry_counts` and `stats --json` include `sat`.
 #[test]
 fn stats_report_sat() {

@@ -502,8 +502,6 @@ struct Geometry {
     words: usize,
     /// Morton index → `[x, y, z]`.
     coords: Vec<[u8; 3]>,
-    /// Morton index → linear index `x + n (y + n z)`.
-    linear: Vec<u16>,
     /// `BASES[axis]^k` for `k < n`.
     powers: [Vec<u64>; 3],
 }
@@ -514,10 +512,6 @@ impl Geometry {
         let cells = n * n * n;
         let coords: Vec<[u8; 3]> = (0..cells as u64)
             .map(|m| morton::decode(m).map(|v| v as u8))
-            .collect();
-        let linear = coords
-            .iter()
-            .map(|&[x, y, z]| (x as usize + n * (y as usize + n * z as usize)) as u16)
             .collect();
         let powers = BASES.map(|b| {
             let mut v = Vec::with_capacity(n);
@@ -532,7 +526,6 @@ impl Geometry {
             n,
             words: cells / 64,
             coords,
-            linear,
             powers,
         }
     }
@@ -546,36 +539,96 @@ struct ItemInfo {
     hi: [u8; 3],
 }
 
-/// Hash table from region hash to entries `item << 6 | permutation << 3 | direction`: open
-/// addressing with linear probing over one `u64` per entry (high half: low 32 bits of the hash,
-/// forced odd so that 0 marks an empty slot; low half: the entry); the slot is chosen by the
-/// high bits of the hash. Equal fingerprints of different hashes only cost a confirmation.
+/// One table entry: item `B` under permutation `perm_dir >> 3` of the set, keyed from its
+/// bounding-box corner toward direction `perm_dir & 7`, with the item's info inline so that a
+/// candidate costs no further random access.
+#[derive(Clone, Copy, Default)]
+struct Entry {
+    item: u32,
+    perm_dir: u8,
+    /// Per axis of `P(B)`: the distance of the keyed corner from the cube face behind it. A
+    /// match moves the region's cut back by exactly this much, so it must not exceed the gap
+    /// behind the region's cut (see `gaps`).
+    offset: [u8; 3],
+    info: ItemInfo,
+}
+
+impl Entry {
+    fn new(item: u32, perm_dir: u8, info: ItemInfo, perms: &[usize], n: usize) -> Entry {
+        let order = super::transform::PERMUTATIONS[perms[(perm_dir >> 3) as usize]];
+        let offset = std::array::from_fn(|ax| {
+            let j = order[ax] as usize;
+            if (perm_dir >> ax) & 1 == 0 {
+                info.lo[j]
+            } else {
+                (n - 1) as u8 - info.hi[j]
+            }
+        });
+        Entry {
+            item,
+            perm_dir,
+            offset,
+            info,
+        }
+    }
+
+    fn max_offset(&self) -> u8 {
+        self.offset[0].max(self.offset[1]).max(self.offset[2])
+    }
+}
+
+/// Hash table from region hash to the group of entries with that key. Keys are deduplicated
+/// before insertion: small items share their shapes (every single-voxel item has the key 1 in
+/// all 48 entries), and storing them one slot each made long linear-probing clusters that every
+/// lookup landing nearby had to walk. Open addressing with linear probing over one `u64` per
+/// distinct key (high half: low 32 bits of the hash forced odd, so 0 marks an empty slot; low
+/// half: the group index); the slot is chosen by the high bits of the hash. Equal fingerprints
+/// of different hashes only cost a confirmation. Within a group, entries are sorted by their
+/// largest offset, so that a lookup stops at the first entry that no gap can accommodate.
 struct Table {
     shift: u32,
     slots: Vec<u64>,
+    /// Group `g` is `entries[starts[g]..starts[g + 1]]`, its key `keys[g]`.
+    starts: Vec<u32>,
+    keys: Vec<u64>,
+    entries: Vec<Entry>,
 }
 
 impl Table {
-    fn new(entries: usize) -> Table {
-        let cap = (entries * 2).next_power_of_two().max(64);
-        Table {
+    /// The table of `(key, entry)` pairs (any order; sorted here so that the groups and the
+    /// table are the same for any thread count).
+    fn build(mut pairs: Vec<(u64, Entry)>) -> Table {
+        pairs.par_sort_unstable_by_key(|&(k, e)| (k, e.max_offset(), e.item, e.perm_dir));
+        let distinct = pairs.windows(2).filter(|w| w[0].0 != w[1].0).count() + 1;
+        let cap = (distinct * 2).next_power_of_two().max(64);
+        let mut table = Table {
             shift: 64 - cap.trailing_zeros(),
             slots: vec![0; cap],
+            starts: Vec::with_capacity(distinct + 1),
+            keys: Vec::with_capacity(distinct),
+            entries: Vec::with_capacity(pairs.len()),
+        };
+        let mask = cap - 1;
+        for (i, &(key, entry)) in pairs.iter().enumerate() {
+            if i == 0 || pairs[i - 1].0 != key {
+                let group = table.starts.len() as u64;
+                table.starts.push(table.entries.len() as u32);
+                table.keys.push(key);
+                let mut s = (key >> table.shift) as usize;
+                while table.slots[s] != 0 {
+                    s = (s + 1) & mask;
+                }
+                table.slots[s] = Self::fingerprint(key) << 32 | group;
+            }
+            table.entries.push(entry);
         }
+        table.starts.push(table.entries.len() as u32);
+        table
     }
 
     #[inline]
     fn fingerprint(hash: u64) -> u64 {
         (hash as u32 | 1) as u64
-    }
-
-    fn insert(&mut self, hash: u64, entry: u32) {
-        let mask = self.slots.len() - 1;
-        let mut s = (hash >> self.shift) as usize;
-        while self.slots[s] != 0 {
-            s = (s + 1) & mask;
-        }
-        self.slots[s] = Self::fingerprint(hash) << 32 | entry as u64;
     }
 
     /// The first slot probed for `hash` (0: certainly absent).
@@ -584,19 +637,22 @@ impl Table {
         self.slots[(hash >> self.shift) as usize]
     }
 
-    /// Calls `f` with every entry whose fingerprint equals that of `hash`.
+    /// The entries whose key has the fingerprint of `hash` (empty when none).
     #[inline]
-    fn for_each(&self, hash: u64, mut f: impl FnMut(u32)) {
+    fn group(&self, hash: u64) -> &[Entry] {
         let mask = self.slots.len() - 1;
         let fp = Self::fingerprint(hash);
         let mut s = (hash >> self.shift) as usize;
         loop {
             let v = self.slots[s];
             if v == 0 {
-                return;
+                return &[];
             }
             if v >> 32 == fp {
-                f(v as u32);
+                let g = (v as u32) as usize;
+                if self.keys[g] == hash {
+                    return &self.entries[self.starts[g] as usize..self.starts[g + 1] as usize];
+                }
             }
             s = (s + 1) & mask;
         }
@@ -642,88 +698,114 @@ impl Scratch {
     }
 }
 
-/// One separable pass along `axis`: suffix (or prefix when `negative`) Horner sums of hashes
-/// and plain sums of counts, from `src` into `dst`.
+/// One separable pass along `axis` over a dense box of `dims` cells (index `x + dx (y + dy z)`):
+/// suffix (or prefix when `negative`) Horner sums of hashes and plain sums of counts, from `src`
+/// into `dst`. The position along the axis is the outer loop and the independent lanes the inner
+/// one, so that the multiply-add chains of different lanes overlap instead of running one
+/// 16-step chain after another.
 fn pass(
-    g: &Geometry,
+    dims: [usize; 3],
     (sh, sc): (&[u64], &[u16]),
     (dh, dc): (&mut [u64], &mut [u16]),
     axis: usize,
     negative: bool,
 ) {
-    let n = g.n;
-    let stride = [1, n, n * n][axis];
-    let (s1, s2) = match axis {
-        0 => (n, n * n),
-        1 => (1, n * n),
-        _ => (1, n),
+    let [dx, dy, dz] = dims;
+    let len = dims[axis];
+    let stride = [1, dx, dx * dy][axis];
+    // (outer planes, their stride, lanes per plane, lane stride).
+    let (planes, plane_stride, lanes, lane_stride) = match axis {
+        0 => (dz, dx * dy, dy, dx),
+        1 => (dz, dx * dy, dx, 1),
+        _ => (dy, dx, dx, 1),
     };
     let base = BASES[axis];
-    for a in 0..n {
-        for b in 0..n {
-            let start = a * s1 + b * s2;
-            let mut h = 0u64;
-            let mut c = 0u16;
-            for k in 0..n {
-                let i = if negative { k } else { n - 1 - k };
-                let idx = start + i * stride;
-                h = sh[idx].wrapping_add(base.wrapping_mul(h));
-                c += sc[idx];
-                dh[idx] = h;
-                dc[idx] = c;
+    for plane in 0..planes {
+        for step in 0..len {
+            let k = if negative { step } else { len - 1 - step };
+            let row = plane * plane_stride + k * stride;
+            if step == 0 {
+                for l in 0..lanes {
+                    let i = row + l * lane_stride;
+                    dh[i] = sh[i];
+                    dc[i] = sc[i];
+                }
+            } else {
+                let prev = if negative { row - stride } else { row + stride };
+                for l in 0..lanes {
+                    let i = row + l * lane_stride;
+                    let p = prev + l * lane_stride;
+                    dh[i] = sh[i].wrapping_add(base.wrapping_mul(dh[p]));
+                    dc[i] = sc[i] + dc[p];
+                }
             }
         }
     }
 }
 
-/// Calls `f(direction, hashes, counts)` for the 8 direction groups of the dense grid held in
+/// Calls `f(direction, hashes, counts)` for the 8 direction groups of the dense box held in
 /// `hash[0]` / `count[0]` (direction bit `i` set = toward negative axis `i`).
 fn for_each_direction(
-    g: &Geometry,
+    dims: [usize; 3],
     hash: &mut [Vec<u64>; 4],
     count: &mut [Vec<u16>; 4],
     mut f: impl FnMut(usize, &[u64], &[u16]),
 ) {
+    let cells = dims[0] * dims[1] * dims[2];
     let [h0, h1, h2, h3] = hash;
     let [c0, c1, c2, c3] = count;
+    let (h0, h1, h2, h3) = (
+        &h0[..cells],
+        &mut h1[..cells],
+        &mut h2[..cells],
+        &mut h3[..cells],
+    );
+    let (c0, c1, c2, c3) = (
+        &c0[..cells],
+        &mut c1[..cells],
+        &mut c2[..cells],
+        &mut c3[..cells],
+    );
     for dx in 0..2 {
-        pass(g, (h0, c0), (h1, c1), 0, dx == 1);
+        pass(dims, (h0, c0), (h1, c1), 0, dx == 1);
         for dy in 0..2 {
-            pass(g, (h1, c1), (h2, c2), 1, dy == 1);
+            pass(dims, (h1, c1), (h2, c2), 1, dy == 1);
             for dz in 0..2 {
-                pass(g, (h2, c2), (h3, c3), 2, dz == 1);
+                pass(dims, (h2, c2), (h3, c3), 2, dz == 1);
                 f(dx | dy << 1 | dz << 2, h3, c3);
             }
         }
     }
 }
 
-/// The tight cells of direction `d`: non-empty regions whose slab through the cell is non-empty
-/// on every axis (the region's bounding box starts there), i.e. every distinct region once.
-fn collect_tight(n: usize, d: usize, count: &[u16], out: &mut Vec<u32>) {
+/// The tight cells of direction `d` in a dense box of `dims`: non-empty regions whose slab
+/// through the cell is non-empty on every axis (the region's bounding box starts there), i.e.
+/// every distinct region once.
+fn collect_tight(dims: [usize; 3], d: usize, count: &[u16], out: &mut Vec<u32>) {
     out.clear();
+    let [dx, dy, dz] = dims;
     let neg = [d & 1 == 1, (d >> 1) & 1 == 1, (d >> 2) & 1 == 1];
-    // The neighbour toward the inside of the region along y / z, if any.
-    let next = |v: usize, negative: bool| -> Option<usize> {
+    // The neighbour toward the inside of the region along an axis of `len` cells, if any.
+    let next = |v: usize, len: usize, negative: bool| -> Option<usize> {
         if negative {
             v.checked_sub(1)
         } else {
-            Some(v + 1).filter(|&w| w < n)
+            Some(v + 1).filter(|&w| w < len)
         }
     };
-    for z in 0..n {
-        let nz = next(z, neg[2]);
-        for y in 0..n {
-            let r = n * (y + n * z);
-            let row = &count[r..r + n];
-            let ny = next(y, neg[1]).map(|w| &count[n * (w + n * z)..][..n]);
-            let nzr = nz.map(|w| &count[n * (y + n * w)..][..n]);
-            for x in 0..n {
+    for z in 0..dz {
+        let nz = next(z, dz, neg[2]);
+        for y in 0..dy {
+            let r = dx * (y + dy * z);
+            let row = &count[r..r + dx];
+            let ny = next(y, dy, neg[1]).map(|w| &count[dx * (w + dy * z)..][..dx]);
+            let nzr = nz.map(|w| &count[dx * (y + dy * w)..][..dx]);
+            for x in 0..dx {
                 let c = row[x];
                 if c == 0 {
                     continue;
                 }
-                let nx = match next(x, neg[0]) {
+                let nx = match next(x, dx, neg[0]) {
                     Some(w) => row[w],
                     None => 0,
                 };
@@ -737,20 +819,110 @@ fn collect_tight(n: usize, d: usize, count: &[u16], out: &mut Vec<u32>) {
     }
 }
 
-/// Loads a Morton grid as dense hash/count seeds (1 per occupied voxel).
-fn load_dense(g: &Geometry, grid: &[u64], hash: &mut [u64], count: &mut [u16]) {
-    hash.fill(0);
-    count.fill(0);
-    for (w, &word) in grid.iter().enumerate() {
-        let mut m = word;
-        while m != 0 {
-            let bit = w * 64 + m.trailing_zeros() as usize;
-            m &= m - 1;
-            let i = g.linear[bit] as usize;
-            hash[i] = 1;
-            count[i] = 1;
+/// The dense box of an item: its bounding box (origin `lo`, `dims` cells per axis).
+#[derive(Clone, Copy)]
+struct DenseBox {
+    lo: [usize; 3],
+    dims: [usize; 3],
+}
+
+impl DenseBox {
+    fn of(info: &ItemInfo) -> DenseBox {
+        DenseBox {
+            lo: info.lo.map(|v| v as usize),
+            dims: std::array::from_fn(|i| (info.hi[i] - info.lo[i]) as usize + 1),
         }
     }
+
+    /// Grid coordinates of box cell `i`.
+    fn point(&self, i: usize) -> [usize; 3] {
+        let [dx, dy, _] = self.dims;
+        [
+            self.lo[0] + i % dx,
+            self.lo[1] + (i / dx) % dy,
+            self.lo[2] + i / (dx * dy),
+        ]
+    }
+
+    /// The box cell whose region toward `d` holds the same voxels as the region of grid point
+    /// `p` toward `d`, or `None` when that region is empty (it starts beyond the box).
+    fn cell(&self, p: [usize; 3], d: usize) -> Option<usize> {
+        let mut index = 0;
+        let mut scale = 1;
+        for (ax, (&len, (&pa, &lo))) in self.dims.iter().zip(p.iter().zip(&self.lo)).enumerate() {
+            let v = pa as isize - lo as isize;
+            let local = if (d >> ax) & 1 == 0 {
+                if v >= len as isize {
+                    return None;
+                }
+                v.max(0) as usize
+            } else {
+                if v < 0 {
+                    return None;
+                }
+                (v as usize).min(len - 1)
+            };
+            index += local * scale;
+            scale *= len;
+        }
+        Some(index)
+    }
+}
+
+/// How far the cut of the region of box cell `i` toward `d` can move back along each axis (alone)
+/// without taking in more voxels, up to the cube face. A window whose cut lies further back
+/// holds more voxels than the region, so a match never moves the cut back by more.
+fn gaps(bx: &DenseBox, n: usize, count: &[u16], i: usize, d: usize) -> [usize; 3] {
+    let [dx, dy, _] = bx.dims;
+    let local = [i % dx, (i / dx) % dy, i / (dx * dy)];
+    let strides = [1, dx, dx * dy];
+    let c = count[i];
+    std::array::from_fn(|ax| {
+        let (stride, len) = (strides[ax], bx.dims[ax]);
+        let mut idx = i;
+        let mut v = local[ax];
+        let mut gap = 0;
+        if (d >> ax) & 1 == 0 {
+            // The region is [q, n): its cut moves back toward 0; below the box nothing changes.
+            loop {
+                if v == 0 {
+                    return gap + bx.lo[ax];
+                }
+                v -= 1;
+                idx -= stride;
+                if count[idx] != c {
+                    return gap;
+                }
+                gap += 1;
+            }
+        } else {
+            loop {
+                if v + 1 == len {
+                    return gap + (n - bx.lo[ax] - len);
+                }
+                v += 1;
+                idx += stride;
+                if count[idx] != c {
+                    return gap;
+                }
+                gap += 1;
+            }
+        }
+    })
+}
+
+/// Loads the voxels of a Morton grid as dense hash/count seeds (1 per occupied voxel) into its
+/// bounding box `bx`.
+fn load_dense(g: &Geometry, grid: &[u64], bx: &DenseBox, hash: &mut [u64], count: &mut [u16]) {
+    let [dx, dy, dz] = bx.dims;
+    hash[..dx * dy * dz].fill(0);
+    count[..dx * dy * dz].fill(0);
+    for_each_voxel(g, grid, |p| {
+        let i = (p[0] as usize - bx.lo[0])
+            + dx * ((p[1] as usize - bx.lo[1]) + dy * (p[2] as usize - bx.lo[2]));
+        hash[i] = 1;
+        count[i] = 1;
+    });
 }
 
 /// Occupancy and bounding box of a grid.
@@ -887,26 +1059,24 @@ fn search_level(
     progress.inc_length((items.len() * batches) as u64);
     for batch in 0..batches {
         let range = batch * TABLE_BATCH..((batch + 1) * TABLE_BATCH).min(items.len());
-        let keys: Vec<Vec<u64>> = range
+        let pairs: Vec<(u64, Entry)> = range
             .clone()
             .into_par_iter()
             .map_init(
-                || [0u64; 64],
-                |grid, b| {
+                || ([0u64; 64], Vec::new()),
+                |(grid, keys), b| {
                     grid_of(b, grid);
-                    let mut keys = Vec::new();
-                    item_keys(&g, &grid[..words], &info[b], &perms, &mut keys);
-                    keys
+                    item_keys(&g, &grid[..words], &info[b], &perms, keys);
+                    let entry = |e: usize| Entry::new(b as u32, e as u8, info[b], &perms, n);
+                    keys.iter()
+                        .enumerate()
+                        .map(|(e, &k)| (k, entry(e)))
+                        .collect::<Vec<_>>()
                 },
             )
+            .flatten_iter()
             .collect();
-        let mut table = Table::new(range.len() * perms.len() * 8);
-        for (b, keys) in range.clone().zip(&keys) {
-            for (e, &k) in keys.iter().enumerate() {
-                table.insert(k, (b as u32) << 6 | e as u32);
-            }
-        }
-        drop(keys);
+        let table = Table::build(pairs);
 
         by_rank.par_iter().rev().for_each_init(
             || Scratch::new(cells),
@@ -916,7 +1086,8 @@ fn search_level(
                 let mut n_lookups = 0u64;
                 let mut n_confirmed = 0u64;
                 grid_of(a, &mut s.grid);
-                load_dense(&g, &s.grid[..words], &mut s.hash[0], &mut s.count[0]);
+                let bx = DenseBox::of(&info[a]);
+                load_dense(&g, &s.grid[..words], &bx, &mut s.hash[0], &mut s.count[0]);
                 let grid_a = s.grid;
                 let mut other = [0u64; 64];
                 let Scratch {
@@ -926,8 +1097,8 @@ fn search_level(
                     first,
                     ..
                 } = s;
-                for_each_direction(&g, hashes, counts, |d, hash, count| {
-                    collect_tight(n, d, count, tight);
+                for_each_direction(bx.dims, hashes, counts, |d, hash, count| {
+                    collect_tight(bx.dims, d, count, tight);
                     // Independent loads first (they overlap in the memory system), then probes.
                     first.clear();
                     first.extend(tight.iter().map(|&i| table.first(hash[i as usize])));
@@ -937,15 +1108,27 @@ fn search_level(
                             continue;
                         }
                         let i = i as usize;
-                        let q = [i % n, (i / n) % n, i / (n * n)];
+                        let q = bx.point(i);
                         let cq = count[i];
-                        table.for_each(hash[i], |e| {
-                            let b = (e >> 6) as usize;
-                            let k = ((e >> 3) & 7) as usize;
-                            let db = (e & 7) as usize;
-                            let ib = &info[b];
+                        let group = table.group(hash[i]);
+                        if group.is_empty() {
+                            continue;
+                        }
+                        let gap = gaps(&bx, n, count, i, d);
+                        let widest = gap[0].max(gap[1]).max(gap[2]);
+                        'entries: for e in group {
+                            if e.max_offset() as usize > widest {
+                                break;
+                            }
+                            if (0..3).any(|ax| e.offset[ax] as usize > gap[ax]) {
+                                continue;
+                            }
+                            let b = e.item as usize;
+                            let k = (e.perm_dir >> 3) as usize;
+                            let db = (e.perm_dir & 7) as usize;
+                            let ib = &e.info;
                             if b == a || ib.voxels != cq {
-                                return;
+                                continue 'entries;
                             }
                             let m = (d ^ db) as u8;
                             let order = super::transform::PERMUTATIONS[perms[k]];
@@ -962,14 +1145,14 @@ fn search_level(
                                 let o = if (db >> ax) & 1 == 0 {
                                     let s_ax = ib.lo[j] as i32 - qm;
                                     if s_ax > 0 {
-                                        return;
+                                        continue 'entries;
                                     }
                                     shift[ax] = s_ax as i8;
                                     -s_ax
                                 } else {
                                     let s_ax = ib.hi[j] as i32 - qm;
                                     if s_ax < 0 {
-                                        return;
+                                        continue 'entries;
                                     }
                                     shift[ax] = s_ax as i8;
                                     n as i32 - 1 - s_ax
@@ -977,26 +1160,26 @@ fn search_level(
                                 origin[ax] = if (m >> ax) & 1 == 1 { n - 1 - o } else { o };
                             }
                             // The window of A that stays inside must hold |b| voxels.
-                            if count[origin[0] + n * (origin[1] + n * origin[2])] != cq {
-                                return;
+                            if bx.cell(origin, d).map_or(0, |c| count[c]) != cq {
+                                continue 'entries;
                             }
                             // b = P⁻¹(Tr_s(M_m(A))) = Tr_{L(s)}((P⁻¹ ∘ M_m)(A)).
                             let pinv = inverse_perms[k];
                             let t = pinv.compose(Transform::from_parts(0, m).unwrap_or_default());
                             if !set.contains(t) {
-                                return;
+                                continue 'entries;
                             }
                             let tr = apply_to_vector(pinv, shift);
                             let key = pack(ra, t, tr);
                             if best[b].load(Ordering::Relaxed) >= key {
-                                return;
+                                continue 'entries;
                             }
                             n_confirmed += 1;
                             grid_of(b, &mut other);
                             if confirm(&g, &grid_a[..words], &other[..words], t, tr) {
                                 best[b].fetch_max(key, Ordering::Relaxed);
                             }
-                        });
+                        }
                     }
                 });
                 lookups.fetch_add(n_lookups, Ordering::Relaxed);
@@ -1019,4 +1202,87 @@ fn search_level(
             (by_rank[r as usize], t, tr)
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn entry(item: u32) -> Entry {
+        Entry {
+            item,
+            ..Entry::default()
+        }
+    }
+
+    /// Two keys with the same fingerprint (low 32 bits) in the same probe run: each lookup gets
+    /// its own group, never the other's (that lost matches before the full key was checked).
+    #[test]
+    fn table_groups_need_the_full_key() {
+        let k1 = 0x0123_4567_89ab_cdef_u64;
+        let k2 = k1 ^ (1 << 40);
+        let table = Table::build(vec![(k1, entry(1)), (k2, entry(2)), (k1, entry(3))]);
+        assert_eq!(Table::fingerprint(k1), Table::fingerprint(k2));
+        let items = |k| table.group(k).iter().map(|e| e.item).collect::<Vec<_>>();
+        assert_eq!(items(k1), vec![1, 3]);
+        assert_eq!(items(k2), vec![2]);
+        assert!(items(k1 ^ 2).is_empty());
+    }
+
+    /// `gaps` against counting the region of every cut position directly.
+    #[test]
+    fn gaps_match_direct_counts() {
+        let n = 8usize;
+        let voxels: Vec<[usize; 3]> = vec![[2, 3, 4], [3, 3, 4], [5, 6, 2], [2, 5, 6], [4, 4, 4]];
+        let lo: [usize; 3] = std::array::from_fn(|i| voxels.iter().map(|v| v[i]).min().unwrap());
+        let hi: [usize; 3] = std::array::from_fn(|i| voxels.iter().map(|v| v[i]).max().unwrap());
+        let bx = DenseBox {
+            lo,
+            dims: std::array::from_fn(|i| hi[i] - lo[i] + 1),
+        };
+        let region = |q: [isize; 3], d: usize| {
+            voxels
+                .iter()
+                .filter(|v| {
+                    (0..3).all(|ax| {
+                        let c = v[ax] as isize;
+                        if (d >> ax) & 1 == 0 {
+                            c >= q[ax]
+                        } else {
+                            c <= q[ax]
+                        }
+                    })
+                })
+                .count() as u16
+        };
+        let cells = bx.dims.iter().product::<usize>();
+        for d in 0..8 {
+            let count: Vec<u16> = (0..cells)
+                .map(|i| region(bx.point(i).map(|v| v as isize), d))
+                .collect();
+            for i in 0..cells {
+                let q = bx.point(i).map(|v| v as isize);
+                let c = count[i];
+                let gap = gaps(&bx, n, &count, i, d);
+                for ax in 0..3 {
+                    let back = |k: isize| {
+                        let mut p = q;
+                        p[ax] += if (d >> ax) & 1 == 0 { -k } else { k };
+                        p
+                    };
+                    let g = gap[ax] as isize;
+                    assert_eq!(region(back(g), d), c, "d {d} cell {i} axis {ax}");
+                    let edge = if (d >> ax) & 1 == 0 {
+                        q[ax]
+                    } else {
+                        n as isize - 1 - q[ax]
+                    };
+                    assert!(g <= edge);
+                    if g < edge {
+                        assert_ne!(region(back(g + 1), d), c, "d {d} cell {i} axis {ax}");
+                    }
+                }
+            }
+        }
+    }
 }
