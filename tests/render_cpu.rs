@@ -407,7 +407,7 @@ fn params_reject_bad_input() {
 }
 
 /// The GLSL twins compile (glslc, as build.rs runs it) inside a minimal includer that defines
-/// the three buffer accessors the contract requires.
+/// the four buffer accessors the contract requires.
 #[test]
 fn glsl_includes_compile() {
     let includer = r#"#version 460
@@ -420,6 +420,8 @@ layout(std430, binding = 2) readonly buffer Colors { uint colors[]; };
 uint dag_word(uint i) { return words[i]; }
 uint64_t dag_node_voxels(uint i) { return counts[i]; }
 uint dag_color(uint64_t i) { return colors[uint(i)]; }
+layout(std430, binding = 6) readonly buffer Info { uint info[]; };
+uint dag_info(uint i) { return info[i]; }
 #include "render/shade.glsl"
 layout(std430, binding = 3) readonly buffer Params { RenderParams params; };
 layout(std430, binding = 4) writeonly buffer Rgba { uint out_rgba[]; };
