@@ -3,6 +3,7 @@
 mod colors;
 mod compress;
 mod hash;
+mod pathtrace;
 mod primitives;
 
 use std::io::Write;
@@ -39,6 +40,8 @@ pub enum BenchCommand {
     Colors(colors::BenchColorsArgs),
     /// GPU primitives (scan, compaction, radix sort) vs their CPU references in the same run.
     Primitives(primitives::BenchPrimitivesArgs),
+    /// Path tracing: ms per sample of the megakernel and wavefront GPU tracers vs the CPU reference.
+    Pathtrace(pathtrace::BenchPathtraceArgs),
 }
 
 /// Arguments of `voxdag bench build`.
@@ -97,6 +100,7 @@ pub fn run(command: BenchCommand, quiet: bool) -> Result<()> {
         BenchCommand::Hash(args) => args.outputs(),
         BenchCommand::Colors(args) => args.outputs(),
         BenchCommand::Primitives(args) => args.outputs(),
+        BenchCommand::Pathtrace(args) => args.outputs(),
     };
     check_outputs(&outputs)?;
     match command {
@@ -106,6 +110,7 @@ pub fn run(command: BenchCommand, quiet: bool) -> Result<()> {
         BenchCommand::Hash(args) => hash::bench_hash(&args, quiet),
         BenchCommand::Colors(args) => colors::bench_colors(&args),
         BenchCommand::Primitives(args) => primitives::bench_primitives(&args),
+        BenchCommand::Pathtrace(args) => pathtrace::bench_pathtrace(&args),
     }
 }
 

@@ -808,6 +808,9 @@ pub fn render(args: &RenderArgs) -> Result<()> {
     if let Some(trace) = &args.trace {
         check_output(trace)?;
     }
+    if args.pt.pt {
+        crate::pathtrace::check(&args.pt, &args.out)?;
+    }
     let (dag, stored) = load_svdag_stored(&args.file)?;
     // Encoded colours are decoded per hit from their chunks, as an engine would keep them.
     let colors = match &stored {
@@ -815,6 +818,12 @@ pub fn render(args: &RenderArgs) -> Result<()> {
         None => ColorSource::Raw(&dag.colors),
     };
     let settings = render_settings(args, &dag);
+    if args.pt.pt {
+        let (trace, profile) = (args.trace.as_deref(), args.profile);
+        return crate::pathtrace::render(
+            &args.pt, &dag, colors, settings, args.cpu, profile, trace, &args.out,
+        );
+    }
     let start = Instant::now();
     let image = if args.cpu {
         let index = VoxelIndex::new(&dag);
@@ -904,6 +913,7 @@ pub fn demo(args: &DemoArgs, quiet: bool) -> Result<()> {
         cpu: false,
         profile: true,
         trace: Some(args.out_dir.join("avocado-trace.json")),
+        pt: Default::default(),
     };
     render(&render_args)?;
     let (dag, stored) = load_svdag_stored(&vdag)?;

@@ -3,6 +3,7 @@
 mod bench;
 mod commands;
 mod limited_alloc;
+mod pathtrace;
 mod view;
 
 use std::path::PathBuf;
@@ -196,7 +197,7 @@ pub struct RenderArgs {
     /// Image size WIDTHxHEIGHT.
     #[arg(long, default_value = "1024x768", value_parser = commands::parse_size)]
     size: (u32, u32),
-    /// Output PNG.
+    /// Output PNG (with --pt: .png tonemapped or .exr linear HDR).
     #[arg(long)]
     out: PathBuf,
     /// Camera position in grid coordinates, "x,y,z" (default: an orbit view of the whole scene).
@@ -220,6 +221,9 @@ pub struct RenderArgs {
     /// Write a Chrome trace-event JSON of the GPU passes (opens in Perfetto).
     #[arg(long)]
     trace: Option<PathBuf>,
+    /// Path tracing (--pt and its flags).
+    #[command(flatten)]
+    pt: pathtrace::PtArgs,
 }
 
 /// Arguments of `voxdag view`.

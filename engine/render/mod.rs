@@ -9,12 +9,15 @@ pub mod cpu;
 pub mod gpu;
 mod gpu_shared;
 pub mod params;
+pub mod pathtrace;
+pub mod pathtrace_gpu;
 
 use std::io;
 use std::path::{Path, PathBuf};
 
 pub use camera::Camera;
 pub use cpu::render_cpu;
+pub use gpu_shared::FirstHit;
 pub use params::RenderParams;
 
 /// What a render needs besides the scene.
