@@ -131,7 +131,10 @@ fn white_furnace() {
     let r = render_all(&dag, &s);
     for (name, img) in [("mega", &r.mega), ("wave", &r.wave), ("cpu", &r.cpu)] {
         let hits = img.first_hits.iter().filter(|h| h.voxel[3] != 0).count();
-        assert!(hits > 48 * 48 / 8, "{name}: the scene should fill the view ({hits} hits)");
+        assert!(
+            hits > 48 * 48 / 8,
+            "{name}: the scene should fill the view ({hits} hits)"
+        );
         for (i, v) in img.linear().iter().enumerate() {
             assert!(
                 (0.99..=1.0).contains(v),
@@ -174,7 +177,10 @@ fn convex_closed_form() {
             for (p, px) in l.chunks_exact(3).enumerate() {
                 // h from the green channel (E = 1), then every channel must match it.
                 let h = ((1.0 - px[1]) / (1.0 - a) * s.spp as f32).round();
-                assert!((0.0..=s.spp as f32).contains(&h), "{name}: pixel {p}: {px:?}");
+                assert!(
+                    (0.0..=s.spp as f32).contains(&h),
+                    "{name}: pixel {p}: {px:?}"
+                );
                 for c in 0..3 {
                     let want = env[c] * (h * a + (s.spp as f32 - h)) / s.spp as f32;
                     assert!(
@@ -233,7 +239,10 @@ fn tracers_agree() {
             cpu_mismatch <= 48 * 48 / 1000,
             "{name}: {cpu_mismatch} first hits differ GPU vs CPU"
         );
-        let (mw, mc) = (mean_abs_diff(&r.mega, &r.wave), mean_abs_diff(&r.mega, &r.cpu));
+        let (mw, mc) = (
+            mean_abs_diff(&r.mega, &r.wave),
+            mean_abs_diff(&r.mega, &r.cpu),
+        );
         println!("{name}: mean |mega - wave| = {mw:e}, |mega - cpu| = {mc:e}");
         assert!(mw < 1e-4, "{name}: megakernel vs wavefront {mw}");
         assert!(mc < 2e-3, "{name}: megakernel vs CPU {mc}");
@@ -282,7 +291,11 @@ fn check_pt_golden(name: &str, image: &PtImage) {
         width: image.width,
         height: image.height,
         rgba: image.to_rgba8(),
-        hits: image.first_hits.iter().map(|h| (h.voxel[3] != 0) as u32).collect(),
+        hits: image
+            .first_hits
+            .iter()
+            .map(|h| (h.voxel[3] != 0) as u32)
+            .collect(),
     };
     let exr = repo().join("tests/golden").join(format!("{name}.exr"));
     if std::env::var("VOXDAG_BLESS").as_deref() == Ok("1") {
@@ -327,7 +340,10 @@ fn check_pt_golden(name: &str, image: &PtImage) {
 #[test]
 fn goldens() {
     let scenes = [
-        ("pt-vox", build_scene(&repo().join("tests/data/ff3.vox"), None)),
+        (
+            "pt-vox",
+            build_scene(&repo().join("tests/data/ff3.vox"), None),
+        ),
         ("pt-sphere", sphere_scene(64)),
     ];
     let ctx = gpu();
@@ -380,7 +396,13 @@ fn bad_arguments_fail_in_one_line() {
     assert_one_line_error(&with(&["--albedo", "NaN"]), "--albedo");
     let jpg = dir.path().join("x.jpg");
     assert_one_line_error(
-        &["render", "missing.vdag", "--pt", "--out", jpg.to_str().unwrap()],
+        &[
+            "render",
+            "missing.vdag",
+            "--pt",
+            "--out",
+            jpg.to_str().unwrap(),
+        ],
         ".exr",
     );
     // Path-tracing flags without --pt are refused by the parser.
@@ -394,12 +416,7 @@ fn cli_writes_png_and_exr() {
     let dir = tempfile::tempdir().unwrap();
     let vdag = dir.path().join("ff3.vdag");
     let ff3 = repo().join("tests/data/ff3.vox");
-    let built = voxdag_cli(&[
-        "build",
-        ff3.to_str().unwrap(),
-        "-o",
-        vdag.to_str().unwrap(),
-    ]);
+    let built = voxdag_cli(&["build", ff3.to_str().unwrap(), "-o", vdag.to_str().unwrap()]);
     assert!(built.status.success(), "{:?}", built);
     for (file, extra) in [
         ("mega.png", &[][..]),
@@ -478,7 +495,12 @@ fn write_voxel_mesh(dag: &Svdag, path: &std::path::Path) {
 /// The Mitsuba 3 scene of `s` (scalar_rgb: pinhole camera at our eye with our vertical field of
 /// view, box filter, independent sampler, constant environment, diffuse albedo, path tracer with
 /// max_depth = B + 1), rendered to `out` (linear EXR).
-fn mitsuba_script(s: &PtSettings, mesh: &std::path::Path, out: &std::path::Path, spp: u32) -> String {
+fn mitsuba_script(
+    s: &PtSettings,
+    mesh: &std::path::Path,
+    out: &std::path::Path,
+    spp: u32,
+) -> String {
     let cam = &s.render.camera;
     let v = |a: [f32; 3]| format!("[{}, {}, {}]", a[0], a[1], a[2]);
     format!(
@@ -549,13 +571,20 @@ fn matches_mitsuba() {
         .arg(&script)
         .output()
         .unwrap();
-    assert!(run.status.success(), "mitsuba: {}", String::from_utf8_lossy(&run.stderr));
+    assert!(
+        run.status.success(),
+        "mitsuba: {}",
+        String::from_utf8_lossy(&run.stderr)
+    );
     let theirs = image::open(&out).unwrap().to_rgb32f();
     let ctx = gpu();
     let renderer = GpuRenderer::new(&ctx).unwrap();
     let tracer = GpuPathTracer::new(&ctx).unwrap();
     let scene = renderer.upload(&dag).unwrap();
-    let ours = tracer.render(&scene, &s, PtMode::Megakernel, None).unwrap().linear();
+    let ours = tracer
+        .render(&scene, &s, PtMode::Megakernel, None)
+        .unwrap()
+        .linear();
     let n = ours.len() as f64;
     let mean = |v: &[f32]| v.iter().map(|&x| x as f64).sum::<f64>() / n;
     let (mo, mt) = (mean(&ours), mean(theirs.as_raw()));

@@ -52,7 +52,9 @@ pub struct PtArgs {
 fn parse_floats<const N: usize>(text: &str) -> Result<[f32; N], String> {
     let parts: Vec<&str> = text.split(',').collect();
     if parts.len() != N {
-        return Err(format!("expected {N} comma-separated numbers, got {text:?}"));
+        return Err(format!(
+            "expected {N} comma-separated numbers, got {text:?}"
+        ));
     }
     let mut v = [0f32; N];
     for (out, part) in v.iter_mut().zip(parts) {
@@ -88,7 +90,11 @@ impl PtArgs {
 pub fn check(args: &PtArgs, out: &Path) -> Result<()> {
     check_extension(out)?;
     // Any image size: only the values are checked here.
-    args.settings(RenderSettings::new(1, 1, voxdag::render::Camera::orbit_default(8)))?;
+    args.settings(RenderSettings::new(
+        1,
+        1,
+        voxdag::render::Camera::orbit_default(8),
+    ))?;
     Ok(())
 }
 
@@ -123,15 +129,7 @@ pub fn render(
         } else {
             PtMode::Megakernel
         };
-        let image = render_gpu(
-            &context,
-            dag,
-            colors,
-            &settings,
-            mode,
-            print_profile,
-            trace,
-        )?;
+        let image = render_gpu(&context, dag, colors, &settings, mode, print_profile, trace)?;
         drop(context);
         image
     };

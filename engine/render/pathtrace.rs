@@ -140,7 +140,12 @@ impl PtSettings {
             )));
         }
         Ok(PtParams {
-            env: [self.env[0], self.env[1], self.env[2], self.albedo.unwrap_or(-1.0)],
+            env: [
+                self.env[0],
+                self.env[1],
+                self.env[2],
+                self.albedo.unwrap_or(-1.0),
+            ],
             sun: [sun_dir[0], sun_dir[1], sun_dir[2], intensity],
             accum: 0,
             first_hits: 0,
@@ -365,7 +370,11 @@ fn trace_path(
                     dir: sun,
                 };
                 rays += 1;
-                if scene.dag.raycast(scene.index, &shadow, T_UNBOUNDED).is_none() {
+                if scene
+                    .dag
+                    .raycast(scene.index, &shadow, T_UNBOUNDED)
+                    .is_none()
+                {
                     let e = (pt.sun[3] * n_dot_l) * INV_PI;
                     for c in 0..3 {
                         radiance[c] += (throughput[c] * albedo[c]) * e;
@@ -387,7 +396,10 @@ fn trace_path(
 
 /// Russian roulette (`pt_roulette`): survive with `p = min(max channel, 0.95)`, then divide.
 fn roulette(throughput: &mut [f32; 3], u: f32) -> bool {
-    let p = throughput[0].max(throughput[1]).max(throughput[2]).min(RR_MAX);
+    let p = throughput[0]
+        .max(throughput[1])
+        .max(throughput[2])
+        .min(RR_MAX);
     if !(u < p) {
         return false;
     }
@@ -525,7 +537,10 @@ pub fn render_pt_cpu(scene: &CpuScene, settings: &PtSettings) -> Result<PtImage,
     let pt = settings.params()?;
     let p = RenderParams::with_colors(&settings.render, dag, scene.colors.len())?;
     let lut = srgb_lut();
-    let (w, h) = (settings.render.width as usize, settings.render.height as usize);
+    let (w, h) = (
+        settings.render.width as usize,
+        settings.render.height as usize,
+    );
     let mut accum = vec![[0.0f32; 4]; w * h];
     let mut first_hits = vec![
         FirstHit {

@@ -136,7 +136,10 @@ pub fn bench_pathtrace(args: &BenchPathtraceArgs) -> Result<()> {
                 let mut profiler = Profiler::new(&ctx)?;
                 let image = tracer.render(&scene, &s, mode, Some(&mut profiler))?;
                 let ms: f64 = profiler.passes().iter().map(|p| p.gpu_ms).sum();
-                passes.push_str(&format!("{name} N={resolution} {mode:?}:\n{}", profiler.table()));
+                passes.push_str(&format!(
+                    "{name} N={resolution} {mode:?}:\n{}",
+                    profiler.table()
+                ));
                 Ok((ms / s.spp as f64, image))
             };
             let (mega_ms, mega) = gpu_ms(PtMode::Megakernel)?;
