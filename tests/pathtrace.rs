@@ -542,8 +542,9 @@ mi.util.write_bitmap("{out}", img)
 /// Against an independent renderer: Mitsuba 3 (PyPI `mitsuba`, scalar_rgb) renders the same
 /// voxels as a mesh of unit-cube faces with the same camera, constant environment (0.8, 1, 1.2),
 /// diffuse albedo 0.6 and max_depth = B + 1 = 4 (B = 3, no Russian roulette in either). Both at
-/// 64 spp, 48x48, on the concave sphere scene: the image means agree within 1.5% and the mean
-/// absolute pixel difference is below 0.03 (Monte Carlo noise of both at 64 spp). Skips with one
+/// 64 spp, 48x48, on the concave sphere scene: the image means agree within 1% and the mean
+/// absolute pixel difference is below 0.02 (Monte Carlo noise of both at 64 spp; measured on
+/// lavapipe with Mitsuba 3.9.1: means 0.8759 vs 0.8764, difference 0.0065). Skips with one
 /// line when Python or Mitsuba is absent.
 #[test]
 fn matches_mitsuba() {
@@ -595,6 +596,6 @@ fn matches_mitsuba() {
         .sum::<f64>()
         / n;
     println!("mitsuba: mean ours {mo}, theirs {mt}, mean abs diff {mad}");
-    assert!((mo - mt).abs() < 0.015 * mt, "means {mo} vs {mt}");
-    assert!(mad < 0.03, "mean abs difference {mad}");
+    assert!((mo - mt).abs() < 0.01 * mt, "means {mo} vs {mt}");
+    assert!(mad < 0.02, "mean abs difference {mad}");
 }

@@ -400,7 +400,7 @@ fn roulette(throughput: &mut [f32; 3], u: f32) -> bool {
         .max(throughput[1])
         .max(throughput[2])
         .min(RR_MAX);
-    if !(u < p) {
+    if u >= p {
         return false;
     }
     for c in throughput.iter_mut() {

@@ -205,7 +205,7 @@ vec3 pt_offset_point(vec3 origin, vec3 dir, float t, ivec3 n, float eps) {
 // divide by p. Returns false when the path ends.
 bool pt_roulette(inout vec3 throughput, float u) {
     float p = min(max(max(throughput.x, throughput.y), throughput.z), PT_RR_MAX);
-    if (!(u < p)) {
+    if (u >= p) {
         return false;
     }
     precise vec3 t = throughput / p;
