@@ -7,7 +7,9 @@ mod common;
 
 use std::io::Write;
 
-use common::{build_scene, check_golden, failure_dir, gpu, repo, voxdag_cli};
+use common::{
+    build_scene, check_golden, failure_dir, gpu, has_translated_pointer, repo, voxdag_cli,
+};
 use voxdag::dag::encode::{EncodedDag, SsvdagEncoding, TsvdagEncoding, TsvdagOptions};
 use voxdag::dag::transform::TransformSet;
 use voxdag::dag::{Svdag, VoxelIndex};
@@ -285,6 +287,10 @@ fn megakernel_formats_match_svdag32() {
         huffman: false,
     };
     let sat = TsvdagEncoding::build_with_translations(&dag, TransformSet::All, true, base).unwrap();
+    assert!(
+        has_translated_pointer(&sat),
+        "S+A+T should use translations"
+    );
     let encodings = [
         (
             "ssvdag",
