@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{build_scene, gpu, repo};
+use common::{build_scene, gpu, has_translated_pointer, repo};
 use voxdag::dag::encode::{EncodedDag, SsvdagEncoding, TsvdagEncoding, TsvdagOptions};
 use voxdag::dag::transform::{Transform, TransformSet};
 use voxdag::dag::Svdag;
@@ -213,28 +213,6 @@ fn check_scene(name: &str, dag: Svdag, expect_translations: bool) {
         0,
         "Vulkan validation reported problems"
     );
-}
-
-/// Whether a TSVDAG has a translated pointer (a nonzero count at a pointer position).
-fn has_translated_pointer(e: &TsvdagEncoding) -> bool {
-    let counts = e.stream_voxel_counts().unwrap();
-    (1..e.levels.len()).any(|l| {
-        let mut starts = std::collections::HashSet::new();
-        // Node headers are the positions a sum is stored at; the first node starts at 0 and
-        // every node has at least one pointer word, so positions holding a count that are
-        // not node starts are translated pointers.
-        let stream = &e.levels[l];
-        let mut off = 0;
-        while off < stream.len() {
-            starts.insert(off);
-            let h = stream[off];
-            off += 1 + (0..8).map(|o| ((h >> (2 * o)) & 3) as usize).sum::<usize>();
-        }
-        counts[l]
-            .iter()
-            .enumerate()
-            .any(|(i, &c)| c != 0 && !starts.contains(&i))
-    })
 }
 
 #[test]

@@ -4,6 +4,7 @@ mod colors;
 mod compress;
 mod hash;
 mod ooc;
+mod pathtrace;
 mod primitives;
 mod render_formats;
 
@@ -43,6 +44,8 @@ pub enum BenchCommand {
     Ooc(ooc::BenchOocArgs),
     /// GPU primitives (scan, compaction, radix sort) vs their CPU references in the same run.
     Primitives(primitives::BenchPrimitivesArgs),
+    /// Path tracing: ms per sample of the megakernel and wavefront GPU tracers vs the CPU reference.
+    Pathtrace(pathtrace::BenchPathtraceArgs),
 }
 
 /// Arguments of `voxdag bench build`.
@@ -110,6 +113,7 @@ pub fn run(command: BenchCommand, quiet: bool) -> Result<()> {
         BenchCommand::Colors(args) => args.outputs(),
         BenchCommand::Primitives(args) => args.outputs(),
         BenchCommand::Ooc(args) => args.outputs(),
+        BenchCommand::Pathtrace(args) => args.outputs(),
     };
     check_outputs(&outputs)?;
     match command {
@@ -120,6 +124,7 @@ pub fn run(command: BenchCommand, quiet: bool) -> Result<()> {
         BenchCommand::Colors(args) => colors::bench_colors(&args),
         BenchCommand::Primitives(args) => primitives::bench_primitives(&args),
         BenchCommand::Ooc(args) => ooc::bench_ooc(&args, quiet),
+        BenchCommand::Pathtrace(args) => pathtrace::bench_pathtrace(&args),
     }
 }
 

@@ -805,7 +805,8 @@ fn render_settings(
 }
 
 /// `voxdag render`: the GPU traverses the file's encoding as it is (svdag32, SSVDAG or TSVDAG
-/// in any mode); `--cpu` decodes compact encodings to svdag32 for the CPU reference.
+/// in any mode); `--cpu` decodes compact encodings to svdag32 for the CPU reference. `--pt`
+/// path traces instead of the raster shading, on the same data (`crate::pathtrace`).
 pub fn render(args: &RenderArgs) -> Result<()> {
     if let Some(fov) = args.fov {
         if !(1.0..=179.0).contains(&fov) {
@@ -816,6 +817,9 @@ pub fn render(args: &RenderArgs) -> Result<()> {
     if let Some(trace) = &args.trace {
         check_output(trace)?;
     }
+    if args.pt.pt {
+        crate::pathtrace::check(&args.pt, &args.out)?;
+    }
     let start;
     let image = if args.cpu {
         let (dag, stored) = load_svdag_stored(&args.file)?;
@@ -825,6 +829,9 @@ pub fn render(args: &RenderArgs) -> Result<()> {
             None => ColorSource::Raw(&dag.colors),
         };
         let settings = render_settings(args, dag.occupied_bounds(), dag.resolution);
+        if args.pt.pt {
+            return crate::pathtrace::render_cpu(&args.pt, &dag, colors, settings, &args.out);
+        }
         start = Instant::now();
         let index = VoxelIndex::new(&dag);
         render_cpu_with(&dag, &index, colors, &settings)?
@@ -837,16 +844,17 @@ pub fn render(args: &RenderArgs) -> Result<()> {
         };
         let bounds = file.encoded.occupied_bounds()?;
         let settings = render_settings(args, bounds, file.encoded.resolution());
+        let (profile, trace) = (args.profile, args.trace.as_deref());
+        if args.pt.pt {
+            let out = &args.out;
+            let encoded = &file.encoded;
+            return crate::pathtrace::render_gpu(
+                &args.pt, encoded, colors, settings, profile, trace, out,
+            );
+        }
         start = Instant::now();
         let context = GpuContext::new(&GpuOptions::default())?;
-        let image = render_gpu(
-            &context,
-            &file.encoded,
-            colors,
-            &settings,
-            args.profile,
-            args.trace.as_deref(),
-        )?;
+        let image = render_gpu(&context, &file.encoded, colors, &settings, profile, trace)?;
         drop(context);
         image
     };
@@ -922,6 +930,7 @@ pub fn demo(args: &DemoArgs, quiet: bool) -> Result<()> {
         cpu: false,
         profile: true,
         trace: Some(args.out_dir.join("avocado-trace.json")),
+        pt: Default::default(),
     };
     render(&render_args)?;
     let (dag, stored) = load_svdag_stored(&vdag)?;

@@ -19,3 +19,9 @@ if [ ${#missing[@]} -gt 0 ]; then
   $sudo apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
 fi
+# Mitsuba 3 (scalar_rgb) for the independent-renderer check of the path tracer (tests/pathtrace.rs
+# `matches_mitsuba`, which skips without it): a ~200 MB wheel, about 45 s; optional, so a failure
+# (no Python, no network) only warns.
+if command -v python3 >/dev/null && ! python3 -c "import mitsuba" 2>/dev/null; then
+  python3 -m pip install --quiet mitsuba || echo "warning: pip install mitsuba failed: tests/pathtrace.rs matches_mitsuba will skip"
+fi

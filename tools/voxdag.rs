@@ -5,6 +5,7 @@ mod commands;
 mod edit;
 mod limited_alloc;
 mod ooc;
+mod pathtrace;
 mod view;
 
 use std::path::PathBuf;
@@ -203,7 +204,7 @@ pub struct RenderArgs {
     /// Image size WIDTHxHEIGHT.
     #[arg(long, default_value = "1024x768", value_parser = commands::parse_size)]
     size: (u32, u32),
-    /// Output PNG.
+    /// Output PNG (with --pt: .png tonemapped or .exr linear HDR).
     #[arg(long)]
     out: PathBuf,
     /// Camera position in grid coordinates, "x,y,z" (default: an orbit view of the whole scene).
@@ -227,6 +228,9 @@ pub struct RenderArgs {
     /// Write a Chrome trace-event JSON of the GPU passes (opens in Perfetto).
     #[arg(long)]
     trace: Option<PathBuf>,
+    /// Path tracing (--pt and its flags).
+    #[command(flatten)]
+    pt: pathtrace::PtArgs,
 }
 
 /// Arguments of `voxdag view`.

@@ -43,15 +43,15 @@ pub struct GpuRenderer {
 /// An SVDAG uploaded to the GPU: its words, per-node voxel counts and colour chunks (encoded
 /// words and both chunk tables, `attr::ChunkedColors`).
 pub struct GpuScene {
-    format: TraversalFormat,
-    dag_info: Buffer,
-    words: Buffer,
-    node_voxels: Buffer,
-    color_words: Buffer,
-    chunk_starts: Buffer,
-    chunk_offsets: Buffer,
-    color_format: ColorFormat,
-    chunk_count: u32,
+    pub(super) format: TraversalFormat,
+    pub(super) dag_info: Buffer,
+    pub(super) words: Buffer,
+    pub(super) node_voxels: Buffer,
+    pub(super) color_words: Buffer,
+    pub(super) chunk_starts: Buffer,
+    pub(super) chunk_offsets: Buffer,
+    pub(super) color_format: ColorFormat,
+    pub(super) chunk_count: u32,
     resolution: u32,
     color_count: u64,
 }

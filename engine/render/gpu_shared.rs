@@ -73,4 +73,71 @@ gpu_shared! {
         /// Depth-first Morton index of the voxel (index into the colours).
         pub color_index: uint64_t,
     }
+
+    /// Path-tracing constants of one render (`struct PtParams` in `render/pt_common.glsl`),
+    /// next to a `RenderParams` for the camera: environment, sun, limits and the device
+    /// addresses of the accumulation, first-hit and wavefront buffers (0 where unused).
+    pub struct PtParams {
+        /// rgb: constant environment radiance; w: uniform albedo, or -1: voxel colours.
+        pub env: vec4,
+        /// xyz: unit direction towards the sun; w: its intensity (0: no sun).
+        pub sun: vec4,
+        /// `vec4` per pixel: summed radiance (rgb) and sample count (w).
+        pub accum: uint64_t,
+        /// `FirstHit` per pixel, written by sample 0 (0: none).
+        pub first_hits: uint64_t,
+        /// 256 `float`s: sRGB byte -> linear (`pathtrace::srgb_lut`).
+        pub srgb_lut: uint64_t,
+        /// Wavefront: one `PtPath` per pixel.
+        pub paths: uint64_t,
+        /// Wavefront: extension queue read by even bounces.
+        pub queue_a: uint64_t,
+        /// Wavefront: extension queue read by odd bounces.
+        pub queue_b: uint64_t,
+        /// Wavefront: survival flag per queue slot (compaction input).
+        pub flags: uint64_t,
+        /// Wavefront: `[count, x, y, z]` of the extension queue.
+        pub ext_count: uint64_t,
+        /// Wavefront: the shadow-ray queue.
+        pub shadow_queue: uint64_t,
+        /// Wavefront: `[count, x, y, z]` of the shadow queue.
+        pub shadow_count: uint64_t,
+        /// Surface interactions a path may have before it must escape (`--bounces`).
+        pub bounces: uint,
+        /// Seed of the counter-based RNG.
+        pub seed: uint,
+        /// First interaction that plays Russian roulette.
+        pub rr_depth: uint,
+        /// Width x height.
+        pub pixels: uint,
+    }
+
+    /// Push constants of every path-tracing shader (`pt_mega.comp`, `pt_*.comp`): device
+    /// addresses of the constants and the scene, the colour format, then the sample and bounce.
+    pub(crate) struct PtPush {
+        /// `RenderParams` (camera, resolution, colour flags; `up.w` = ray offset).
+        pub(crate) params: uint64_t,
+        /// `PtParams`.
+        pub(crate) pt: uint64_t,
+        /// The DAG's words.
+        pub(crate) words: uint64_t,
+        /// Voxel count below each node (`u64` per DAG word, colour indexing).
+        pub(crate) node_voxels: uint64_t,
+        /// Encoded colour words.
+        pub(crate) color_words: uint64_t,
+        /// First voxel of each colour chunk.
+        pub(crate) chunk_starts: uint64_t,
+        /// Word offset of each colour chunk.
+        pub(crate) chunk_offsets: uint64_t,
+        /// The format info block of the DAG's format (`render::format`; svdag32: one unused word).
+        pub(crate) dag_info: uint64_t,
+        /// `ColorFormat` id.
+        pub(crate) color_format: uint,
+        /// Number of colour chunks.
+        pub(crate) chunk_count: uint,
+        /// Index of the sample being traced (RNG key; 0 writes the first hits).
+        pub(crate) sample_index: uint,
+        /// Wavefront: the bounce of this pass (0 = camera rays).
+        pub(crate) bounce: uint,
+    }
 }

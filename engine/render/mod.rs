@@ -10,6 +10,8 @@ pub mod format;
 pub mod gpu;
 mod gpu_shared;
 pub mod params;
+pub mod pathtrace;
+pub mod pathtrace_gpu;
 
 use std::io;
 use std::path::{Path, PathBuf};

@@ -220,3 +220,25 @@ impl Rng {
         self.next() % n
     }
 }
+
+/// Whether a TSVDAG has a translated pointer (a nonzero count at a pointer position).
+pub fn has_translated_pointer(e: &voxdag::dag::encode::TsvdagEncoding) -> bool {
+    let counts = e.stream_voxel_counts().unwrap();
+    (1..e.levels.len()).any(|l| {
+        let mut starts = std::collections::HashSet::new();
+        // Node headers are the positions a sum is stored at; the first node starts at 0 and
+        // every node has at least one pointer word, so positions holding a count that are
+        // not node starts are translated pointers.
+        let stream = &e.levels[l];
+        let mut off = 0;
+        while off < stream.len() {
+            starts.insert(off);
+            let h = stream[off];
+            off += 1 + (0..8).map(|o| ((h >> (2 * o)) & 3) as usize).sum::<usize>();
+        }
+        counts[l]
+            .iter()
+            .enumerate()
+            .any(|(i, &c)| c != 0 && !starts.contains(&i))
+    })
+}
