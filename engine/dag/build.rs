@@ -15,11 +15,11 @@ use crate::scene::Voxels;
 /// Nodes of one level before they are laid out: concatenated node words with child pointers
 /// still given as node indices into the level below.
 #[derive(Default)]
-struct LevelNodes {
+pub(crate) struct LevelNodes {
     /// Node words (leaf: 2 words; inner: mask + one index per child).
-    words: Vec<u32>,
+    pub(crate) words: Vec<u32>,
     /// Word offset of each unique node inside `words`.
-    offsets: Vec<u32>,
+    pub(crate) offsets: Vec<u32>,
 }
 
 /// An inner node before deduplication: child mask, then up to 8 child ids (unused slots 0).
@@ -228,7 +228,7 @@ impl Svdag {
     }
 
     /// Concatenates the levels top-down and turns child node indices into absolute word offsets.
-    fn lay_out(
+    pub(crate) fn lay_out(
         resolution: u32,
         levels: Vec<LevelNodes>,
         colors: Vec<u32>,

@@ -16,7 +16,7 @@
 //!
 //! Colours (optional) are one RGBA8 word per occupied voxel in depth-first Morton order.
 
-mod build;
+pub(crate) mod build;
 pub mod canonical;
 pub mod digest;
 pub mod encode;

@@ -20,6 +20,7 @@ use super::item::{
     POINTER_HANDLE_BITS, TABLE_COUNT,
 };
 use super::tool::{ToolError, Voxel, VoxelSource};
+use crate::dag::build::LevelNodes;
 use crate::dag::{DagError, Svdag, MAX_RESOLUTION};
 use crate::scene::morton;
 
@@ -215,8 +216,7 @@ fn octant_offset(corner: Voxel, octant: usize, half: u32) -> Voxel {
 /// Per-level node lists of an `Svdag` under construction (child ids, deduplicated).
 #[derive(Default)]
 struct SvdagLevel {
-    words: Vec<u32>,
-    offsets: Vec<u32>,
+    nodes: LevelNodes,
     ids: FxHashMap<Vec<u32>, u32>,
 }
 
@@ -225,14 +225,15 @@ impl SvdagLevel {
         if let Some(&id) = self.ids.get(&node) {
             return Ok(id);
         }
-        let id = self.offsets.len() as u32;
-        if self.words.len() + node.len() > u32::MAX as usize {
+        let nodes = &mut self.nodes;
+        let id = nodes.offsets.len() as u32;
+        if nodes.words.len() + node.len() > u32::MAX as usize {
             return Err(DagError::TooLarge {
-                words: (self.words.len() + node.len()) as u64,
+                words: (nodes.words.len() + node.len()) as u64,
             });
         }
-        self.offsets.push(self.words.len() as u32);
-        self.words.extend_from_slice(&node);
+        nodes.offsets.push(nodes.words.len() as u32);
+        nodes.words.extend_from_slice(&node);
         self.ids.insert(node, id);
         Ok(id)
     }
@@ -467,43 +468,8 @@ impl HashDag {
                 self.convert(child, root_level, &mut levels, &mut memo)?;
             }
         }
-        // Lay the levels out top-down; child ids become absolute word offsets.
-        let mut level_starts = vec![0u64; levels.len()];
-        let mut total = 0u64;
-        for (l, level) in levels.iter().enumerate().rev() {
-            level_starts[l] = total;
-            total += level.words.len() as u64;
-        }
-        if total > u32::MAX as u64 {
-            return Err(DagError::TooLarge { words: total }.into());
-        }
-        let mut words = Vec::with_capacity(total as usize);
-        for l in (0..levels.len()).rev() {
-            let level = &levels[l];
-            if l == 0 {
-                words.extend_from_slice(&level.words);
-                continue;
-            }
-            let below = &levels[l - 1];
-            let below_start = level_starts[l - 1] as u32;
-            for &offset in &level.offsets {
-                let offset = offset as usize;
-                let mask = level.words[offset];
-                words.push(mask);
-                let children = &level.words[offset + 1..offset + 1 + mask.count_ones() as usize];
-                words.extend(
-                    children
-                        .iter()
-                        .map(|&c| below_start + below.offsets[c as usize]),
-                );
-            }
-        }
-        Ok(Svdag {
-            resolution: self.resolution,
-            words,
-            level_starts,
-            colors: Vec::new(),
-        })
+        let levels = levels.into_iter().map(|level| level.nodes).collect();
+        Ok(Svdag::lay_out(self.resolution, levels, Vec::new())?)
     }
 
     /// Id in `levels[level]` of the svdag node of a non-empty child.
