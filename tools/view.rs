@@ -11,8 +11,8 @@ use raw_window_handle::{HasDisplayHandle, HasWindowHandle};
 use serde::Serialize;
 use voxdag::dag::Svdag;
 use voxdag::gpu::{
-    GpuContext, GpuOptions, Image, OverlayFrame, PassTiming, Presenter, PresenterOptions,
-    PresenterStats, Profiler, Surface,
+    GpuContext, GpuOptions, Image, OverlayFrame, PassTiming, PhaseClock, PhaseTime, Presenter,
+    PresenterOptions, PresenterStats, Profiler, Surface,
 };
 use voxdag::render::cpu::ColorSource;
 use voxdag::render::gpu::{GpuRenderer, GpuScene, RenderFrame};
@@ -56,7 +56,7 @@ const WAIT_PHASES: [usize; 3] = [0, 1, 10];
 
 /// The presenter's cumulative times that split `end_frame` and the waits, as
 /// (slot wait, acquire, textures, record, submit, present).
-fn presenter_times(stats: &PresenterStats) -> [Duration; 6] {
+fn presenter_times(stats: &PresenterStats) -> [PhaseTime; 6] {
     [
         stats.slot_wait,
         stats.acquire,
@@ -146,9 +146,14 @@ struct ViewReport {
     cpu_ms_mean: f64,
     /// Median of the same.
     cpu_ms_median: f64,
-    /// On-CPU time of the frame loop's thread per frame (ms, `/proc/thread-self/schedstat`),
-    /// mean after the warm-up: unlike `cpu_ms_*`, not inflated when other threads (lavapipe's,
-    /// other processes) preempt it, but it includes driver work done inside submit and present.
+    /// The same phases' on-CPU time (the thread's CPU clock, `CLOCK_THREAD_CPUTIME_ID`): not
+    /// inflated when other threads (lavapipe's, other processes) preempt the loop. Mean after
+    /// the warm-up.
+    loop_on_cpu_ms_mean: f64,
+    /// Median of the same.
+    loop_on_cpu_ms_median: f64,
+    /// On-CPU time of the frame loop's thread per frame (ms), waits included: adds the driver
+    /// work done inside acquire and present (lavapipe copies the image to the X server there).
     thread_cpu_ms_mean: f64,
     /// The frame loop split into [`PHASES`] (wall ms per frame after the warm-up; waits
     /// included, marked "(wait)"): where `cpu_ms_*` goes.
@@ -176,15 +181,19 @@ struct ViewReport {
     validation_messages: usize,
 }
 
-/// Wall time of one frame-loop phase per frame.
+/// Wall and on-CPU time of one frame-loop phase per frame.
 #[derive(Clone, Debug, Serialize)]
 struct PhaseStat {
     /// Phase name (see [`PHASES`]).
     name: String,
-    /// Mean ms per frame.
+    /// Mean wall ms per frame.
     mean_ms: f64,
-    /// Median ms per frame.
+    /// Median wall ms per frame.
     median_ms: f64,
+    /// Mean on-CPU ms per frame (the loop thread's CPU clock).
+    on_cpu_mean_ms: f64,
+    /// Median on-CPU ms per frame.
+    on_cpu_median_ms: f64,
 }
 
 impl ViewReport {
@@ -196,7 +205,7 @@ impl ViewReport {
             .collect();
         format!(
             "view: {} frames, {:.1} fps ({:.2} ms/frame) at {}x{} (internal {}x{}, scale {:.2}), \
-             CPU frame loop {:.3} ms mean / {:.3} ms median (on-CPU {:.3} ms), GPU {}, \
+             CPU frame loop {:.3} ms mean / {:.3} ms median (on-CPU {:.3} / {:.3} ms), GPU {}, \
              {} swapchain(s), {}",
             self.frames,
             self.fps,
@@ -208,7 +217,8 @@ impl ViewReport {
             self.render_scale,
             self.cpu_ms_mean,
             self.cpu_ms_median,
-            self.thread_cpu_ms_mean,
+            self.loop_on_cpu_ms_mean,
+            self.loop_on_cpu_ms_median,
             passes.join(", "),
             self.swapchain_creations,
             self.present_mode
@@ -315,15 +325,6 @@ impl CameraInput {
     }
 }
 
-/// Nanoseconds this thread has run on a CPU (first field of `/proc/thread-self/schedstat`; 0 where
-/// unavailable).
-fn thread_cpu_ns() -> u64 {
-    std::fs::read_to_string("/proc/thread-self/schedstat")
-        .ok()
-        .and_then(|s| s.split_whitespace().next()?.parse().ok())
-        .unwrap_or(0)
-}
-
 /// Rotates `v` by `yaw` around +y and raises its elevation by `pitch` (clamped short of the
 /// poles), keeping its length.
 fn rotate(v: Vec3, yaw: f32, pitch: f32) -> Vec3 {
@@ -363,9 +364,9 @@ struct Running {
     scale: f32,
     /// Per presented frame: interval since the previous one (ms), CPU loop cost (ms), on-CPU
     /// time of the thread (ms).
-    samples: Vec<(f64, f64, f64)>,
+    samples: Vec<(f64, f64, f64, f64)>,
     /// Per presented frame: wall ms of each of [`PHASES`].
-    phase_samples: Vec<[f64; PHASES.len()]>,
+    phase_samples: Vec<[PhaseTime; PHASES.len()]>,
     /// Times the overlay UI ran (egui passes), in total and per presented frame.
     egui_passes: usize,
     egui_pass_samples: Vec<usize>,
@@ -618,16 +619,11 @@ impl Running {
 
     /// One frame: wait for a slot, camera, overlay, record the render and present it.
     fn redraw(&mut self, args: &ViewArgs) -> Result<()> {
-        let start = Instant::now();
-        let thread_start = thread_cpu_ns();
+        let frame_start = PhaseClock::start();
         let presenter_before = presenter_times(self.presenter.stats());
-        let mut phases = [0.0f64; PHASES.len()];
-        let mut mark = start;
-        let mut lap = |phase: usize| {
-            let now = Instant::now();
-            phases[phase] += (now - mark).as_secs_f64() * 1e3;
-            mark = now;
-        };
+        let mut phases = [PhaseTime::default(); PHASES.len()];
+        let mut clock = frame_start;
+        let mut lap = |phase: usize| phases[phase] += clock.lap();
         let dt = self
             .last_frame
             .map_or(0.0, |t| t.elapsed().as_secs_f32().min(0.1));
@@ -714,32 +710,42 @@ impl Running {
         }
         // end_frame, split below from the presenter's times.
         lap(8);
-        let now = mark;
+        let total = clock - frame_start;
+        let now = clock.instant();
         // end_frame and begin_frame's parts, from the presenter's counters.
         let presenter_after = presenter_times(self.presenter.stats());
-        let part = |i: usize| (presenter_after[i] - presenter_before[i]).as_secs_f64() * 1e3;
-        let (slot_wait, acquire) = (part(0), part(1));
-        phases[0] = slot_wait;
-        phases[1] = acquire;
-        phases[7] = part(2);
-        phases[8] = part(3);
-        phases[9] = part(4);
-        phases[10] = part(5);
-        let total = (now - start).as_secs_f64() * 1e3;
-        let timed: f64 = phases[..11].iter().sum();
-        phases[11] = (total - timed).max(0.0);
-        let waited: f64 = WAIT_PHASES.iter().map(|&i| phases[i]).sum();
-        let cpu = (total - waited).max(0.0);
-        let on_cpu = thread_cpu_ns().saturating_sub(thread_start) as f64 * 1e-6;
+        for (phase, i) in [(0, 0), (1, 1), (7, 2), (8, 3), (9, 4), (10, 5)] {
+            phases[phase] = presenter_after[i] - presenter_before[i];
+        }
+        let ms = |d: Duration| d.as_secs_f64() * 1e3;
+        let timed = phases[..11]
+            .iter()
+            .fold(PhaseTime::default(), |mut sum, p| {
+                sum += *p;
+                sum
+            });
+        phases[11] = total - timed;
+        let loop_time = (0..PHASES.len()).filter(|i| !WAIT_PHASES.contains(i)).fold(
+            PhaseTime::default(),
+            |mut sum, i| {
+                sum += phases[i];
+                sum
+            },
+        );
         if let Some(prev) = self.last_frame {
-            let interval = (now - prev).as_secs_f64() * 1e3;
+            let interval = ms(now - prev);
             self.frame_ms = interval;
-            self.samples.push((interval, cpu, on_cpu));
+            self.samples.push((
+                interval,
+                ms(loop_time.wall),
+                ms(loop_time.cpu),
+                ms(total.cpu),
+            ));
             self.phase_samples.push(phases);
             self.egui_pass_samples
                 .push(self.egui_passes - passes_before);
         }
-        self.cpu_ms = cpu;
+        self.cpu_ms = ms(loop_time.wall);
         self.last_frame = Some(now);
         if screenshot {
             let path = args.screenshot.as_ref().expect("checked above");
@@ -824,7 +830,8 @@ impl Running {
 
     /// The statistics of the run.
     fn report(&self) -> ViewReport {
-        let kept: Vec<(f64, f64, f64)> = self.samples.iter().skip(WARMUP_FRAMES).copied().collect();
+        let kept: Vec<(f64, f64, f64, f64)> =
+            self.samples.iter().skip(WARMUP_FRAMES).copied().collect();
         let kept = if kept.is_empty() {
             self.samples.clone()
         } else {
@@ -839,20 +846,28 @@ impl Running {
             let mean = v.iter().sum::<f64>() / v.len().max(1) as f64;
             (mean, v.get(v.len() / 2).copied().unwrap_or(0.0))
         };
-        let phase_rows: Vec<&[f64; PHASES.len()]> = if self.phase_samples.len() > WARMUP_FRAMES {
-            self.phase_samples.iter().skip(WARMUP_FRAMES).collect()
-        } else {
-            self.phase_samples.iter().collect()
-        };
+        let loop_on_cpu = mean_median(kept.iter().map(|s| s.2).collect());
+        let phase_rows: Vec<&[PhaseTime; PHASES.len()]> =
+            if self.phase_samples.len() > WARMUP_FRAMES {
+                self.phase_samples.iter().skip(WARMUP_FRAMES).collect()
+            } else {
+                self.phase_samples.iter().collect()
+            };
         let cpu_phases = PHASES
             .iter()
             .enumerate()
             .map(|(i, name)| {
-                let (mean_ms, median_ms) = mean_median(phase_rows.iter().map(|p| p[i]).collect());
+                let ms = |d: Duration| d.as_secs_f64() * 1e3;
+                let (mean_ms, median_ms) =
+                    mean_median(phase_rows.iter().map(|p| ms(p[i].wall)).collect());
+                let (on_cpu_mean_ms, on_cpu_median_ms) =
+                    mean_median(phase_rows.iter().map(|p| ms(p[i].cpu)).collect());
                 PhaseStat {
                     name: name.to_string(),
                     mean_ms,
                     median_ms,
+                    on_cpu_mean_ms,
+                    on_cpu_median_ms,
                 }
             })
             .collect();
@@ -867,7 +882,9 @@ impl Running {
             frame_ms_mean,
             cpu_ms_mean: cpu.iter().sum::<f64>() / n,
             cpu_ms_median: cpu.get(cpu.len() / 2).copied().unwrap_or(0.0),
-            thread_cpu_ms_mean: kept.iter().map(|s| s.2).sum::<f64>() / n,
+            loop_on_cpu_ms_mean: loop_on_cpu.0,
+            loop_on_cpu_ms_median: loop_on_cpu.1,
+            thread_cpu_ms_mean: kept.iter().map(|s| s.3).sum::<f64>() / n,
             cpu_phases,
             egui_passes_mean: {
                 let kept: Vec<usize> = self

@@ -21,6 +21,7 @@
 // Every public item of the GPU layer (generated shader constants included) is documented.
 #![warn(missing_docs)]
 
+mod clock;
 mod commands;
 mod context;
 mod frame;
@@ -37,6 +38,7 @@ mod swapchain;
 #[path = "gpu_shared.rs"]
 pub mod test_layouts;
 
+pub use clock::{thread_cpu_time, PhaseClock, PhaseTime};
 pub use commands::{Commands, Readback, Submission};
 pub use context::{DeviceInfo, DeviceType, GpuContext, GpuOptions, GpuStats, REQUIRED_FEATURES};
 pub use frame::{FrameRing, DEFAULT_FRAMES_IN_FLIGHT};

@@ -7,7 +7,7 @@
 //! value before the slot is reused (`Submission::wait`).
 
 use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
@@ -15,8 +15,8 @@ use gpu_allocator::{AllocationSizes, AllocatorDebugSettings};
 
 use super::memory::color_range;
 use super::{
-    vk_err, Buffer, Commands, GpuContext, GpuError, Image, MemLocation, Profiler, Submission,
-    Surface,
+    vk_err, Buffer, Commands, GpuContext, GpuError, Image, MemLocation, PhaseClock, PhaseTime,
+    Profiler, Submission, Surface,
 };
 
 /// How a [`Presenter`] presents.
@@ -67,17 +67,17 @@ pub struct PresenterStats {
     /// Time blocked waiting for a frame slot's timeline value, for a swapchain image and in present.
     pub wait: Duration,
     /// Part of `wait`: waiting for frame slots' previous frames (`begin_frame`).
-    pub slot_wait: Duration,
+    pub slot_wait: PhaseTime,
     /// Part of `wait`: `vkAcquireNextImageKHR` (and swapchain rebuilds).
-    pub acquire: Duration,
+    pub acquire: PhaseTime,
     /// Part of `wait`: `vkQueuePresentKHR` (lavapipe copies the image to the X server in it).
-    pub present: Duration,
+    pub present: PhaseTime,
     /// `end_frame`: applying egui texture uploads and frees.
-    pub textures: Duration,
+    pub textures: PhaseTime,
     /// `end_frame`: recording the blit, the screenshot copy and the egui overlay.
-    pub record: Duration,
+    pub record: PhaseTime,
     /// `end_frame`: ending the command buffer and `vkQueueSubmit`.
-    pub submit: Duration,
+    pub submit: PhaseTime,
     /// Present mode in use, e.g. `FIFO`.
     pub present_mode: String,
     /// Swapchain images.
@@ -299,17 +299,16 @@ impl Presenter {
                 "Presenter::begin_frame called twice without end_frame".into(),
             ));
         }
-        let start = Instant::now();
+        let mut clock = PhaseClock::start();
+        let start = clock.instant();
         let index = (self.frame % self.slots.len() as u64) as usize;
         if let Some(done) = self.slots[index].in_flight.take() {
             done.wait()?;
         }
-        let acquire_start = Instant::now();
+        self.stats.slot_wait += clock.lap();
         let result = self.acquire(index);
-        let end = Instant::now();
-        self.stats.slot_wait += acquire_start - start;
-        self.stats.acquire += end - acquire_start;
-        self.stats.wait += end - start;
+        self.stats.acquire += clock.lap();
+        self.stats.wait += clock.instant() - start;
         let Some(image) = result? else {
             return Ok(None);
         };
@@ -560,13 +559,12 @@ impl Presenter {
                 s.slot = slot;
             }
         }
-        let textures_start = Instant::now();
+        let mut clock = PhaseClock::start();
         let overlay = match overlay {
             Some(o) => Some(self.apply_textures(o)?),
             None => None,
         };
-        let record_start = Instant::now();
-        self.stats.textures += record_start - textures_start;
+        self.stats.textures += clock.lap();
         if let Some(p) = profiler.as_deref_mut() {
             p.begin_pass(&mut cmd, "present");
         }
@@ -753,15 +751,14 @@ impl Presenter {
         if let Some(p) = profiler {
             p.end_pass(&mut cmd);
         }
-        let submit_start = Instant::now();
-        self.stats.record += submit_start - record_start;
+        self.stats.record += clock.lap();
         // Waits for the slot's acquired image at the blit, signals the image's present semaphore
         // (binary: presentation cannot wait on a timeline) and the context's timeline value.
         let submission = cmd.submit_async_with(
             &[(self.slots[slot].acquired, vk::PipelineStageFlags::TRANSFER)],
             &[rendered],
         )?;
-        self.stats.submit += submit_start.elapsed();
+        self.stats.submit += clock.lap();
         self.slots[slot].in_flight = Some(submission);
         self.frame += 1;
         self.stats.frames += 1;
@@ -802,7 +799,7 @@ impl Presenter {
     /// Presents image `index` once `rendered` is signalled; out of date or suboptimal marks the
     /// swapchain for a rebuild before the next frame.
     fn present(&mut self, index: u32, rendered: vk::Semaphore) -> Result<(), GpuError> {
-        let start = Instant::now();
+        let mut clock = PhaseClock::start();
         let sc = self.swapchain.as_ref().expect("acquired in begin_frame");
         let waits = [rendered];
         let swapchains = [sc.raw];
@@ -816,9 +813,9 @@ impl Presenter {
             // SAFETY: the image was acquired and its frame submitted to signal `rendered`.
             unsafe { self.loader.queue_present(*queue, &info) }
         };
-        let elapsed = start.elapsed();
+        let elapsed = clock.lap();
         self.stats.present += elapsed;
-        self.stats.wait += elapsed;
+        self.stats.wait += elapsed.wall;
         match result {
             Ok(false) => Ok(()),
             Ok(true) | Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => {
