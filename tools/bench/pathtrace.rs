@@ -290,9 +290,12 @@ impl RunConfig<'_> {
             .as_ref()
             .map_or((mega_ms, wave_ms), |b| (b.mega_ms, b.wave_ms));
         let ratio = |a: Option<f64>, b: Option<f64>| a.zip(b).map(|(a, b)| a / b);
+        let ms = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.1}"));
         eprintln!(
-            "{label}: megakernel {mega_ms:.1?} ms, wavefront {wave_ms:.1?} ms per sample, \
-             {mismatches} first-hit mismatches"
+            "{label}: megakernel {} ms, wavefront {} ms per sample, {mismatches} first-hit \
+             mismatches",
+            ms(mega_ms),
+            ms(wave_ms)
         );
         let rays = self.rays;
         let mrays = |ms: Option<f64>| ms.filter(|_| rays > 0).map(|m| rays as f64 / m / 1e3);
