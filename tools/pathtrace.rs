@@ -12,6 +12,7 @@ use voxdag::render::cpu::ColorSource;
 use voxdag::render::gpu::GpuRenderer;
 use voxdag::render::pathtrace::{
     check_extension, render_pt_cpu, CpuScene, PtImage, PtSettings, Sun, DEFAULT_BOUNCES,
+    DEFAULT_RR_DEPTH,
 };
 use voxdag::render::pathtrace_gpu::{GpuPathTracer, PtMode};
 use voxdag::render::RenderSettings;
@@ -39,6 +40,10 @@ pub struct PtArgs {
     /// Uniform albedo in [0, 1] instead of the voxel colours.
     #[arg(long, requires = "pt", allow_hyphen_values = true)]
     pub albedo: Option<f32>,
+    /// First surface interaction that plays Russian roulette (default 3; more than --bounces:
+    /// never). A path survives interaction i >= RR_DEPTH with p = min(max throughput, 0.95).
+    #[arg(long, requires = "pt")]
+    pub rr_depth: Option<u32>,
     /// Seed of the counter-based RNG (default 0).
     #[arg(long, requires = "pt")]
     pub seed: Option<u32>,
@@ -81,6 +86,7 @@ impl PtArgs {
         });
         s.albedo = self.albedo;
         s.seed = self.seed.unwrap_or(0);
+        s.rr_depth = self.rr_depth.unwrap_or(DEFAULT_RR_DEPTH);
         s.validate()?;
         Ok(s)
     }

@@ -2,21 +2,25 @@
 //!
 //! Every shader that includes `render/traverse.glsl` is compiled once per [`TraversalFormat`]
 //! (build.rs, list in `traversal_variants.rs`); the format-specific child fetch is
-//! `render/dag_formats.glsl`. [`GpuDagData::new`] lays a DAG out for it without decoding:
-//! - svdag32: `Svdag::words`, `VoxelIndex::node_voxels`, a one-word info block (unused).
+//! `render/dag_formats.glsl` (the hash DAG's in `render/dag_hash.glsl`: it is bound in place by
+//! `GpuRenderer::bind_hash_dag`, nothing is laid out). [`GpuDagData::new`] lays a DAG out for
+//! the other formats without decoding:
+//! - svdag32: `Svdag::words`, `VoxelIndex::node_voxels` plus the voxels before each child
+//!   pointer (at the pointer's word), a one-word info block (unused).
 //! - SSVDAG / TSVDAG: the words are the encoding's leaves (two words each), pointer tables
 //!   (TSVDAG with tables, two words per entry, child levels in order) and node streams (levels
 //!   1..=root concatenated, two u16 per word), unchanged; `node_voxels` has one `u64` per u16 of
-//!   the streams (`stream_voxel_counts`: the colour index sums them); the info block
+//!   the streams (`pointer_voxel_counts`: at every pointer the voxels it leads to; the colour
+//!   index sums them); the info block
 //!   ([`info`] offsets, mirrored by `DAG_INFO_*` in the GLSL) holds where each level starts,
-//!   the coding flags, the transform tables of `dag::transform` and the Huffman decoders.
+//!   the coding flags and the Huffman decoders (the transforms are computed in the shader).
 
 use crate::dag::encode::{EncodeError, EncodedDag, SsvdagEncoding, TsvdagEncoding};
-use crate::dag::transform::{Transform, TransformSet, TRANSFORM_COUNT};
+use crate::dag::transform::TransformSet;
 use crate::dag::{Svdag, VoxelIndex};
 
 /// `(name, GLSL defines)` of every traversal variant, in [`TraversalFormat::index`] order.
-pub const TRAVERSAL_VARIANTS: [(&str, &[&str]); 10] = include!("traversal_variants.rs");
+pub const TRAVERSAL_VARIANTS: [(&str, &[&str]); 11] = include!("traversal_variants.rs");
 
 /// Word offsets of the format info block (`DAG_INFO_*` in `render/dag_formats.glsl`).
 pub mod info {
@@ -34,22 +38,13 @@ pub mod info {
     pub const LEVEL_START: usize = 8;
     /// Per child level: first entry of its table in the tables (24 entries).
     pub const TABLE_START: usize = 32;
-    /// `Transform::compose`, one byte per pair (48 x 48).
-    pub const COMPOSE: usize = 56;
-    /// `Transform::inverse`, one byte each.
-    pub const INVERSE: usize = 632;
-    /// `Transform::apply_octant`, 8 x 3 bits per transform.
-    pub const OCTANT: usize = 644;
-    /// `Transform::apply_child_mask`, one byte per (transform, mask).
-    pub const CHILD_MASK: usize = 692;
     /// Per child level: Huffman code kind | implied symbol << 16.
-    pub const HUFF_KIND: usize = 3764;
-    /// Per child level: 16 code counts by length.
-    pub const HUFF_COUNT: usize = 3788;
-    /// Per child level: 384 u16 symbols sorted by (length, symbol).
-    pub const HUFF_SYMBOLS: usize = 4172;
-    /// Words of the block.
-    pub const LEN: usize = HUFF_SYMBOLS + 24 * 192;
+    pub const HUFF_KIND: usize = 56;
+    /// Per child level: word offset of its Huffman decode table in this block | the table's
+    /// index bits << 24 (see [`super::huffman_decode_table`]).
+    pub const HUFF_LUT: usize = 80;
+    /// Words of the fixed part of the block; the Huffman decode tables follow it.
+    pub const LEN: usize = HUFF_LUT + 24;
     /// Levels the per-level arrays hold (root levels up to 19 for 2^21 grids).
     pub const MAX_LEVELS: usize = 24;
 }
@@ -70,11 +65,14 @@ pub enum TraversalFormat {
         /// Translated subtrees (S+A+T).
         translations: bool,
     },
+    /// The live hash DAG of the editor (`edit::gpu::GpuHashDag`): items read in place from its
+    /// nine slab hash tables (`render/dag_hash.glsl`, bound by `GpuRenderer::bind_hash_dag`).
+    HashDag,
 }
 
 impl TraversalFormat {
     /// Every variant, in index order.
-    pub fn all() -> [TraversalFormat; 10] {
+    pub fn all() -> [TraversalFormat; 11] {
         std::array::from_fn(TraversalFormat::from_index)
     }
 
@@ -82,6 +80,7 @@ impl TraversalFormat {
         match i {
             0 => TraversalFormat::Svdag32,
             1 => TraversalFormat::Ssvdag,
+            10 => TraversalFormat::HashDag,
             _ => {
                 let mode = (i - 2) % 4;
                 TraversalFormat::Tsvdag {
@@ -124,6 +123,7 @@ impl TraversalFormat {
                 };
                 2 + mode + 4 * translations as usize
             }
+            TraversalFormat::HashDag => 10,
         }
     }
 
@@ -146,37 +146,6 @@ pub struct GpuDagData {
     pub node_voxels: Vec<u64>,
     /// The format info block.
     pub info: Vec<u32>,
-}
-
-/// Packs bytes little-endian into words (zero-padded).
-fn pack_bytes(out: &mut [u32], bytes: impl Iterator<Item = u8>) {
-    for (i, b) in bytes.enumerate() {
-        out[i / 4] |= (b as u32) << (8 * (i % 4));
-    }
-}
-
-/// The info block's level-independent part: the transform tables.
-fn base_info() -> Vec<u32> {
-    let mut w = vec![0u32; info::LEN];
-    let all: Vec<Transform> = Transform::all().collect();
-    pack_bytes(
-        &mut w[info::COMPOSE..info::INVERSE],
-        all.iter()
-            .flat_map(|a| all.iter().map(move |b| a.compose(*b).index() as u8)),
-    );
-    pack_bytes(
-        &mut w[info::INVERSE..info::OCTANT],
-        all.iter().map(|t| t.inverse().index() as u8),
-    );
-    for (i, t) in all.iter().enumerate() {
-        w[info::OCTANT + i] = (0..8).fold(0, |acc, o| acc | (t.apply_octant(o) as u32) << (3 * o));
-    }
-    pack_bytes(
-        &mut w[info::CHILD_MASK..info::CHILD_MASK + TRANSFORM_COUNT * 64],
-        all.iter()
-            .flat_map(|t| (0..=255u8).map(move |m| t.apply_child_mask(m))),
-    );
-    w
 }
 
 /// Appends the node streams (two u16 per word) and returns each level's u16 start.
@@ -222,7 +191,7 @@ fn ssvdag_data(e: &SsvdagEncoding) -> Result<GpuDagData, EncodeError> {
         .iter()
         .flat_map(|&m| [m as u32, (m >> 32) as u32])
         .collect();
-    let mut w = base_info();
+    let mut w = vec![0u32; info::LEN];
     w[info::STREAM_BASE] = words.len() as u32;
     let starts = push_streams(&mut words, &e.levels);
     w[info::LEVEL_START..info::LEVEL_START + starts.len()].copy_from_slice(&starts);
@@ -230,7 +199,7 @@ fn ssvdag_data(e: &SsvdagEncoding) -> Result<GpuDagData, EncodeError> {
         format: TraversalFormat::Ssvdag,
         resolution: e.resolution,
         words,
-        node_voxels: flatten_counts(e.stream_voxel_counts()?),
+        node_voxels: flatten_counts(e.pointer_voxel_counts()?),
         info: w,
     })
 }
@@ -242,7 +211,7 @@ fn tsvdag_data(e: &TsvdagEncoding) -> Result<GpuDagData, EncodeError> {
         .iter()
         .flat_map(|&m| [m as u32, (m >> 32) as u32])
         .collect();
-    let mut w = base_info();
+    let mut w = vec![0u32; info::LEN];
     w[info::ROOT_XFORM] = e.root.map_or(0, |t| t.index() as u32);
     let set = match e.set {
         TransformSet::None => 0,
@@ -278,13 +247,10 @@ fn tsvdag_data(e: &TsvdagEncoding) -> Result<GpuDagData, EncodeError> {
         for (l, (kind, count, symbols)) in e.huffman_tables().into_iter().enumerate() {
             let single = if kind == 1 { symbols[0] as u32 } else { 0 };
             w[info::HUFF_KIND + l] = kind | single << 16;
-            w[info::HUFF_COUNT + 16 * l..info::HUFF_COUNT + 16 * (l + 1)].copy_from_slice(&count);
             if kind == 2 {
-                let base = info::HUFF_SYMBOLS + 192 * l;
-                pack_bytes(
-                    &mut w[base..base + 192],
-                    symbols.iter().flat_map(|s| s.to_le_bytes()),
-                );
+                let (bits, table) = huffman_decode_table(&count, &symbols);
+                w[info::HUFF_LUT + l] = w.len() as u32 | bits << 24;
+                w.extend(table);
             }
         }
     }
@@ -296,19 +262,66 @@ fn tsvdag_data(e: &TsvdagEncoding) -> Result<GpuDagData, EncodeError> {
         },
         resolution: e.resolution,
         words,
-        node_voxels: flatten_counts(e.stream_voxel_counts()?),
+        node_voxels: flatten_counts(e.pointer_voxel_counts()?),
         info: w,
     })
 }
 
+/// The decode table of a canonical Huffman code (`count[len]` codes of each length, `symbols`
+/// sorted by (length, symbol)), indexed by the low `bits` bits of a pointer (bits = the longest
+/// code): entry = symbol | length << 16, what the bit-serial canonical decoder
+/// (`Huffman::decode`, read least significant bit first) gives for those bits; 0 where no code
+/// matches. One lookup replaces up to 15 dependent steps on the GPU.
+pub fn huffman_decode_table(count: &[u32; 16], symbols: &[u16]) -> (u32, Vec<u32>) {
+    let bits = (1..16).rev().find(|&l| count[l] > 0).unwrap_or(0) as u32;
+    let table = (0..1u32 << bits)
+        .map(|x| {
+            let (mut code, mut first, mut index) = (0u32, 0u32, 0u32);
+            for len in 1..16u32 {
+                code |= (x >> (len - 1)) & 1;
+                let n = count[len as usize];
+                if code < first + n {
+                    let sym = symbols.get((index + code - first) as usize).copied();
+                    return sym.map_or(0, |s| s as u32 | len << 16);
+                }
+                index += n;
+                first = (first + n) << 1;
+                code <<= 1;
+            }
+            0
+        })
+        .collect();
+    (bits, table)
+}
+
 impl GpuDagData {
-    /// The svdag32 layout of `dag` (its words and `VoxelIndex`).
+    /// The svdag32 layout of `dag`: its words, and `VoxelIndex::node_voxels` with, at each child
+    /// pointer word of an inner node, the voxels of the children before it (so the colour index
+    /// reads one count per level instead of one per preceding sibling).
     pub fn svdag32(dag: &Svdag) -> GpuDagData {
+        let mut node_voxels = VoxelIndex::new(dag).node_voxels;
+        for l in 1..dag.level_starts.len() {
+            let (start, end) = (
+                dag.level_starts[l] as usize,
+                dag.level_starts[l - 1] as usize,
+            );
+            let mut p = start;
+            while p < end {
+                let children = dag.words[p].count_ones() as usize;
+                let mut before = 0u64;
+                for k in 0..children {
+                    let child = dag.words[p + 1 + k] as usize;
+                    node_voxels[p + 1 + k] = before;
+                    before += node_voxels[child];
+                }
+                p += 1 + children;
+            }
+        }
         GpuDagData {
             format: TraversalFormat::Svdag32,
             resolution: dag.resolution,
             words: dag.words.clone(),
-            node_voxels: VoxelIndex::new(dag).node_voxels,
+            node_voxels,
             info: vec![0],
         }
     }

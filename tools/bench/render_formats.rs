@@ -47,7 +47,8 @@ pub const FORMAT_NAMES: [&str; 8] = [
     "svdag32",
 ];
 
-fn encode(dag: &Svdag, name: &str) -> Result<EncodedDag> {
+/// `dag` encoded as format `name` (one of [`FORMAT_NAMES`]).
+pub fn encode(dag: &Svdag, name: &str) -> Result<EncodedDag> {
     let mode = |m: &str| match m {
         "base" => Some(TsvdagOptions {
             lut: false,

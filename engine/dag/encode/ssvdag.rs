@@ -332,8 +332,18 @@ impl TreeView for SsvdagEncoding {
 
 impl SsvdagEncoding {
     /// Voxels below every node, by u16 position in its level's stream (the node's header word;
-    /// other positions 0), level 0 empty: what the GPU colour index sums (`render::format`).
+    /// other positions 0), level 0 empty.
     pub fn stream_voxel_counts(&self) -> Result<Vec<Vec<u64>>, EncodeError> {
+        self.voxel_counts(false)
+    }
+
+    /// [`SsvdagEncoding::stream_voxel_counts`] plus, at the first word of every pointer, the
+    /// voxels of the subtree it leads to: what the GPU colour index sums (`render::format`).
+    pub fn pointer_voxel_counts(&self) -> Result<Vec<Vec<u64>>, EncodeError> {
+        self.voxel_counts(true)
+    }
+
+    fn voxel_counts(&self, every_pointer: bool) -> Result<Vec<Vec<u64>>, EncodeError> {
         let mut counts: Vec<Vec<u64>> = vec![Vec::new(); self.levels.len()];
         for l in 1..self.levels.len() {
             let stream = &self.levels[l];
@@ -342,9 +352,10 @@ impl SsvdagEncoding {
             while off < stream.len() {
                 let (ptrs, end) = read_node(stream, off, 2, 0)?;
                 let mut sum = 0u64;
-                for (v, _) in ptrs.into_iter().flatten() {
+                let mut at = off + 1;
+                for (v, code) in ptrs.into_iter().flatten() {
                     let target = (v >> 3) as usize;
-                    sum += if l == 1 {
+                    let n = if l == 1 {
                         self.leaves
                             .get(target)
                             .ok_or_else(|| corrupt(0, "leaf index out of range"))?
@@ -354,6 +365,11 @@ impl SsvdagEncoding {
                             .get(target)
                             .ok_or_else(|| corrupt(0, "node offset out of range"))?
                     };
+                    if every_pointer {
+                        here[at] = n;
+                    }
+                    sum += n;
+                    at += code as usize;
                 }
                 here[off] = sum;
                 off = end;

@@ -1538,8 +1538,18 @@ impl TsvdagEncoding {
     /// Voxels below every node, by u16 position in its level's stream: at a node's header word
     /// the voxels of the stored node, at the first word of a translated pointer the voxels the
     /// translated subtree keeps in its cell (the destructive translation drops some), other
-    /// positions 0; level 0 empty. What the GPU colour index sums (`render::format`).
+    /// positions 0; level 0 empty.
     pub fn stream_voxel_counts(&self) -> Result<Vec<Vec<u64>>, EncodeError> {
+        self.voxel_counts(false)
+    }
+
+    /// [`TsvdagEncoding::stream_voxel_counts`] plus, at the first word of every pointer, the
+    /// voxels of the subtree it leads to: what the GPU colour index sums (`render::format`).
+    pub fn pointer_voxel_counts(&self) -> Result<Vec<Vec<u64>>, EncodeError> {
+        self.voxel_counts(true)
+    }
+
+    fn voxel_counts(&self, every_pointer: bool) -> Result<Vec<Vec<u64>>, EncodeError> {
         let mut counts: Vec<Vec<u64>> = vec![Vec::new(); self.levels.len()];
         let mut shifted: FxHashMap<(u32, u64, u8, [i32; 3]), u64> = FxHashMap::default();
         for l in 1..self.levels.len() {
@@ -1576,6 +1586,9 @@ impl TsvdagEncoding {
                             .get(target as usize)
                             .ok_or_else(|| corrupt(0, "node offset out of range"))?
                     };
+                    if every_pointer {
+                        here[at] = n;
+                    }
                     sum += n;
                     at += code as usize;
                 }

@@ -6,6 +6,7 @@
 //   DAG_FORMAT_TSVDAG  TSVDAG: 16/32/48-bit pointers with transform ids; TSVDAG_LUT (pointer
 //                      tables), TSVDAG_HUFFMAN (Huffman-coded symbols), TSVDAG_TRANSLATIONS
 //                      (translated subtrees: traverse.glsl's second stack).
+//   DAG_FORMAT_HASH    the live hash DAG of the editor, read in place: render/dag_hash.glsl.
 // Layouts: docs/encodings.md; what is uploaded where: engine/render/format.rs.
 //
 // The includer defines, BEFORE including traverse.glsl:
@@ -19,6 +20,18 @@
 // A node handle is (node, xform): svdag32 a word offset and 0; encoded formats a u16 index in
 // the streams (inner levels) or a leaf index (level 0), and the transform id (SSVDAG: the
 // mirror bits, which are the transform ids 0..7) the stored node is seen through.
+//
+// What a format provides to traverse.glsl (names with a default below need not be defined):
+//   dag_root, dag_child(node, xform, aux, level, c, ...), dag_inner_mask, dag_leaf_byte;
+//   dag_begin (DAG_HAS_BEGIN; default: nothing): per-invocation setup (constants into registers);
+//   dag_node_aux / dag_frame_mask (DAG_HAS_AUX; default: aux = the world child mask): the word
+//     a frame keeps for `dag_child` and the world mask derived from it (encoded: the header);
+//   dag_child_masks (DAG_HAS_CHILD_MASKS; default: dag_inner_mask or dag_leaf_bits);
+//   dag_leaf_bits (DAG_HAS_LEAF_BITS; default: 8 x dag_leaf_byte): a leaf's 64 world-order bits;
+//   dag_voxels_before (DAG_HAS_VOXELS_BEFORE; default: each preceding sibling's
+//     dag_child + dag_child_count, so a format without it defines dag_child_count);
+//   dag_leaf_rank (DAG_HAS_LEAF_RANK; default: the popcount of the leaf bits before the voxel):
+//     the colour index's part inside the leaf.
 #ifndef VOXDAG_RENDER_DAG_FORMATS_GLSL
 #define VOXDAG_RENDER_DAG_FORMATS_GLSL
 
@@ -30,41 +43,122 @@
 #define DAG_INFO_CODING 4u
 #define DAG_INFO_LEVEL_START 8u
 #define DAG_INFO_TABLE_START 32u
-#define DAG_INFO_COMPOSE 56u
-#define DAG_INFO_INVERSE 632u
-#define DAG_INFO_OCTANT 644u
-#define DAG_INFO_CHILD_MASK 692u
-#define DAG_INFO_HUFF_KIND 3764u
-#define DAG_INFO_HUFF_COUNT 3788u
-#define DAG_INFO_HUFF_SYMBOLS 4172u
+#define DAG_INFO_HUFF_KIND 56u
+#define DAG_INFO_HUFF_LUT 80u
+// Levels the per-level words hold (`info::MAX_LEVELS`).
+#define DAG_MAX_LEVELS 24u
 
-// Byte `i` of the info block starting at word `base`.
-uint dag_info_byte(uint base, uint i) {
-    return (dag_info(base + (i >> 2u)) >> (8u * (i & 3u))) & 0xffu;
+// Words i and i + 1 of the DAG. Includers that can load both at once (one 64-bit load, which
+// lavapipe executes as one per-lane loop instead of two) define DAG_HAS_WORD_PAIR and
+// `uvec2 dag_word_pair(uint i)` before including traverse.glsl.
+#if !defined(DAG_HAS_WORD_PAIR)
+uvec2 dag_word_pair(uint i) {
+    return uvec2(dag_word(i), dag_word(i + 1u));
+}
+#endif
+
+// Transform group (engine/dag/transform.rs) computed with integer arithmetic rather than the
+// info block's tables: on lavapipe every buffer load is a scalar loop over the 8 SIMD lanes that
+// runs whether or not a lane needs it, while these few vector operations cost far less
+// (docs/pathtracing.md, "Where the time goes on lavapipe"). They equal `Transform::compose`,
+// `inverse`, `apply_octant`, `apply_child_mask` and `apply_leaf` for all 48 transforms.
+// Transform t = 8 * permutation + mirror bits; output axis i reads input axis
+// `PERMUTATIONS[t >> 3][i]`, then mirror bit i flips it.
+
+// Output axis i of transform t reads input axis `xform_axis(t, i)` (2 bits per permutation).
+uint xform_axis(uint t, uint i) {
+    uint packed = i == 0u ? 0xa50u : (i == 1u ? 0x489u : 0x126u);
+    return (packed >> (2u * (t >> 3u))) & 3u;
 }
 
-// Transform group (engine/dag/transform.rs): `a ∘ b`, inverse, octant and child-mask action.
-uint xform_compose(uint a, uint b) {
-    return dag_info_byte(DAG_INFO_COMPOSE, a * 48u + b);
-}
-
-uint xform_inverse(uint t) {
-    return dag_info_byte(DAG_INFO_INVERSE, t);
+// The octant bits o permuted by t's permutation (no mirror).
+uint xform_permute_bits(uint t, uint o) {
+    return ((o >> xform_axis(t, 0u)) & 1u) | (((o >> xform_axis(t, 1u)) & 1u) << 1u) |
+           (((o >> xform_axis(t, 2u)) & 1u) << 2u);
 }
 
 uint xform_octant(uint t, uint o) {
-    return (dag_info(DAG_INFO_OCTANT + t) >> (3u * o)) & 7u;
+    return xform_permute_bits(t, o) ^ (t & 7u);
 }
 
+// The stored octant s with `xform_octant(t, s) == c`.
+uint xform_stored_octant(uint t, uint c) {
+    uint x = c ^ (t & 7u);
+    return ((x & 1u) << xform_axis(t, 0u)) | (((x >> 1u) & 1u) << xform_axis(t, 1u)) |
+           (((x >> 2u) & 1u) << xform_axis(t, 2u));
+}
+
+uint xform_compose(uint a, uint b) {
+    uint c0 = xform_axis(b, xform_axis(a, 0u));
+    uint c1 = xform_axis(b, xform_axis(a, 1u));
+    uint c2 = xform_axis(b, xform_axis(a, 2u));
+    uint perm = 2u * c0 + (c1 > c2 ? 1u : 0u);
+    return 8u * perm + ((a & 7u) ^ xform_permute_bits(a, b & 7u));
+}
+
+uint xform_inverse(uint t) {
+    uint p = t >> 3u;
+    uint q = p == 3u ? 4u : (p == 4u ? 3u : p);
+    uint m = t & 7u;
+    uint mb = ((m & 1u) << xform_axis(t, 0u)) | (((m >> 1u) & 1u) << xform_axis(t, 1u)) |
+              (((m >> 2u) & 1u) << xform_axis(t, 2u));
+    return 8u * q + mb;
+}
+
+// Delta swap: exchanges the bits of x selected by mask with those `shift` above them.
+uint xform_delta_swap(uint x, uint mask, uint shift) {
+    uint d = ((x >> shift) ^ x) & mask;
+    return x ^ d ^ (d << shift);
+}
+
+uint64_t xform_delta_swap64(uint64_t x, uint64_t mask, uint shift) {
+    uint64_t d = ((x >> shift) ^ x) & mask;
+    return x ^ d ^ (d << shift);
+}
+
+// Index-bit transpositions realising permutation p: first (2 bits per p) then second;
+// code 1 swaps index bits 0 and 1, 2 swaps 1 and 2, 3 swaps 0 and 2.
+#define XFORM_FIRST_SWAP 0xe58u
+#define XFORM_SECOND_SWAP 0x180u
+
+// The mask of child octants (bit o) seen through t: bit `xform_octant(t, o)` of the result.
 uint xform_child_mask(uint t, uint mask) {
-    return dag_info_byte(DAG_INFO_CHILD_MASK, t * 256u + mask);
+    uint p = t >> 3u;
+    uint m = mask;
+    for (uint k = 0u; k < 2u; k++) {
+        uint code = ((k == 0u ? XFORM_FIRST_SWAP : XFORM_SECOND_SWAP) >> (2u * p)) & 3u;
+        uint sel = code == 1u ? 0x22u : (code == 2u ? 0x0cu : (code == 3u ? 0x0au : 0u));
+        m = xform_delta_swap(m, sel, code);
+    }
+    m = (t & 1u) != 0u ? xform_delta_swap(m, 0x55u, 1u) : m;
+    m = (t & 2u) != 0u ? xform_delta_swap(m, 0x33u, 2u) : m;
+    m = (t & 4u) != 0u ? xform_delta_swap(m, 0x0fu, 4u) : m;
+    return m;
 }
 
-// Output axis i of transform t reads input axis `xform_axis(t, i)` (`PERMUTATIONS`).
-uint xform_axis(uint t, uint i) {
-    // PERMUTATIONS = [0,1,2] [0,2,1] [1,0,2] [1,2,0] [2,0,1] [2,1,0], 2 bits per axis.
-    const uint perms[6] = uint[6](0x24u, 0x18u, 0x21u, 0x09u, 0x12u, 0x06u);
-    return (perms[t >> 3u] >> (2u * i)) & 3u;
+// A 4^3 leaf mask (bit = Morton code sub-block << 3 | voxel) seen through t (`apply_leaf`).
+uvec2 xform_leaf(uint t, uvec2 bits) {
+    uint64_t x = packUint2x32(bits);
+    uint p = t >> 3u;
+    for (uint k = 0u; k < 2u; k++) {
+        uint code = ((k == 0u ? XFORM_FIRST_SWAP : XFORM_SECOND_SWAP) >> (2u * p)) & 3u;
+        uint64_t lo = code == 1u ? 0x2222222222222222ul
+                    : (code == 2u ? 0x0c0c0c0c0c0c0c0cul : (code == 3u ? 0x0a0a0a0a0a0a0a0aul : 0ul));
+        uint64_t hi = code == 1u ? 0x0000ff000000ff00ul
+                    : (code == 2u ? 0x00000000ffff0000ul : (code == 3u ? 0x00000000ff00ff00ul : 0ul));
+        x = xform_delta_swap64(x, lo, code);
+        x = xform_delta_swap64(x, hi, 8u * code);
+    }
+    if ((t & 1u) != 0u) {
+        x = xform_delta_swap64(xform_delta_swap64(x, 0x5555555555555555ul, 1u), 0x00ff00ff00ff00fful, 8u);
+    }
+    if ((t & 2u) != 0u) {
+        x = xform_delta_swap64(xform_delta_swap64(x, 0x3333333333333333ul, 2u), 0x0000ffff0000fffful, 16u);
+    }
+    if ((t & 4u) != 0u) {
+        x = xform_delta_swap64(xform_delta_swap64(x, 0x0f0f0f0f0f0f0f0ful, 4u), 0x00000000fffffffful, 32u);
+    }
+    return unpackUint2x32(x);
 }
 
 // `T(Shift_t(X)) = Shift_t'(T(X))`: the translation seen through t (`transform_translation`).
@@ -80,9 +174,48 @@ ivec3 xform_translation(uint t, ivec3 tr) {
 #if defined(DAG_FORMAT_SSVDAG) || defined(DAG_FORMAT_TSVDAG)
 #define DAG_ENCODED 1
 
+// Copies of the info block's scalars, read once per invocation (`dag_begin`, called by
+// `traverse_begin`) instead of once per child fetch.
+uint g_dag_stream_base;
+uint g_dag_level_start[DAG_MAX_LEVELS];
+#if defined(DAG_FORMAT_TSVDAG)
+uint g_dag_set;
+uint g_dag_coding;
+#if defined(TSVDAG_LUT)
+uint g_dag_table_base;
+uint g_dag_table_start[DAG_MAX_LEVELS];
+#endif
+#if defined(TSVDAG_HUFFMAN)
+uint g_dag_huff_kind[DAG_MAX_LEVELS];
+uint g_dag_huff_lut[DAG_MAX_LEVELS];
+#endif
+#endif
+
+#define DAG_HAS_BEGIN 1
+void dag_begin(uint root_level) {
+    g_dag_stream_base = dag_info(DAG_INFO_STREAM_BASE);
+    for (uint l = 0u; l <= root_level && l < DAG_MAX_LEVELS; l++) {
+        g_dag_level_start[l] = dag_info(DAG_INFO_LEVEL_START + l);
+#if defined(TSVDAG_LUT)
+        g_dag_table_start[l] = dag_info(DAG_INFO_TABLE_START + l);
+#endif
+#if defined(TSVDAG_HUFFMAN)
+        g_dag_huff_kind[l] = dag_info(DAG_INFO_HUFF_KIND + l);
+        g_dag_huff_lut[l] = dag_info(DAG_INFO_HUFF_LUT + l);
+#endif
+    }
+#if defined(DAG_FORMAT_TSVDAG)
+    g_dag_set = dag_info(DAG_INFO_SET);
+    g_dag_coding = dag_info(DAG_INFO_CODING);
+#if defined(TSVDAG_LUT)
+    g_dag_table_base = dag_info(DAG_INFO_TABLE_BASE);
+#endif
+#endif
+}
+
 // u16 `g` of the node streams.
 uint dag_u16(uint g) {
-    return (dag_word(dag_info(DAG_INFO_STREAM_BASE) + (g >> 1u)) >> ((g & 1u) << 4u)) & 0xffffu;
+    return (dag_word(g_dag_stream_base + (g >> 1u)) >> ((g & 1u) << 4u)) & 0xffffu;
 }
 
 // 8-bit stored child mask of a 2-bit-per-octant header.
@@ -93,78 +226,86 @@ uint dag_header_mask(uint h) {
     return (x | (x >> 4u)) & 0x00ffu;
 }
 
-// The pointer of stored octant `so` of the node at u16 `node`: its value, size code (1..3 u16)
-// and the u16 index of its first word.
-uint64_t dag_read_pointer(uint node, uint so, out uint code, out uint at) {
-    uint h = dag_u16(node);
+// The pointer of stored octant `so` of the node at u16 `node` with header h: its value, size
+// code (1..3 u16)
+// and the u16 index of its first word. The up to three u16 are read as one word pair (the
+// streams end with a zero word, so the pair never leaves the buffer).
+uint64_t dag_read_pointer(uint node, uint h, uint so, out uint code, out uint at) {
     uint below = h & ((1u << (2u * so)) - 1u);
     at = node + 1u + uint(bitCount(below & 0x5555u)) + 2u * uint(bitCount(below & 0xaaaau));
     code = (h >> (2u * so)) & 3u;
-    uint64_t v = uint64_t(dag_u16(at));
-    if (code >= 2u) {
-        v |= uint64_t(dag_u16(at + 1u)) << 16u;
-    }
-    if (code == 3u) {
-        v |= uint64_t(dag_u16(at + 2u)) << 32u;
-    }
-    return v;
+    uint64_t pair = packUint2x32(dag_word_pair(g_dag_stream_base + (at >> 1u)));
+    uint64_t v = pair >> ((at & 1u) << 4u);
+    uint64_t keep = code == 1u ? 0xfffful : (code == 2u ? 0xfffffffful : 0xfffffffffffful);
+    return v & keep;
 }
 
 // Leaf `i`'s two mask words.
 uvec2 dag_leaf_words(uint i) {
-    return uvec2(dag_word(2u * i), dag_word(2u * i + 1u));
+    return dag_word_pair(2u * i);
 }
 
 uint dag_stored_byte(uvec2 m, uint s) {
     return (m[s >> 2u] >> (8u * (s & 3u))) & 0xffu;
 }
 
-// The world mask of the non-empty 2^3 sub-blocks of a leaf seen through xform.
-uint dag_leaf_block_mask(uint leaf, uint xform) {
-    uvec2 m = dag_leaf_words(leaf);
-    uint mask = 0u;
-    for (uint s = 0u; s < 8u; s++) {
-        if (dag_stored_byte(m, s) != 0u) {
-            mask |= 1u << s;
-        }
-    }
-    return xform_child_mask(xform, mask);
+// The leaf's 64 voxel bits seen through xform, in world Morton order.
+#define DAG_HAS_LEAF_BITS 1
+uvec2 dag_leaf_bits(uint leaf, uint xform) {
+    return xform_leaf(xform, dag_leaf_words(leaf));
 }
 
 // World sub-block c of a leaf seen through xform (its voxels in world order).
 uint dag_leaf_byte(uint leaf, uint xform, uint c) {
     uvec2 m = dag_leaf_words(leaf);
-    return xform_child_mask(xform, dag_stored_byte(m, xform_octant(xform_inverse(xform), c)));
+    return xform_child_mask(xform, dag_stored_byte(m, xform_stored_octant(xform, c)));
 }
 
-// Voxels of the leaf before world Morton code `code` (sub-block << 3 | voxel).
-uint dag_leaf_rank(uint leaf, uint xform, uint code) {
-    uvec2 m = dag_leaf_words(leaf);
-    uint inv = xform_inverse(xform);
-    uint cb = code >> 3u;
-    uint rank = 0u;
-    for (uint c = 0u; c < cb; c++) {
-        rank += uint(bitCount(dag_stored_byte(m, xform_octant(inv, c))));
-    }
-    uint world = xform_child_mask(xform, dag_stored_byte(m, xform_octant(inv, cb)));
-    return rank + uint(bitCount(world & ((1u << (code & 7u)) - 1u)));
+// A frame's aux word is the node's 2-bit-per-octant header: child fetches and pops need no
+// header load.
+#define DAG_HAS_AUX 1
+uint dag_node_aux(uint node, uint xform, uint level) {
+    return dag_u16(node);
+}
+
+// World child mask of a node with header `aux` seen through xform.
+uint dag_frame_mask(uint aux, uint xform) {
+    return xform_child_mask(xform, dag_header_mask(aux));
 }
 
 // World child mask of the inner node (node, xform) at level >= 1.
 uint dag_inner_mask(uint node, uint xform, uint level) {
-    return xform_child_mask(xform, dag_header_mask(dag_u16(node)));
+    return dag_frame_mask(dag_u16(node), xform);
 }
 
-// Voxels of the child at world octant c of an inner node whose children are at `child_level`.
-uint64_t dag_child_count(uint child, uint child_level, uint pointer_at, bool shifted) {
-    if (shifted) {
-        return dag_node_voxels(pointer_at);
+// The child masks of (child, xform) at child_level: the world child mask and header of an
+// inner node, or the world voxel bits of a leaf, from one word-pair load at the header or the
+// leaf.
+#define DAG_HAS_CHILD_MASKS 1
+void dag_child_masks(uint child, uint xform, uint child_level, out uint mask, out uvec2 leaf,
+                     out uint aux) {
+    uvec2 pair = dag_word_pair(child_level == 0u ? 2u * child : g_dag_stream_base + (child >> 1u));
+    leaf = xform_leaf(xform, pair);
+    aux = (pair.x >> ((child & 1u) << 4u)) & 0xffffu;
+    mask = dag_frame_mask(aux, xform);
+}
+
+// Voxels of the children before world octant c of the inner node (node, xform) with header
+// `aux`: the counts stored at their pointers' first u16 (`GpuDagData`: the voxels of the
+// subtree each pointer leads to), found from the header alone (no pointer decoded).
+#define DAG_HAS_VOXELS_BEFORE 1
+uint64_t dag_voxels_before(uint node, uint xform, uint aux, uint level, uint c) {
+    uint64_t sum = 0ul;
+    uint before = dag_frame_mask(aux, xform) & ((1u << c) - 1u);
+    while (before != 0u) {
+        uint k = uint(findLSB(before));
+        before &= before - 1u;
+        uint so = xform_stored_octant(xform, k);
+        uint below = aux & ((1u << (2u * so)) - 1u);
+        uint at = node + 1u + uint(bitCount(below & 0x5555u)) + 2u * uint(bitCount(below & 0xaaaau));
+        sum += dag_node_voxels(at);
     }
-    if (child_level == 0u) {
-        uvec2 m = dag_leaf_words(child);
-        return uint64_t(bitCount(m.x) + bitCount(m.y));
-    }
-    return dag_node_voxels(child);
+    return sum;
 }
 #endif
 
@@ -178,12 +319,12 @@ void dag_root(uint root_level, out uint node, out uint xform) {
 // The child at world octant c (set in the world mask) of the inner node (node, xform) at
 // `level`: its handle, the translation of its subtree (world frame) and the u16 index of the
 // pointer. SSVDAG: stored octant c ^ mirror, child mirror = mirror ^ pointer mirror.
-void dag_child(uint node, uint xform, uint mask, uint level, uint c, out uint child,
+void dag_child(uint node, uint xform, uint aux, uint level, uint c, out uint child,
                out uint child_xform, out ivec3 shift, out uint at) {
     uint code;
-    uint64_t v = dag_read_pointer(node, c ^ xform, code, at);
+    uint64_t v = dag_read_pointer(node, aux, c ^ xform, code, at);
     uint target = uint(v >> 3u);
-    child = level == 1u ? target : dag_info(DAG_INFO_LEVEL_START + level - 1u) + target;
+    child = level == 1u ? target : g_dag_level_start[level - 1u] + target;
     child_xform = xform ^ uint(v & 7ul);
     shift = ivec3(0);
 }
@@ -197,32 +338,19 @@ void dag_root(uint root_level, out uint node, out uint xform) {
 
 #if defined(TSVDAG_HUFFMAN)
 // Canonical Huffman decode (`Huffman::decode`) of the low bits of e with child level cl's code:
-// the symbol and its length.
+// the symbol and its length, looked up in the level's decode table (`huffman_decode_table` in
+// engine/render/format.rs: one load instead of a bit-serial loop with a load per bit).
 uint tsvdag_huffman(uint cl, uint64_t e, out uint len) {
-    uint kind = dag_info(DAG_INFO_HUFF_KIND + cl);
+    uint kind = g_dag_huff_kind[cl];
     len = 0u;
     if ((kind & 0xffffu) == 1u) {
         return kind >> 16u;
     }
-    uint bits = uint(e & 0x7ffful);
-    uint code = 0u;
-    uint first = 0u;
-    uint index = 0u;
-    for (uint l = 1u; l <= 15u; l++) {
-        code |= (bits >> (l - 1u)) & 1u;
-        uint n = dag_info(DAG_INFO_HUFF_COUNT + cl * 16u + l);
-        if (code < first + n) {
-            uint i = index + code - first;
-            len = l;
-            return (dag_info(DAG_INFO_HUFF_SYMBOLS + cl * 192u + (i >> 1u)) >> ((i & 1u) << 4u)) &
-                   0xffffu;
-        }
-        index += n;
-        first = (first + n) << 1u;
-        code <<= 1u;
-    }
-    // Validated files never get here (every pointer decodes on load).
-    return 0u;
+    uint lut = g_dag_huff_lut[cl];
+    uint entry = dag_info((lut & 0xffffffu) + (uint(e) & ((1u << (lut >> 24u)) - 1u)));
+    entry = (kind & 0xffffu) == 2u ? entry : 0u;
+    len = entry >> 16u;
+    return entry & 0xffffu;
 }
 #endif
 
@@ -237,15 +365,15 @@ uint tsvdag_take(inout uint64_t e, uint bits) {
 // = xform^-1(c); the pointer value, through the table when it is an index, then the transform
 // field or Huffman symbol, the translation, the target; child transform = xform ∘ pointer
 // transform, translation seen through xform.
-void dag_child(uint node, uint xform, uint mask, uint level, uint c, out uint child,
+void dag_child(uint node, uint xform, uint aux, uint level, uint c, out uint child,
                out uint child_xform, out ivec3 shift, out uint at) {
     uint code;
-    uint so = xform == 0u ? c : xform_octant(xform_inverse(xform), c);
-    uint64_t v = dag_read_pointer(node, so, code, at);
+    uint so = xform_stored_octant(xform, c);
+    uint64_t v = dag_read_pointer(node, aux, so, code, at);
     uint cl = level - 1u;
     uint64_t e = v;
 #if defined(TSVDAG_LUT)
-    bool tagged = ((dag_info(DAG_INFO_CODING) >> (8u + cl)) & 1u) != 0u;
+    bool tagged = ((g_dag_coding >> (8u + cl)) & 1u) != 0u;
     bool in_table = true;
     uint64_t index = v;
     if (code != 1u || tagged) {
@@ -254,8 +382,8 @@ void dag_child(uint node, uint xform, uint mask, uint level, uint c, out uint ch
         e = v >> 1u;
     }
     if (in_table) {
-        uint w = dag_info(DAG_INFO_TABLE_BASE) + 2u * (dag_info(DAG_INFO_TABLE_START + cl) + uint(index));
-        e = uint64_t(dag_word(w)) | (uint64_t(dag_word(w + 1u)) << 32u);
+        uint w = g_dag_table_base + 2u * (g_dag_table_start[cl] + uint(index));
+        e = packUint2x32(dag_word_pair(w));
     }
 #endif
     uint t = 0u;
@@ -278,7 +406,7 @@ void dag_child(uint node, uint xform, uint mask, uint level, uint c, out uint ch
     }
 #endif
 #else
-    uint set_word = dag_info(DAG_INFO_SET);
+    uint set_word = g_dag_set;
     uint set = set_word & 3u;
 #if defined(TSVDAG_TRANSLATIONS)
     bool flagged = set != 0u || translates;
@@ -293,7 +421,7 @@ void dag_child(uint node, uint xform, uint mask, uint level, uint c, out uint ch
             // Translation coding of child level cl: full (3 fields), escape (a zero first
             // field means none) or mask (3-bit mask of the fields present).
             bool compact = ((set_word >> 4u) & 1u) != 0u;
-            bool mask_coding = compact && ((dag_info(DAG_INFO_CODING) >> cl) & 1u) != 0u;
+            bool mask_coding = compact && ((g_dag_coding >> cl) & 1u) != 0u;
             uint axes = 7u;
             if (mask_coding) {
                 axes = tsvdag_take(e, 3u);
@@ -315,13 +443,17 @@ void dag_child(uint node, uint xform, uint mask, uint level, uint c, out uint ch
     }
 #endif
     uint target = uint(e);
-    child = cl == 0u ? target : dag_info(DAG_INFO_LEVEL_START + cl) + target;
+    child = cl == 0u ? target : g_dag_level_start[cl] + target;
     child_xform = xform_compose(xform, t);
     shift = xform_translation(xform, tr);
 }
 #endif
 
-#if !defined(DAG_ENCODED)
+#if defined(DAG_FORMAT_HASH)
+#include "render/dag_hash.glsl"
+#endif
+
+#if !defined(DAG_ENCODED) && !defined(DAG_FORMAT_HASH)
 // svdag32: word offsets, no transforms (xform is always 0).
 void dag_root(uint root_level, out uint node, out uint xform) {
     node = 0u;
@@ -340,36 +472,91 @@ uint dag_inner_mask(uint node, uint xform, uint level) {
     return dag_word(node) & 0xffu;
 }
 
-uint dag_leaf_block_mask(uint ptr, uint xform) {
-    uint lo = dag_word(ptr);
-    uint hi = dag_word(ptr + 1u);
-    uint mask = 0u;
-    for (uint s = 0u; s < 4u; s++) {
-        if (((lo >> (8u * s)) & 0xffu) != 0u) {
-            mask |= 1u << s;
-        }
-        if (((hi >> (8u * s)) & 0xffu) != 0u) {
-            mask |= 1u << (s + 4u);
-        }
-    }
-    return mask;
+#define DAG_HAS_LEAF_BITS 1
+uvec2 dag_leaf_bits(uint ptr, uint xform) {
+    return dag_word_pair(ptr);
 }
 
 uint dag_leaf_byte(uint ptr, uint xform, uint s) {
     return (dag_word(ptr + (s >> 2u)) >> (8u * (s & 3u))) & 0xffu;
 }
 
-uint dag_leaf_rank(uint ptr, uint xform, uint code) {
-    uint lo = dag_word(ptr);
-    if (code < 32u) {
-        return uint(bitCount(lo & ((1u << code) - 1u)));
-    }
-    uint hi = dag_word(ptr + 1u);
-    return uint(bitCount(lo)) + uint(bitCount(hi & ((1u << (code - 32u)) - 1u)));
+// The child masks of (child, xform) at child_level: its world child mask (inner node) or its
+// 64 voxel bits (leaf), from one load of two words either way.
+#define DAG_HAS_CHILD_MASKS 1
+void dag_child_masks(uint child, uint xform, uint child_level, out uint mask, out uvec2 leaf,
+                     out uint aux) {
+    leaf = dag_word_pair(child);
+    mask = leaf.x & 0xffu;
+    aux = mask;
 }
 
-uint64_t dag_child_count(uint child, uint child_level, uint pointer_at, bool shifted) {
-    return dag_node_voxels(child);
+// Voxels of the children before world octant c of the inner node at `node` (with mask): the
+// count stored at the child's pointer word (`GpuDagData::svdag32`).
+#define DAG_HAS_VOXELS_BEFORE 1
+uint64_t dag_voxels_before(uint node, uint xform, uint mask, uint level, uint c) {
+    return dag_node_voxels(node + 1u + uint(bitCount(mask & ((1u << c) - 1u))));
+}
+#endif
+
+// Defaults for formats that do not provide the optional hooks.
+#if !defined(DAG_HAS_BEGIN)
+void dag_begin(uint root_level) {
+}
+#endif
+
+#if !defined(DAG_HAS_AUX)
+// Formats without an aux word: it is the world child mask (what `dag_child` takes).
+uint dag_node_aux(uint node, uint xform, uint level) {
+    return dag_inner_mask(node, xform, level);
+}
+
+uint dag_frame_mask(uint aux, uint xform) {
+    return aux;
+}
+#endif
+
+#if !defined(DAG_HAS_CHILD_MASKS)
+void dag_child_masks(uint child, uint xform, uint child_level, out uint mask, out uvec2 leaf,
+                     out uint aux) {
+    leaf = uvec2(0u);
+    mask = 0u;
+    if (child_level == 0u) {
+        leaf = dag_leaf_bits(child, xform);
+    } else {
+        mask = dag_inner_mask(child, xform, child_level);
+    }
+    aux = mask;
+}
+#endif
+
+#if !defined(DAG_HAS_VOXELS_BEFORE)
+// Voxels of the children before world octant c of the inner node (node, xform) with world mask
+// `mask` at `level`: each preceding sibling's count.
+uint64_t dag_voxels_before(uint node, uint xform, uint aux, uint level, uint c) {
+    uint64_t sum = 0ul;
+    uint before = dag_frame_mask(aux, xform) & ((1u << c) - 1u);
+    while (before != 0u) {
+        uint k = uint(findLSB(before));
+        before &= before - 1u;
+        uint sib;
+        uint sib_xform;
+        ivec3 sib_shift;
+        uint at;
+        dag_child(node, xform, aux, level, k, sib, sib_xform, sib_shift, at);
+        sum += dag_child_count(sib, level - 1u, at, any(notEqual(sib_shift, ivec3(0))));
+    }
+    return sum;
+}
+#endif
+
+#if !defined(DAG_HAS_LEAF_BITS)
+uvec2 dag_leaf_bits(uint leaf, uint xform) {
+    uvec2 bits = uvec2(0u);
+    for (uint s = 0u; s < 8u; s++) {
+        bits[s >> 2u] |= dag_leaf_byte(leaf, xform, s) << (8u * (s & 3u));
+    }
+    return bits;
 }
 #endif
 

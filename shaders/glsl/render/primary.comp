@@ -48,6 +48,17 @@ uint dag_info(uint i) {
     return WordsRef(push.dag_info).w[i];
 }
 
+// Words i and i + 1 as one 64-bit load (4-byte aligned: x86 lavapipe and GPUs load it as two
+// words' worth; one per-lane loop on lavapipe instead of two).
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer WordPairRef {
+    uint64_t v;
+};
+
+#define DAG_HAS_WORD_PAIR 1
+uvec2 dag_word_pair(uint i) {
+    return unpackUint2x32(WordPairRef(push.words + 4ul * uint64_t(i)).v);
+}
+
 uint64_t dag_node_voxels(uint i) {
     return Words64Ref(push.node_voxels).w[i];
 }
@@ -65,6 +76,7 @@ void main() {
     if (pixel.x >= p.width || pixel.y >= p.height) {
         return;
     }
+    traverse_begin(p.root_level);
     bool hit;
     Hit h;
     vec4 color = shade_pixel_hit(pixel, p, hit, h);

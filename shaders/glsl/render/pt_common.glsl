@@ -58,6 +58,17 @@ uint dag_info(uint i) {
     return PtWordsRef(push.dag_info).w[i];
 }
 
+// Words i and i + 1 as one 64-bit load (4-byte aligned: x86 lavapipe and GPUs load it as two
+// words' worth; one per-lane loop on lavapipe instead of two).
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer PtWordPairRef {
+    uint64_t v;
+};
+
+#define DAG_HAS_WORD_PAIR 1
+uvec2 dag_word_pair(uint i) {
+    return unpackUint2x32(PtWordPairRef(push.words + 4ul * uint64_t(i)).v);
+}
+
 uint64_t dag_node_voxels(uint i) {
     return PtWords64Ref(push.node_voxels).w[i];
 }

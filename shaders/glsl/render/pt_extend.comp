@@ -19,6 +19,7 @@ void main() {
     PtPathsRef paths = PtPathsRef(pt.paths);
     vec3 origin = paths.p[index].origin.xyz;
     vec3 dir = paths.p[index].dir.xyz;
+    traverse_begin(p.root_level);
     Hit h;
     bool hit = trace_ray(origin, dir, TRAVERSE_T_UNBOUNDED, p.root_level, h);
     if (push.bounce == 0u && push.sample_index == 0u && pt.first_hits != 0ul) {

@@ -23,6 +23,7 @@ void main() {
     vec3 origin;
     vec3 dir;
     pt_camera_ray(pixel, p, pt_random(key, 0u, 0u), pt_random(key, 0u, 1u), origin, dir);
+    traverse_begin(p.root_level);
     vec3 throughput = vec3(1.0);
     precise vec3 radiance = vec3(0.0);
     vec3 sun = pt.sun.xyz;

@@ -16,6 +16,7 @@ void main() {
         return;
     }
     PtShadowRay ray = PtShadowsRef(pt.shadow_queue).r[slot];
+    traverse_begin(p.root_level);
     Hit blocker;
     if (!trace_ray(ray.origin.xyz, pt.sun.xyz, TRAVERSE_T_UNBOUNDED, p.root_level, blocker)) {
         uint index = floatBitsToUint(ray.origin.w);

@@ -6,7 +6,8 @@
 //   uint dag_word(uint i);            // the DAG's words (svdag32: `Svdag::words`)
 //   uint64_t dag_node_voxels(uint i); // voxel counts (svdag32: `VoxelIndex::node_voxels[i]`)
 //   uint dag_info(uint i);            // format info block (unused by svdag32)
-// Provides `struct Hit` and
+// Provides `struct Hit`,
+//   void traverse_begin(uint root_level); // once per invocation, before any trace_ray
 //   bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit);
 // `root_level` is `RenderParams::root_level` (log2(N) - 2); the grid is [0, 4 << root_level)^3.
 //
@@ -101,6 +102,17 @@ ivec3 traverse_normal(vec3 dir, float t_near, uint entry_axis) {
 }
 
 #if defined(TSVDAG_TRANSLATIONS)
+// An entry of the translated-subtree stack: the depth of the subtree's root frame, the outer
+// base and cursor to restore, the outer clip box, the subtree's translated origin.
+struct TraverseShift {
+    uint depth;
+    ivec3 base;
+    uvec3 cursor;
+    ivec3 lo;
+    ivec3 hi;
+    ivec3 origin;
+};
+
 // Morton code of a point inside a 16^3 cell (4 bits per axis).
 uint traverse_morton16(uvec3 p) {
     uint code = 0u;
@@ -167,7 +179,8 @@ uint traverse_shifted_rank(uint node, uint xform, uint level, ivec3 org, ivec3 c
         uint c = s_next[top];
         s_next[top] = c + 1u;
         uint lvl = level - top;
-        uint mask = dag_inner_mask(s_node[top], s_xform[top], lvl);
+        uint aux = dag_node_aux(s_node[top], s_xform[top], lvl);
+        uint mask = dag_frame_mask(aux, s_xform[top]);
         if ((mask & (1u << c)) == 0u) {
             continue;
         }
@@ -177,7 +190,7 @@ uint traverse_shifted_rank(uint node, uint xform, uint level, ivec3 org, ivec3 c
         uint child_xform;
         ivec3 shift;
         uint at;
-        dag_child(s_node[top], s_xform[top], mask, lvl, c, child, child_xform, shift, at);
+        dag_child(s_node[top], s_xform[top], aux, lvl, c, child, child_xform, shift, at);
         ivec3 lo = s_lo[top];
         ivec3 hi = s_hi[top];
         if (any(notEqual(shift, ivec3(0)))) {
@@ -204,6 +217,46 @@ uint traverse_shifted_rank(uint node, uint xform, uint level, ivec3 org, ivec3 c
 }
 #endif
 
+// Per-invocation setup of the format (its constants read once into registers: every load is
+// a scalar loop over the SIMD lanes on lavapipe, so none is repeated per ray or per node).
+void traverse_begin(uint root_level) {
+    dag_begin(root_level);
+}
+
+// The ordinals (visit order i, child i ^ mirror) of the children in the world mask `mask`:
+// bit i set when child i ^ mirror is.
+uint traverse_order(uint mask, uint mirror) {
+    uint m = mask;
+    m = (mirror & 1u) != 0u ? ((m & 0x55u) << 1u) | ((m >> 1u) & 0x55u) : m;
+    m = (mirror & 2u) != 0u ? ((m & 0x33u) << 2u) | ((m >> 2u) & 0x33u) : m;
+    m = (mirror & 4u) != 0u ? ((m & 0x0fu) << 4u) | ((m >> 4u) & 0x0fu) : m;
+    return m;
+}
+
+// Non-empty 2^3 sub-blocks of a 4^3 leaf (bit s: byte s of the bits is non-zero).
+uint traverse_block_mask(uvec2 bits) {
+    uint mask = 0u;
+    for (uint s = 0u; s < 4u; s++) {
+        mask |= (((bits.x >> (8u * s)) & 0xffu) != 0u ? 1u : 0u) << s;
+        mask |= (((bits.y >> (8u * s)) & 0xffu) != 0u ? 1u : 0u) << (s + 4u);
+    }
+    return mask;
+}
+
+// The traversal visits the same children in the same order, with the same slab tests, as
+// `Svdag::raycast`, so it finds the same voxel; how it is organised is shaped by lavapipe, which
+// runs 8 invocations as the lanes of one SIMD loop and executes every branch of the loop body
+// on every iteration (masked) while any lane is still looping (docs/pathtracing.md, "Where the
+// time goes on lavapipe"):
+// - the current frame lives in registers (node, transform, world mask, ordinals left to visit);
+//   the stack arrays are written on a descent and read on a pop only;
+// - `todo` holds the ordinals of the non-empty children left, so empty octants take no
+//   iteration (the CPU steps through all 8);
+// - the 64 bits of the current leaf stay in registers: sub-block masks and the leaf rank cost
+//   no loads;
+// - a pop and the next child's test share an iteration;
+// - the colour index is computed once, after the loop (inside it, its loops and loads would run
+//   masked on every iteration).
 bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit) {
     hit.t = 0.0;
     hit.voxel = uvec3(0u);
@@ -228,18 +281,28 @@ bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit)
     if (!(t_enter < t_far && t_enter < t_max)) {
         return false;
     }
-    // Frame d: node handle and (world child mask | next ordinal << 8 | transform id << 12).
+    // Frame d below the current one: node handle and (aux word | ordinal visited << 16 |
+    // transform id << 19). The aux word is what the format's child fetch takes (svdag32: the
+    // child mask; SSVDAG/TSVDAG: the node header, so a descent does not load it again); leaf
+    // and sub-block frames keep their world child mask there.
     uint stack_node[TRAVERSE_MAX_FRAMES];
     uint stack_state[TRAVERSE_MAX_FRAMES];
-    uint root_node;
-    uint root_xform;
-    dag_root(root_level, root_node, root_xform);
-    stack_node[0] = root_node;
-    stack_state[0] = dag_inner_mask(root_node, root_xform, root_level) | (root_xform << 12u);
+    uint node;
+    uint xform;
+    dag_root(root_level, node, xform);
+    uint aux = dag_node_aux(node, xform, root_level);
+    uint mask = dag_frame_mask(aux, xform);
+    uint todo = traverse_order(mask, r.mirror);
     uint depth = 0u;
+    uvec2 leaf_bits = uvec2(0u);
     // Cube of frame d: base + (cursor & ~(size_d - 1)). `base` is 0 except inside a translated
     // subtree, whose frames are laid out from its translated origin (cursor local to it).
     uvec3 cursor = uvec3(0u);
+    bool found = false;
+    float hit_t_near = 0.0;
+    uint hit_axis = 0u;
+    uint hit_c = 0u;
+    ivec3 hit_voxel = ivec3(0);
 #if defined(TSVDAG_TRANSLATIONS)
     // The second stack: one entry per translated subtree on the path (its depth, the outer
     // base and cursor to restore, the outer clip box, its own origin); voxels outside the clip
@@ -247,41 +310,47 @@ bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit)
     ivec3 base = ivec3(0);
     ivec3 clip_lo = ivec3(0);
     ivec3 clip_hi = ivec3(n);
+    // Its entries are three sets of registers (selects) rather than arrays: lavapipe turns a
+    // dynamically indexed array write into a scalar store per lane and field, on every iteration.
     uint shifts = 0u;
-    uint sh_depth[TRAVERSE_MAX_SHIFTS];
-    ivec3 sh_base[TRAVERSE_MAX_SHIFTS];
-    uvec3 sh_cursor[TRAVERSE_MAX_SHIFTS];
-    ivec3 sh_lo[TRAVERSE_MAX_SHIFTS];
-    ivec3 sh_hi[TRAVERSE_MAX_SHIFTS];
-    ivec3 sh_origin[TRAVERSE_MAX_SHIFTS];
+    TraverseShift sh0;
+    TraverseShift sh1;
+    TraverseShift sh2;
+    sh0.depth = 0u;
+    sh1.depth = 0u;
+    sh2.depth = 0u;
 #else
     const ivec3 base = ivec3(0);
 #endif
     for (;;) {
-        uint node = stack_node[depth];
-        uint state = stack_state[depth];
-        uint next = (state >> 8u) & 15u;
-        if (next == 8u) {
+        if (todo == 0u) {
             if (depth == 0u) {
-                return false;
+                break;
             }
 #if defined(TSVDAG_TRANSLATIONS)
-            if (shifts > 0u && sh_depth[shifts - 1u] == depth) {
+            TraverseShift top = shifts == 1u ? sh0 : (shifts == 2u ? sh1 : sh2);
+            if (shifts > 0u && top.depth == depth) {
                 shifts -= 1u;
-                base = sh_base[shifts];
-                cursor = sh_cursor[shifts];
-                clip_lo = sh_lo[shifts];
-                clip_hi = sh_hi[shifts];
+                base = top.base;
+                cursor = top.cursor;
+                clip_lo = top.lo;
+                clip_hi = top.hi;
             }
 #endif
             depth -= 1u;
+            node = stack_node[depth];
+            uint st = stack_state[depth];
+            aux = st & 0xffffu;
+            xform = (st >> 19u) & 63u;
+            mask = depth >= leaf_depth ? aux : dag_frame_mask(aux, xform);
+            todo = traverse_order(mask, r.mirror) & (0xfeu << ((st >> 16u) & 7u)) & 0xffu;
+        }
+        if (todo == 0u) {
             continue;
         }
-        stack_state[depth] = state + 256u;
-        uint c = next ^ r.mirror;
-        if ((state & (1u << c)) == 0u) {
-            continue;
-        }
+        uint i = uint(findLSB(todo));
+        todo &= todo - 1u;
+        uint c = i ^ r.mirror;
         uint size = n >> depth;
         uint half_size = size >> 1u;
         uvec3 child_local =
@@ -300,98 +369,116 @@ bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit)
         }
         cursor = child_local;
         if (depth + 1u == voxel_depth) {
-            hit.t = t_enter;
-            hit.voxel = uvec3(child);
-            hit.normal = traverse_normal(dir, t_near, axis);
-            // Colour index: voxels of the preceding siblings (world order) on the path, then
-            // the rank inside the leaf (or inside the outermost translated subtree).
-            uint64_t color = 0ul;
-            uint ranked_depth = leaf_depth;
-#if defined(TSVDAG_TRANSLATIONS)
-            if (shifts > 0u) {
-                ranked_depth = sh_depth[0];
-            }
-#endif
-            for (uint d = 0u; d < ranked_depth; d++) {
-                uint st = stack_state[d];
-                uint cd = (((st >> 8u) & 15u) - 1u) ^ r.mirror;
-                uint mask = st & 0xffu;
-                uint xf = (st >> 12u) & 63u;
-                uint level = root_level - d;
-                for (uint k = 0u; k < cd; k++) {
-                    if ((mask & (1u << k)) != 0u) {
-                        uint sib;
-                        uint sib_xform;
-                        ivec3 sib_shift;
-                        uint at;
-                        dag_child(stack_node[d], xf, mask, level, k, sib, sib_xform, sib_shift, at);
-                        color += dag_child_count(sib, level - 1u, at,
-                                                 any(notEqual(sib_shift, ivec3(0))));
-                    }
-                }
-            }
-#if defined(TSVDAG_TRANSLATIONS)
-            if (shifts > 0u) {
-                // The siblings before the translated cell are counted; add the voxel's rank
-                // among the voxels the translated subtree leaves in its cell.
-                uint d0 = sh_depth[0];
-                uint side = n >> d0;
-                ivec3 cell = sh_base[0] + ivec3(sh_cursor[0]);
-                color += uint64_t(traverse_shifted_rank(
-                    stack_node[d0], (stack_state[d0] >> 12u) & 63u, root_level - d0,
-                    sh_origin[0], cell, side, child));
-                hit.color_index = color;
-                return true;
-            }
-#endif
-            uint leaf = stack_node[leaf_depth];
-            uint code = ((((stack_state[leaf_depth] >> 8u) & 15u) - 1u) ^ r.mirror) << 3u |
-                        ((((stack_state[leaf_depth + 1u] >> 8u) & 15u) - 1u) ^ r.mirror);
-            color += uint64_t(dag_leaf_rank(leaf, (stack_state[leaf_depth] >> 12u) & 63u, code));
-            hit.color_index = color;
-            return true;
+            found = true;
+            hit_t_near = t_near;
+            hit_axis = axis;
+            hit_c = c;
+            hit_voxel = child;
+            break;
         }
-        uint xform = (state >> 12u) & 63u;
-        uint child_node;
-        uint child_xform;
+        stack_node[depth] = node;
+        stack_state[depth] = aux | (i << 16u) | (xform << 19u);
+        uint child_node = node;
+        uint child_xform = xform;
         uint child_mask;
+        uint child_aux;
         ivec3 shift = ivec3(0);
         if (depth + 1u <= leaf_depth) {
             // Inner or leaf child: follow the pointer of world octant c.
             uint at;
             uint level = root_level - depth;
-            dag_child(node, xform, state & 0xffu, level, c, child_node, child_xform, shift, at);
-            child_mask = depth + 1u < leaf_depth
-                             ? dag_inner_mask(child_node, child_xform, level - 1u)
-                             : dag_leaf_block_mask(child_node, child_xform);
+            dag_child(node, xform, aux, level, c, child_node, child_xform, shift, at);
+            uvec2 bits;
+            dag_child_masks(child_node, child_xform, level - 1u, child_mask, bits, child_aux);
+            if (depth + 1u == leaf_depth) {
+                leaf_bits = bits;
+                child_mask = traverse_block_mask(bits);
+                child_aux = child_mask;
+            }
         } else {
-            // Sub-block c of the leaf at `node`.
-            child_node = node;
-            child_xform = xform;
-            child_mask = dag_leaf_byte(node, xform, c);
+            // Sub-block c of the leaf in leaf_bits.
+            child_mask = (leaf_bits[c >> 2u] >> (8u * (c & 3u))) & 0xffu;
+            child_aux = child_mask;
         }
         depth += 1u;
-        stack_node[depth] = child_node;
-        stack_state[depth] = child_mask | (child_xform << 12u);
+        node = child_node;
+        xform = child_xform;
+        aux = child_aux;
+        mask = child_mask;
+        todo = traverse_order(child_mask, r.mirror);
 #if defined(TSVDAG_TRANSLATIONS)
         if (any(notEqual(shift, ivec3(0)))) {
             // Enter a translated subtree: its frames start at its translated origin; only
             // the voxels inside the cell (and any outer translated cell) count.
-            sh_depth[shifts] = depth;
-            sh_base[shifts] = base;
-            sh_cursor[shifts] = child_local;
-            sh_lo[shifts] = clip_lo;
-            sh_hi[shifts] = clip_hi;
+            TraverseShift e;
+            e.depth = depth;
+            e.base = base;
+            e.cursor = child_local;
+            e.lo = clip_lo;
+            e.hi = clip_hi;
             clip_lo = max(clip_lo, child);
             clip_hi = min(clip_hi, child + ivec3(half_size));
             base = child + shift;
-            sh_origin[shifts] = base;
+            e.origin = base;
             cursor = uvec3(0u);
+            if (shifts == 0u) {
+                sh0 = e;
+            } else if (shifts == 1u) {
+                sh1 = e;
+            } else {
+                sh2 = e;
+            }
             shifts += 1u;
         }
 #endif
     }
-    return false;
+    if (!found) {
+        return false;
+    }
+    hit.t = max(hit_t_near, 0.0);
+    hit.voxel = uvec3(hit_voxel);
+    hit.normal = traverse_normal(dir, hit_t_near, hit_axis);
+    // Colour index: voxels of the preceding siblings (world order) on the path, then the rank
+    // inside the leaf (or inside the outermost translated subtree).
+    uint64_t color = 0ul;
+    uint ranked_depth = leaf_depth;
+#if defined(TSVDAG_TRANSLATIONS)
+    if (shifts > 0u) {
+        ranked_depth = sh0.depth;
+    }
+#endif
+    for (uint d = 0u; d < ranked_depth; d++) {
+        uint st = stack_state[d];
+        uint cd = ((st >> 16u) & 7u) ^ r.mirror;
+        color += dag_voxels_before(stack_node[d], (st >> 19u) & 63u, st & 0xffffu, root_level - d,
+                                   cd);
+    }
+#if defined(TSVDAG_TRANSLATIONS)
+    if (shifts > 0u) {
+        // The siblings before the translated cell are counted; add the voxel's rank among the
+        // voxels the translated subtree leaves in its cell.
+        uint d0 = sh0.depth;
+        uint side = n >> d0;
+        ivec3 cell = sh0.base + ivec3(sh0.cursor);
+        color += uint64_t(traverse_shifted_rank(
+            stack_node[d0], (stack_state[d0] >> 19u) & 63u, root_level - d0,
+            sh0.origin, cell, side, hit_voxel));
+        hit.color_index = color;
+        return true;
+    }
+#endif
+    // Rank inside the leaf: its voxels before Morton code (sub-block << 3 | voxel).
+    uint code = ((((stack_state[leaf_depth] >> 16u) & 7u) ^ r.mirror) << 3u) | hit_c;
+#if defined(DAG_HAS_LEAF_RANK)
+    // The format's own index inside the leaf (hash DAG: the voxel's material).
+    uint rank = dag_leaf_rank(stack_node[leaf_depth], (stack_state[leaf_depth] >> 19u) & 63u, code);
+#else
+    uint rank = code < 32u ? uint(bitCount(leaf_bits.x & ((1u << code) - 1u)))
+                           : uint(bitCount(leaf_bits.x)) +
+                                 uint(bitCount(leaf_bits.y & ((1u << (code - 32u)) - 1u)));
+#endif
+    hit.color_index = color + uint64_t(rank);
+    return true;
 }
 
 #endif
