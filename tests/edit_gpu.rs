@@ -8,13 +8,13 @@ mod common;
 
 use std::sync::Arc;
 
-use rustc_hash::FxHashMap;
-use voxdag::dag::Svdag;
-use voxdag::edit::gpu::{GpuDagError, GpuHashDag, GpuHashDagConfig};
-use voxdag::edit::item::Root;
 use proptest::prelude::*;
 use proptest::test_runner::{Config, TestRunner};
+use rustc_hash::FxHashMap;
+use voxdag::dag::Svdag;
 use voxdag::edit::cpu::{CpuEditor, HashDag};
+use voxdag::edit::gpu::{GpuDagError, GpuHashDag, GpuHashDagConfig};
+use voxdag::edit::item::Root;
 use voxdag::edit::tool::{self, CopyParams, Shape, Tool, VoxelMap};
 use voxdag::gpu::{GpuContext, Profiler};
 use voxdag::hash::{HashError, HashVariant};
@@ -546,7 +546,8 @@ fn transforms() -> [Option<[[f32; 3]; 3]>; 5] {
 /// eighths, any material, a copy transform from `transforms`), undo and redo.
 fn steps(resolution: u32, max_radius: u32, len: usize) -> impl Strategy<Value = Vec<Step>> {
     let n = resolution as i32;
-    let pos = move || prop::array::uniform3(-16..4 * n + 16).prop_map(|a| a.map(|x| x as f32 / 4.0));
+    let pos =
+        move || prop::array::uniform3(-16..4 * n + 16).prop_map(|a| a.map(|x| x as f32 / 4.0));
     let step = (
         0u32..13,
         pos(),
@@ -623,7 +624,12 @@ fn check_sequence(ctx: &Arc<GpuContext>, scene: &Scene, steps: &[Step]) {
             for c in dag.to_voxels().codes {
                 map.voxels.insert(morton::decode(c), 0);
             }
-            (GpuHashDag::load(ctx, &config, dag, None).unwrap(), cpu, root, map)
+            (
+                GpuHashDag::load(ctx, &config, dag, None).unwrap(),
+                cpu,
+                root,
+                map,
+            )
         }
         None => {
             let root_level = n.trailing_zeros() - 2;
@@ -827,5 +833,42 @@ fn fixed_tool_cases_match_the_cpu_editor_and_brute_force() {
         };
         check_sequence(&ctx, &scene, &steps);
     }
+    assert_clean(&ctx);
+}
+
+/// Host waits of one sphere edit on a 64^3 scene, per level touched (the folded merge: per
+/// level one wait for the traversal count, one for the size counters, one for the dedup and
+/// search of every size, one for the insert rounds, one for the resolve; the fill adds its
+/// flood rounds). Printed for docs/editing-gpu.md.
+#[test]
+fn an_edit_waits_for_the_host_a_bounded_number_of_times_per_level() {
+    let ctx = common::gpu();
+    let dag = Svdag::from_voxels(&synthetic(64, 9)).unwrap();
+    let mut hd = GpuHashDag::load(
+        &ctx,
+        &GpuHashDagConfig::new(HashVariant::TicketBoard, 1024),
+        &dag,
+        None,
+    )
+    .unwrap();
+    for tool in [
+        shaped(Shape::Sphere, [40.0, 30.0, 31.0], 12.0, false),
+        shaped(Shape::Sphere, [40.0, 30.0, 31.0], 12.0, true),
+    ] {
+        let before = ctx.stats();
+        let report = hd.edit(&tool, None).unwrap();
+        let waits = ctx.stats().since(before).host_waits;
+        let levels = report.temporary_nodes.iter().filter(|&&n| n > 0).count() as u64;
+        let sizes: u64 = report.items.iter().map(|&n| (n > 0) as u64).sum();
+        println!(
+            "host waits: {waits} for {levels} levels ({sizes} levels with items) {:?}",
+            report.items
+        );
+        assert!(
+            waits <= 5 * levels + 1,
+            "{waits} host waits for {levels} levels"
+        );
+    }
+    drop(hd);
     assert_clean(&ctx);
 }
