@@ -838,8 +838,9 @@ fn fixed_tool_cases_match_the_cpu_editor_and_brute_force() {
 
 /// Host waits of one sphere edit on a 64^3 scene, per level touched (the folded merge: per
 /// level one wait for the traversal count, one for the size counters, one for the dedup and
-/// search of every size, one for the insert rounds, one for the resolve; the fill adds its
-/// flood rounds). Printed for docs/editing-gpu.md.
+/// search of every size, one for the insert rounds, one for the resolve, one for the merge's
+/// index upload; plus the uploads of the tool and the first entry and the root's readback).
+/// Printed for docs/editing-gpu.md.
 #[test]
 fn an_edit_waits_for_the_host_a_bounded_number_of_times_per_level() {
     let ctx = common::gpu();
