@@ -866,7 +866,7 @@ fn an_edit_waits_for_the_host_a_bounded_number_of_times_per_level() {
             report.items
         );
         assert!(
-            waits <= 5 * levels + 1,
+            waits <= 6 * levels + 3,
             "{waits} host waits for {levels} levels"
         );
     }
