@@ -58,16 +58,8 @@ struct HdagItem {
     uint variant;
 };
 
-// The last item located (per invocation): the traversal reads a node's header when it pushes
-// it and again for each child it follows, so the slab address is usually known already.
-uint hdag_cached_ptr = HDAG_EMPTY;
-HdagItem hdag_cached;
-
 // Where the item a NodePtr names lives: super-block table of its size, super block, slab.
 HdagItem hdag_item(uint ptr) {
-    if (ptr == hdag_cached_ptr) {
-        return hdag_cached;
-    }
     HdagItem it;
     uint table = ptr >> 28u;
     uint handle = ptr & HDAG_HANDLE_MASK;
@@ -85,8 +77,6 @@ HdagItem hdag_item(uint ptr) {
     uint slab_words = (end + 1u) & ~1u;
     it.slab = base + uint64_t(HASH_SUPER_BLOCK_BITMASK_WORDS * 4u) +
               uint64_t(slab % HASH_SLABS_PER_SUPER_BLOCK) * uint64_t(slab_words * 4u);
-    hdag_cached_ptr = ptr;
-    hdag_cached = it;
     return it;
 }
 
