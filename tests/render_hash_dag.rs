@@ -483,3 +483,85 @@ fn materials_show_palette_colours() {
     drop(renderer);
     assert_eq!(ctx.validation_errors(), 0, "Vulkan validation errors");
 }
+
+/// `voxdag render --hash-dag`: the PNG equals the svdag32 render of the same file (primary and
+/// `--pt`), for a named table variant; bad combinations are one-line errors.
+#[test]
+fn cli_renders_the_hash_dag() {
+    let dir = tempfile::tempdir().unwrap();
+    let vdag = dir.path().join("teapot.vdag");
+    let s = |p: &std::path::Path| p.to_str().unwrap().to_string();
+    let teapot = repo().join("tests/data/teapot.obj");
+    let out = common::voxdag_cli(&[
+        "build",
+        &s(&teapot),
+        "-r",
+        "64",
+        "--no-colors",
+        "-o",
+        &s(&vdag),
+        "-q",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for pt in [false, true] {
+        let mut pngs = Vec::new();
+        for hash in [false, true] {
+            let png = dir.path().join(format!("{pt}-{hash}.png"));
+            let mut args = vec![
+                "render".to_string(),
+                s(&vdag),
+                "--size".into(),
+                "48x32".into(),
+                "--out".into(),
+                s(&png),
+            ];
+            if hash {
+                args.extend(["--hash-dag", "--hash-table", "ticket_board"].map(String::from));
+            }
+            if pt {
+                args.extend(["--pt", "--spp", "2"].map(String::from));
+            }
+            let args: Vec<&str> = args.iter().map(String::as_str).collect();
+            let out = common::voxdag_cli(&args);
+            assert!(
+                out.status.success(),
+                "{args:?}: {}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            pngs.push(image::open(&png).unwrap().to_rgba8().into_raw());
+        }
+        assert!(
+            pngs[0] == pngs[1],
+            "pt {pt}: the hash DAG PNG differs from svdag32's"
+        );
+    }
+    let png = dir.path().join("bad.png");
+    for (bad, message) in [
+        (vec!["--hash-dag", "--cpu"], "--cpu"),
+        (vec!["--hash-table", "accel8"], "needs --hash-dag"),
+        (
+            vec!["--hash-dag", "--hash-table", "nope"],
+            "unknown --hash-table",
+        ),
+    ] {
+        let mut args = vec![
+            "render",
+            vdag.to_str().unwrap(),
+            "--out",
+            png.to_str().unwrap(),
+        ];
+        args.extend(bad.iter().copied());
+        let out = common::voxdag_cli(&args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error")).collect();
+        assert!(!out.status.success(), "{bad:?} should fail");
+        assert!(
+            errors.len() == 1 && errors[0].contains(message),
+            "{bad:?}: expected one error line with {message:?}, got {stderr}"
+        );
+    }
+}
