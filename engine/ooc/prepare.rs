@@ -445,11 +445,14 @@ pub fn prepare(
         head.extend_from_slice(&format::FORMAT_VERSION.to_le_bytes());
         head.extend_from_slice(&0u32.to_le_bytes());
         geo.write_all(&head).map_err(geo_error)?;
-        for b in 0..nb {
-            let mut tris = if bits == 0 {
-                std::mem::take(&mut in_memory)
-            } else {
-                let mut file = buckets[b].take().expect("each bucket is read once");
+        // One round per bucket file, or one round over the triangles held in memory.
+        let rounds = if bits == 0 {
+            vec![None]
+        } else {
+            std::mem::take(&mut buckets)
+        };
+        for bucket in rounds {
+            let mut tris = if let Some(mut file) = bucket {
                 let len = file.seek(SeekFrom::End(0)).map_err(bucket_error)?;
                 file.seek(SeekFrom::Start(0)).map_err(bucket_error)?;
                 let mut tris = crate::safety::try_vec::<Tri>("bucket triangles", len / TRI_BYTES)?;
@@ -464,6 +467,8 @@ pub fn prepare(
                     tris.push([[f(0), f(1), f(2)], [f(3), f(4), f(5)], [f(6), f(7), f(8)]]);
                 }
                 tris
+            } else {
+                std::mem::take(&mut in_memory)
             };
             if tris.is_empty() {
                 continue;
