@@ -7,6 +7,7 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use indicatif::ProgressBar;
+use voxdag::dag::DagError;
 use voxdag::ooc::prepare::{Instance, SourceMesh};
 use voxdag::ooc::{
     format, prepare, render_in_core, render_out_of_core, Grid, OocError, OocScene, PrepareOptions,
@@ -203,7 +204,7 @@ fn proxy_nodes_are_shared_across_points() {
 
 fn expect_format_error(result: Result<impl std::fmt::Debug, OocError>, file: &str) -> u64 {
     match result {
-        Err(OocError::Format { path, offset, .. }) => {
+        Err(OocError::Dag(DagError::Format { path, offset, .. })) => {
             assert!(path.ends_with(file), "{path:?}");
             offset
         }
@@ -337,11 +338,12 @@ fn cli_generate_prepare_render() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let mut pngs = Vec::new();
-    for (name, extra) in [
-        ("in", vec!["--in-core"]),
+    let mut images = Vec::new();
+    for (name, ext, extra) in [
+        ("in", "png", vec!["--in-core"]),
         (
             "on",
+            "png",
             vec![
                 "--proxies",
                 "on",
@@ -351,9 +353,19 @@ fn cli_generate_prepare_render() {
                 "300K",
             ],
         ),
-        ("off", vec!["--proxies", "off", "--memory-budget", "300K"]),
+        (
+            "off",
+            "png",
+            vec!["--proxies", "off", "--memory-budget", "300K"],
+        ),
+        ("in", "exr", vec!["--in-core"]),
+        (
+            "off",
+            "exr",
+            vec!["--proxies", "off", "--memory-budget", "300K"],
+        ),
     ] {
-        let png = dir.join(format!("{name}.png"));
+        let image = dir.join(format!("{name}.{ext}"));
         let report = dir.join(format!("{name}.json"));
         let mut args = vec![
             "-q",
@@ -365,7 +377,7 @@ fn cli_generate_prepare_render() {
             "--spp",
             "2",
             "--out",
-            png.to_str().unwrap(),
+            image.to_str().unwrap(),
             "--report",
             report.to_str().unwrap(),
         ];
@@ -388,9 +400,82 @@ fn cli_generate_prepare_render() {
         ] {
             assert!(json.get(key).is_some(), "{key} missing");
         }
-        pngs.push(std::fs::read(&png).unwrap());
+        images.push(std::fs::read(&image).unwrap());
     }
-    assert_eq!(pngs[0], pngs[1]);
-    assert_eq!(pngs[0], pngs[2]);
+    assert_eq!(images[0], images[1]);
+    assert_eq!(images[0], images[2]);
+    assert_eq!(images[3], images[4], "EXR: out of core equals in core");
+    // The EXR holds the linear radiance the PNG was tonemapped from.
+    let exr = image::load_from_memory(&images[3]).unwrap().to_rgb32f();
+    let png = image::load_from_memory(&images[0]).unwrap().to_rgba8();
+    assert_eq!((exr.width(), exr.height()), (24, 16));
+    for (e, p) in exr.pixels().zip(png.pixels()) {
+        for k in 0..3 {
+            let srgb = voxdag::color::linear_to_srgb(e.0[k].clamp(0.0, 1.0));
+            assert_eq!((srgb * 255.0 + 0.5) as u8, p.0[k]);
+        }
+    }
+    let bad = dir.join("x.bmp");
+    let out = common::voxdag_cli(&[
+        "-q",
+        "ooc",
+        "render",
+        scene_dir.to_str().unwrap(),
+        "--in-core",
+        "--out",
+        bad.to_str().unwrap(),
+    ]);
+    assert!(!out.status.success(), "a .bmp output is refused");
+    assert!(!bad.exists());
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Names in `dir`, sorted.
+fn listing(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+#[test]
+fn failed_prepare_leaves_no_temporary_files() {
+    let source = SceneSource::landscape(vec![avocado()], 20_000, 5).unwrap();
+    // Tiny buckets: the grouping goes through bucket files, as for a scene larger than memory.
+    let options = PrepareOptions {
+        batch_triangles: 2000,
+        proxy_resolutions: vec![16],
+        bucket_bytes: 1 << 14,
+    };
+    // A non-empty directory where `geometry.bin` goes: every byte is written, the final rename
+    // fails.
+    let failed_geometry = scratch("fail-geometry");
+    let dir = &failed_geometry;
+    std::fs::create_dir_all(dir.join(format::GEOMETRY_FILE).join("x")).unwrap();
+    let err = prepare(&source, dir, &options, &ProgressBar::hidden()).unwrap_err();
+    assert!(
+        err.to_string().contains(format::GEOMETRY_FILE),
+        "the error names the file: {err}"
+    );
+    assert_eq!(listing(dir), [format::GEOMETRY_FILE]);
+    // The same where the proxies go: geometry is written, the proxy file fails.
+    let failed_proxies = scratch("fail-proxies");
+    let dir = &failed_proxies;
+    let proxies = format::proxy_file(16);
+    std::fs::create_dir_all(dir.join(&proxies).join("x")).unwrap();
+    let err = prepare(&source, dir, &options, &ProgressBar::hidden()).unwrap_err();
+    assert!(err.to_string().contains(&proxies), "{err}");
+    assert_eq!(listing(dir), [format::GEOMETRY_FILE.to_string(), proxies]);
+    // And the same options succeed in a clean directory with only the scene files.
+    let clean = scratch("no-failure");
+    prepare(&source, &clean, &options, &ProgressBar::hidden()).unwrap();
+    assert_eq!(
+        listing(&clean),
+        [format::GEOMETRY_FILE, format::INDEX_FILE, "proxies-16.bin"]
+    );
+    for d in [failed_geometry, failed_proxies, clean] {
+        std::fs::remove_dir_all(d).unwrap();
+    }
 }

@@ -117,7 +117,7 @@ pub struct OocRenderArgs {
     /// Load everything and trace each path alone (the reference image; ignores the budget).
     #[arg(long)]
     in_core: bool,
-    /// Output PNG.
+    /// Output image: .png (sRGB) or .exr (linear RGB f32).
     #[arg(long)]
     out: PathBuf,
     /// JSON report (disk bytes, batching events, cache hits and misses, rays/s, wall time).
@@ -271,6 +271,7 @@ fn write_scene(source: &SceneSource, layout: &LayoutArgs, quiet: bool) -> Result
 
 fn render(args: &OocRenderArgs, quiet: bool) -> Result<()> {
     check_output(&args.out)?;
+    voxdag::render::pathtrace::check_extension(&args.out)?;
     if let Some(r) = &args.report {
         check_output(r)?;
     }
@@ -300,7 +301,7 @@ fn render(args: &OocRenderArgs, quiet: bool) -> Result<()> {
         };
         render_out_of_core(&scene, proxies.as_ref(), &options, &bar)?
     };
-    image.save_png(&args.out)?;
+    image.save(&args.out)?;
     eprintln!(
         "{}: {} rays in {:.2} s ({:.2} Mrays/s), read {}, {} batching events, cache {} hits / {} misses",
         args.out.display(),

@@ -54,11 +54,7 @@ impl<'a> Reader<'a> {
 
     /// An error at `offset` of this file.
     pub(crate) fn error(&self, offset: u64, reason: String) -> OocError {
-        OocError::Format {
-            path: self.path.to_path_buf(),
-            offset,
-            reason,
-        }
+        OocError::format(self.path, offset, reason)
     }
 
     /// Current offset.
@@ -272,13 +268,11 @@ impl OocScene {
             .map_err(|e| OocError::io(&geometry_path, e))?
             .len();
         if actual != geometry_bytes {
-            return Err(OocError::Format {
-                path: geometry_path,
-                offset: actual.min(geometry_bytes),
-                reason: format!(
-                    "file has {actual} bytes, the index expects {geometry_bytes} (truncated?)"
-                ),
-            });
+            return Err(OocError::format(
+                &geometry_path,
+                actual.min(geometry_bytes),
+                format!("file has {actual} bytes, the index expects {geometry_bytes} (truncated?)"),
+            ));
         }
         let mut points = Vec::with_capacity(n as usize);
         let mut next = GEOMETRY_HEADER;
@@ -345,21 +339,23 @@ impl OocScene {
         let mut bytes = vec![0u8; p.bytes() as usize];
         self.geometry
             .read_exact_at(&mut bytes, p.offset)
-            .map_err(|e| OocError::Format {
-                path: path.clone(),
-                offset: p.offset,
-                reason: format!("point {i}: reading its region: {e}"),
+            .map_err(|e| {
+                OocError::format(
+                    &path,
+                    p.offset,
+                    format!("point {i}: reading its region: {e}"),
+                )
             })?;
         let crc = crc32fast::hash(&bytes);
         if crc != p.crc {
-            return Err(OocError::Format {
-                path,
-                offset: p.offset,
-                reason: format!(
+            return Err(OocError::format(
+                &path,
+                p.offset,
+                format!(
                     "point {i}: region checksum mismatch (index {:#010x}, data {crc:#010x})",
                     p.crc
                 ),
-            });
+            ));
         }
         let mut tris = Vec::with_capacity(p.triangles as usize);
         for (t, c) in bytes.chunks_exact(TRI_BYTES as usize).enumerate() {
@@ -371,13 +367,11 @@ impl OocScene {
                 (0..3).all(|k| v[k].is_finite() && p.bounds.lo[k] <= v[k] && v[k] <= p.bounds.hi[k])
             });
             if !inside {
-                return Err(OocError::Format {
-                    path,
-                    offset: p.offset + t as u64 * TRI_BYTES,
-                    reason: format!(
-                        "point {i}: triangle {t} is non-finite or outside the point's bounds"
-                    ),
-                });
+                return Err(OocError::format(
+                    &path,
+                    p.offset + t as u64 * TRI_BYTES,
+                    format!("point {i}: triangle {t} is non-finite or outside the point's bounds"),
+                ));
             }
             tris.push(tri);
         }

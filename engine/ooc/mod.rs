@@ -16,7 +16,9 @@ pub mod prepare;
 pub mod proxy;
 pub mod render;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
+
+use crate::dag::DagError;
 
 pub use format::{OocScene, PointEntry};
 pub use prepare::{prepare, PrepareOptions, PrepareSummary, SceneSource, Terrain};
@@ -24,32 +26,17 @@ pub use proxy::{Grid, ProxySet};
 pub use render::{render_in_core, render_out_of_core, Image, RenderOptions, RenderStats};
 
 /// Errors of scene preparation, scene loading and rendering; each names the file involved.
+/// Malformed files and I/O errors are [`DagError::Format`] and [`DagError::Io`] (the same
+/// variants the SVDAG files use), wrapped in [`OocError::Dag`].
 #[derive(Debug, thiserror::Error)]
 pub enum OocError {
-    /// A scene file is malformed: `offset` is the byte offset of the offending field.
-    #[error("{}: byte offset {offset}: {reason}", path.display())]
-    Format {
-        /// The file.
-        path: PathBuf,
-        /// Byte offset in the file.
-        offset: u64,
-        /// What is wrong.
-        reason: String,
-    },
-    /// An I/O error on a file.
-    #[error("{}: {source}", path.display())]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The underlying error.
-        source: std::io::Error,
-    },
     /// Importing an input mesh failed.
     #[error(transparent)]
     Scene(#[from] crate::scene::SceneError),
-    /// Building a proxy SVDAG failed.
+    /// A scene file is malformed or unreadable ([`DagError::Format`], [`DagError::Io`]), or
+    /// building a proxy SVDAG failed.
     #[error(transparent)]
-    Dag(#[from] crate::dag::DagError),
+    Dag(#[from] DagError),
     /// An allocation sized by the input would pass the memory limit.
     #[error(transparent)]
     Memory(#[from] crate::safety::MemoryError),
@@ -61,9 +48,18 @@ pub enum OocError {
 impl OocError {
     /// An I/O error on `path`.
     pub fn io(path: &Path, source: std::io::Error) -> OocError {
-        OocError::Io {
+        OocError::Dag(DagError::Io {
             path: path.to_path_buf(),
             source,
-        }
+        })
+    }
+
+    /// A malformed file: `offset` is the byte offset of the offending field.
+    pub fn format(path: &Path, offset: u64, reason: String) -> OocError {
+        OocError::Dag(DagError::Format {
+            path: path.to_path_buf(),
+            offset,
+            reason,
+        })
     }
 }

@@ -9,8 +9,8 @@
 //! `batch_triangles` triangles: one batching point per range.
 
 use std::fs::File;
-use std::io::{BufReader, BufWriter, Read, Write};
-use std::path::{Path, PathBuf};
+use std::io::{BufReader, BufWriter, Read, Seek, SeekFrom, Write};
+use std::path::Path;
 
 use indicatif::ProgressBar;
 use rayon::prelude::*;
@@ -390,9 +390,11 @@ pub fn prepare(
         bits += 1;
     }
     let nb = 1usize << bits;
-    let bucket_dir = dir.join(".buckets");
     let mut in_memory: Vec<Tri> = Vec::new();
-    let bucket_path = |b: usize| bucket_dir.join(format!("{b}.tmp"));
+    // Bucket files are anonymous (`O_TMPFILE`, or unlinked at once): they have no name to leave
+    // behind when preparation fails or the process is killed, and vanish when dropped.
+    let mut buckets: Vec<Option<File>> = Vec::new();
+    let bucket_error = |e: std::io::Error| OocError::io(dir, e);
     progress.set_length(2 * total);
     progress.set_message("grouping");
     if bits == 0 {
@@ -403,13 +405,11 @@ pub fn prepare(
             Ok(())
         })?;
     } else {
-        std::fs::create_dir_all(&bucket_dir).map_err(|e| OocError::io(&bucket_dir, e))?;
         let mut writers = (0..nb)
-            .map(|b| {
-                let p = bucket_path(b);
-                File::create(&p)
+            .map(|_| {
+                tempfile::tempfile_in(dir)
                     .map(|f| BufWriter::with_capacity(1 << 16, f))
-                    .map_err(|e| OocError::io(&p, e))
+                    .map_err(bucket_error)
             })
             .collect::<Result<Vec<_>, _>>()?;
         let mut rec = Vec::with_capacity(36);
@@ -418,31 +418,19 @@ pub fn prepare(
                 let b = (centroid_code(t, lo, inv) >> (30 - bits)) as usize;
                 rec.clear();
                 tri_bytes(t, &mut rec);
-                writers[b]
-                    .write_all(&rec)
-                    .map_err(|e| OocError::io(&bucket_path(b), e))?;
+                writers[b].write_all(&rec).map_err(bucket_error)?;
             }
             progress.inc(c.len() as u64);
             Ok(())
         })?;
-        for (b, w) in writers.into_iter().enumerate() {
-            w.into_inner()
-                .map_err(|e| OocError::io(&bucket_path(b), e.into_error()))?;
+        for w in writers {
+            buckets.push(Some(
+                w.into_inner().map_err(|e| bucket_error(e.into_error()))?,
+            ));
         }
     }
     progress.set_message("points");
     let geometry_path = dir.join(format::GEOMETRY_FILE);
-    let tmp_path: PathBuf = dir.join(".geometry.bin.tmp");
-    let mut geo = BufWriter::with_capacity(
-        1 << 20,
-        File::create(&tmp_path).map_err(|e| OocError::io(&tmp_path, e))?,
-    );
-    let mut head = Vec::new();
-    head.extend_from_slice(format::GEOMETRY_MAGIC);
-    head.extend_from_slice(&format::FORMAT_VERSION.to_le_bytes());
-    head.extend_from_slice(&0u32.to_le_bytes());
-    geo.write_all(&head)
-        .map_err(|e| OocError::io(&tmp_path, e))?;
     let mut offset = GEOMETRY_HEADER;
     let mut entries: Vec<PointEntry> = Vec::new();
     let mut builders: Vec<ProxyBuilder> = options
@@ -450,29 +438,37 @@ pub fn prepare(
         .iter()
         .map(|&r| ProxyBuilder::new(r))
         .collect();
-    let result = (|| -> Result<(), OocError> {
-        for b in 0..nb {
-            let mut tris = if bits == 0 {
-                std::mem::take(&mut in_memory)
-            } else {
-                let p = bucket_path(b);
-                let len = std::fs::metadata(&p)
-                    .map_err(|e| OocError::io(&p, e))?
-                    .len();
-                let mut bytes = Vec::new();
-                BufReader::new(File::open(&p).map_err(|e| OocError::io(&p, e))?)
-                    .read_to_end(&mut bytes)
-                    .map_err(|e| OocError::io(&p, e))?;
-                std::fs::remove_file(&p).map_err(|e| OocError::io(&p, e))?;
+    let mut write_points = |geo: &mut BufWriter<File>| -> Result<(), OocError> {
+        let geo_error = |e: std::io::Error| OocError::io(&geometry_path, e);
+        let mut head = Vec::new();
+        head.extend_from_slice(format::GEOMETRY_MAGIC);
+        head.extend_from_slice(&format::FORMAT_VERSION.to_le_bytes());
+        head.extend_from_slice(&0u32.to_le_bytes());
+        geo.write_all(&head).map_err(geo_error)?;
+        // One round per bucket file, or one round over the triangles held in memory.
+        let rounds = if bits == 0 {
+            vec![None]
+        } else {
+            std::mem::take(&mut buckets)
+        };
+        for bucket in rounds {
+            let mut tris = if let Some(mut file) = bucket {
+                let len = file.seek(SeekFrom::End(0)).map_err(bucket_error)?;
+                file.seek(SeekFrom::Start(0)).map_err(bucket_error)?;
                 let mut tris = crate::safety::try_vec::<Tri>("bucket triangles", len / TRI_BYTES)?;
+                let mut bytes = crate::safety::try_vec::<u8>("bucket bytes", len)?;
+                BufReader::new(file)
+                    .read_to_end(&mut bytes)
+                    .map_err(bucket_error)?;
                 for c in bytes.chunks_exact(TRI_BYTES as usize) {
-                    let f: Vec<f32> = c
-                        .chunks_exact(4)
-                        .map(|v| f32::from_le_bytes(v.try_into().expect("4 bytes")))
-                        .collect();
-                    tris.push([[f[0], f[1], f[2]], [f[3], f[4], f[5]], [f[6], f[7], f[8]]]);
+                    let f = |j: usize| {
+                        f32::from_le_bytes(c[4 * j..4 * j + 4].try_into().expect("4 bytes"))
+                    };
+                    tris.push([[f(0), f(1), f(2)], [f(3), f(4), f(5)], [f(6), f(7), f(8)]]);
                 }
                 tris
+            } else {
+                std::mem::take(&mut in_memory)
             };
             if tris.is_empty() {
                 continue;
@@ -524,8 +520,7 @@ pub fn prepare(
             for (mut entry, bytes, dags) in per_point {
                 entry.offset = offset;
                 offset += bytes.len() as u64;
-                geo.write_all(&bytes)
-                    .map_err(|e| OocError::io(&tmp_path, e))?;
+                geo.write_all(&bytes).map_err(geo_error)?;
                 for (builder, dag) in builders.iter_mut().zip(&dags) {
                     builder.add(dag);
                 }
@@ -534,19 +529,21 @@ pub fn prepare(
             }
         }
         Ok(())
-    })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp_path);
-        let _ = std::fs::remove_dir_all(&bucket_dir);
+    };
+    // `write_atomic` (random exclusive temporary name, removed on error and on signals) only
+    // carries an `io::Error`: the real error waits here.
+    let mut failure = None;
+    let written = crate::atomic_file::write_atomic(&geometry_path, |geo| {
+        write_points(geo).map_err(|e| {
+            let io = std::io::Error::other(e.to_string());
+            failure = Some(e);
+            io
+        })
+    });
+    if let Some(e) = failure {
         return Err(e);
     }
-    let _ = std::fs::remove_dir_all(&bucket_dir);
-    let file = geo
-        .into_inner()
-        .map_err(|e| OocError::io(&tmp_path, e.into_error()))?;
-    file.sync_all().map_err(|e| OocError::io(&tmp_path, e))?;
-    drop(file);
-    std::fs::rename(&tmp_path, &geometry_path).map_err(|e| OocError::io(&geometry_path, e))?;
+    written.map_err(|e| OocError::io(&geometry_path, e))?;
     let mut scene_bounds = Aabb::EMPTY;
     for e in &entries {
         scene_bounds.union(&e.bounds);

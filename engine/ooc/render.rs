@@ -8,7 +8,6 @@
 //! cannot hit. Each path's radiance lands in its own `(pixel, sample)` slot; pixels sum their
 //! slots in sample order at the end. Random numbers are a hash of (pixel, sample, bounce, seed).
 
-use std::sync::Arc;
 use std::time::Instant;
 
 use indicatif::ProgressBar;
@@ -83,6 +82,16 @@ pub struct RenderStats {
     pub disk_bytes_read: u64,
     /// Times a point's queue was processed.
     pub batching_events: u64,
+    /// Batching events in which no queued ray hit a triangle of the point (the load was of no
+    /// use to any ray: what a perfect proxy would avoid).
+    pub empty_batches: u64,
+    /// Ray visits of points (a ray intersected with a loaded point).
+    pub ray_visits: u64,
+    /// Ray visits that found the ray's closest hit so far in the point.
+    pub ray_visits_hit: u64,
+    /// Ray visits made at once, outside a batching event, because the ray's next point was
+    /// resident in the cache.
+    pub resident_visits: u64,
     /// Batching events whose point was already in the cache.
     pub cache_hits: u64,
     /// Batching events that loaded their point from disk.
@@ -236,6 +245,14 @@ enum Advance {
 struct StepCount {
     rays: u64,
     culls: u64,
+    /// 1 when the ray was intersected with the loaded point.
+    visits: u64,
+    /// 1 when that gave the ray's closest hit so far.
+    hits: u64,
+    /// 1 when the ray's first visit, at the batch's point, gave its closest hit so far.
+    batch_hits: u64,
+    /// Visits of resident points outside a batching event.
+    resident: u64,
 }
 
 /// Everything the per-ray steps read: camera, top-level BVH, optional proxies.
@@ -503,7 +520,10 @@ pub fn render_in_core(
     let results: Vec<([f32; 3], u64)> = (0..total)
         .into_par_iter()
         .map(|slot| {
-            let mut count = StepCount { rays: 1, culls: 0 };
+            let mut count = StepCount {
+                rays: 1,
+                ..Default::default()
+            };
             let mut path = tracer.camera_path(slot);
             loop {
                 match tracer.advance(path, &mut count) {
@@ -549,7 +569,7 @@ struct Cache {
     budget: u64,
     used: u64,
     clock: u64,
-    entries: FxHashMap<u32, (Arc<LoadedPoint>, u64)>,
+    entries: FxHashMap<u32, (LoadedPoint, u64)>,
 }
 
 /// Renders with batched ray traversal: per-point ray queues, the fullest queue first, points
@@ -594,35 +614,63 @@ pub fn render_out_of_core(
         clock: 0,
         entries: FxHashMap::default(),
     };
-    let mut pending: Vec<(u32, PathState)> = rays
+    // Rays to advance, with the point each must first be intersected with (the batch's point).
+    let mut pending: Vec<(u32, PathState, Option<u32>)> = rays
         .iter()
         .enumerate()
-        .map(|(r, p)| (r as u32, *p))
+        .map(|(r, p)| (r as u32, *p, None))
         .collect();
-    let mut point: Option<(u32, Arc<LoadedPoint>)> = None;
     loop {
         // Advance the rays of the last batch (intersected first) and new camera rays until each
-        // waits at a point or its path is done; done paths start new camera rays.
+        // waits at a point that is not in the cache or its path is done; done paths start new
+        // camera rays. A ray whose next point is resident is intersected with it at once (its
+        // own surface for a bounce ray, most often): the order of its visits is unchanged.
         while !pending.is_empty() {
-            let outs: Vec<(u32, Advance, StepCount)> = pending
+            let resident = &cache.entries;
+            let outs: Vec<(u32, Advance, StepCount, Vec<u32>)> = pending
                 .par_iter()
-                .map(|&(r, mut path)| {
+                .map(|&(r, mut path, first)| {
                     let mut count = StepCount::default();
-                    if let Some((id, p)) = &point {
-                        if path.last.is_some_and(|(_, l)| l == *id) {
+                    let mut used = Vec::new();
+                    let mut visit = first;
+                    loop {
+                        if let Some(id) = visit {
+                            let (p, _) = &resident[&id];
                             let ray = path.ray;
-                            intersect_point(p, *id, &ray, &mut path.best);
+                            intersect_point(p, id, &ray, &mut path.best);
+                            count.visits += 1;
+                            let hit = u64::from(path.best.point == id);
+                            count.hits += hit;
+                            if first.is_some() && used.is_empty() {
+                                count.batch_hits = hit;
+                            } else {
+                                count.resident += 1;
+                            }
+                            used.push(id);
+                        }
+                        match tracer.advance(path, &mut count) {
+                            Advance::Queued(p, id) if resident.contains_key(&id) => {
+                                path = p;
+                                visit = Some(id);
+                            }
+                            adv => return (r, adv, count, used),
                         }
                     }
-                    let adv = tracer.advance(path, &mut count);
-                    (r, adv, count)
                 })
                 .collect();
-            point = None;
+            let batch = pending.first().and_then(|p| p.2);
+            if batch.is_some() && outs.iter().all(|o| o.2.batch_hits == 0) {
+                stats.empty_batches += 1;
+            }
             pending.clear();
-            for (r, adv, count) in outs {
+            let mut touched = Vec::new();
+            for (r, adv, count, used) in outs {
                 stats.rays += count.rays;
                 stats.proxy_culls += count.culls;
+                stats.ray_visits += count.visits;
+                stats.ray_visits_hit += count.hits;
+                stats.resident_visits += count.resident;
+                touched.extend(used);
                 match adv {
                     Advance::Queued(path, id) => {
                         rays[r as usize] = path;
@@ -636,13 +684,17 @@ pub fn render_out_of_core(
                             next += 1;
                             stats.rays += 1;
                             rays[r as usize] = p;
-                            pending.push((r, p));
+                            pending.push((r, p, None));
                         }
                     }
                 }
             }
+            touched.sort_unstable();
+            touched.dedup();
+            cache.touch(&touched);
         }
-        // The point with the most queued rays (lowest id on ties).
+        // The point with the most queued rays (lowest id on ties). Queued rays wait only at
+        // points that are not resident.
         let Some((id, _)) = queues
             .iter()
             .enumerate()
@@ -652,11 +704,13 @@ pub fn render_out_of_core(
             break;
         };
         let id = id as u32;
-        let geometry = cache.get(scene, id, &mut stats)?;
+        cache.get(scene, id, &mut stats)?;
         stats.batching_events += 1;
         let queue = std::mem::take(&mut queues[id as usize]);
-        pending = queue.iter().map(|&r| (r, rays[r as usize])).collect();
-        point = Some((id, geometry));
+        pending = queue
+            .iter()
+            .map(|&r| (r, rays[r as usize], Some(id)))
+            .collect();
     }
     let image = tracer.resolve(&slots);
     stats.paths = total as u64;
@@ -667,25 +721,20 @@ pub fn render_out_of_core(
 }
 
 impl Cache {
-    /// Point `id`'s geometry, from the cache or loaded from disk (evicting the least recently
-    /// used points until it fits).
-    fn get(
-        &mut self,
-        scene: &OocScene,
-        id: u32,
-        stats: &mut RenderStats,
-    ) -> Result<Arc<LoadedPoint>, OocError> {
+    /// Makes point `id` resident: a hit, or a load from disk evicting the least recently used
+    /// points until it fits.
+    fn get(&mut self, scene: &OocScene, id: u32, stats: &mut RenderStats) -> Result<(), OocError> {
         self.clock += 1;
         if let Some(e) = self.entries.get_mut(&id) {
             e.1 = self.clock;
             stats.cache_hits += 1;
-            return Ok(e.0.clone());
+            return Ok(());
         }
         stats.cache_misses += 1;
         let entry = &scene.points[id as usize];
         let tris = scene.read_point(id)?;
         stats.disk_bytes_read += entry.bytes();
-        let loaded = Arc::new(LoadedPoint::build(tris));
+        let loaded = LoadedPoint::build(tris);
         let need = loaded.bytes();
         if need > self.budget {
             return Err(OocError::Invalid(format!(
@@ -704,25 +753,61 @@ impl Cache {
         }
         self.used += need;
         stats.peak_cache_bytes = stats.peak_cache_bytes.max(self.used);
-        self.entries.insert(id, (loaded.clone(), self.clock));
-        Ok(loaded)
+        self.entries.insert(id, (loaded, self.clock));
+        Ok(())
+    }
+
+    /// Marks the resident points `ids` as used now (in id order).
+    fn touch(&mut self, ids: &[u32]) {
+        for id in ids {
+            if let Some(e) = self.entries.get_mut(id) {
+                self.clock += 1;
+                e.1 = self.clock;
+            }
+        }
     }
 }
 
 impl Image {
-    /// Writes the image as an sRGB PNG (atomically).
-    pub fn save_png(&self, path: &std::path::Path) -> Result<(), OocError> {
-        let rgba = self.to_rgba8();
-        crate::atomic_file::write_atomic(path, |w| {
-            image::ImageEncoder::write_image(
-                image::codecs::png::PngEncoder::new(w),
-                &rgba,
-                self.width,
-                self.height,
-                image::ExtendedColorType::Rgba8,
-            )
-            .map_err(std::io::Error::other)
-        })
-        .map_err(|e| OocError::io(path, e))
+    /// Writes `.png` (sRGB, clamped) or `.exr` (linear RGB f32), atomically; other extensions
+    /// are an error.
+    pub fn save(&self, path: &std::path::Path) -> Result<(), OocError> {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        let (w, h) = (self.width, self.height);
+        let written = match ext.as_deref() {
+            Some("png") => {
+                let rgba = self.to_rgba8();
+                crate::atomic_file::write_atomic(path, |out| {
+                    image::ImageEncoder::write_image(
+                        image::codecs::png::PngEncoder::new(out),
+                        &rgba,
+                        w,
+                        h,
+                        image::ExtendedColorType::Rgba8,
+                    )
+                    .map_err(std::io::Error::other)
+                })
+            }
+            Some("exr") => crate::atomic_file::write_atomic(path, |out| {
+                image::ImageEncoder::write_image(
+                    image::codecs::openexr::OpenExrEncoder::new(out),
+                    bytemuck::cast_slice(&self.pixels),
+                    w,
+                    h,
+                    image::ExtendedColorType::Rgb32F,
+                )
+                .map_err(std::io::Error::other)
+            }),
+            _ => {
+                return Err(OocError::Invalid(format!(
+                    "{}: the image must end in .png or .exr",
+                    path.display()
+                )))
+            }
+        };
+        written.map_err(|e| OocError::io(path, e))
     }
 }

@@ -161,7 +161,7 @@ pub fn bench_ooc(args: &BenchOocArgs, quiet: bool) -> Result<()> {
     let mut md = format!(
         "Scene: {} triangles, {} batching points, geometry.bin {:.1} MiB; image {}x{}, {} spp, {} threads.\n\n\
          Figure 6.3 (proxies {}^3, {:.1} MiB):\n\n\
-         | budget | disk MiB off | disk MiB on | off/on | wall s off | wall s on | off/on | events off | events on |\n|---|---|---|---|---|---|---|---|---|\n",
+         | budget | disk MiB off | disk MiB on | off/on | wall s off | wall s on | off/on | events off | events on | misses off | misses on | empty off | empty on |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
         scene.triangles,
         n,
         scene.geometry_bytes as f64 / 1048576.0,
@@ -198,7 +198,7 @@ pub fn bench_ooc(args: &BenchOocArgs, quiet: bool) -> Result<()> {
         let wall_ratio = on.as_ref().map(|s| off.wall_s / s.wall_s);
         let cell = |v: Option<String>| v.unwrap_or_else(|| "-".into());
         md += &format!(
-            "| {:.0} MiB ({frac}) | {:.1} | {} | {} | {:.2} | {} | {} | {} | {} |\n",
+            "| {:.0} MiB ({frac}) | {:.1} | {} | {} | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
             budget as f64 / 1048576.0,
             off.disk_bytes_read as f64 / 1048576.0,
             cell(
@@ -211,6 +211,10 @@ pub fn bench_ooc(args: &BenchOocArgs, quiet: bool) -> Result<()> {
             cell(wall_ratio.map(|r| format!("{r:.2}x"))),
             off.batching_events,
             cell(on.as_ref().map(|s| s.batching_events.to_string())),
+            off.cache_misses,
+            cell(on.as_ref().map(|s| s.cache_misses.to_string())),
+            off.empty_batches,
+            cell(on.as_ref().map(|s| s.empty_batches.to_string())),
         );
         budgets.push(BudgetRow {
             budget_fraction: frac,
@@ -231,7 +235,7 @@ pub fn bench_ooc(args: &BenchOocArgs, quiet: bool) -> Result<()> {
     for &r in &args.resolutions {
         let set = ProxySet::read(&args.scene.join(format::proxy_file(r)), n)?;
         let stats = if set.bytes() < budget {
-            render(budget, Some(&set)).ok().map(|(_, s)| s)
+            Some(render(budget, Some(&set))?.1)
         } else {
             None
         };
