@@ -412,6 +412,7 @@ fn huge_valid_scene() {
             crc32: 0,
         }),
         stored_colors: None,
+        materials: None,
     }
     .save(&tsv)
     .unwrap();
