@@ -152,8 +152,11 @@ impl GpuHashDag {
                 continue;
             }
             let input = ctx.upload("hash dag load records", &input)?;
-            let results =
-                ctx.create_buffer("hash dag load results", 4 * count as u64, MemLocation::GpuOnly)?;
+            let results = ctx.create_buffer(
+                "hash dag load results",
+                4 * count as u64,
+                MemLocation::GpuOnly,
+            )?;
             hd.merge_level(
                 &MergeLevel {
                     input: input.address(),
