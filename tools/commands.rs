@@ -361,12 +361,15 @@ fn quantize_materials(dag: &Svdag, k: u32) -> Result<Materials> {
     } else {
         Materials::quantize(&dag.colors, k)?
     };
+    let time = start.elapsed();
+    let rmse = voxdag::attr::rmse(&dag.colors, &materials.to_colors());
     println!(
-        "materials: {} voxels, palette of {} (at most {k} asked), 4-bit ids {} bytes, in {}",
+        "materials: {} voxels, palette of {} (at most {k} asked), 4-bit ids {} bytes, RMSE {:.4}, in {}",
         materials.ids.len(),
         materials.palette.len(),
         materials.ids.len().div_ceil(2),
-        seconds(start.elapsed())
+        rmse,
+        seconds(time)
     );
     Ok(materials)
 }
