@@ -62,14 +62,14 @@ fn quantization_is_deterministic_bounded_and_keeps_few_colours() {
     assert_eq!(m.palette, distinct);
     // Exactly 16 colours are kept, 17 are quantized to at most 16.
     let sixteen: Vec<u32> = (0..1000u32)
-        .map(|i| 0xff00_0000 | (i % 16) * 0x0f0b07)
+        .map(|i| 0xff00_0000 | ((i % 16) * 0x0f0b07))
         .collect();
     assert_eq!(
         Materials::quantize(&sixteen, 16).unwrap().to_colors(),
         sixteen
     );
     let seventeen: Vec<u32> = (0..1000u32)
-        .map(|i| 0xff00_0000 | (i % 17) * 0x0f0b07)
+        .map(|i| 0xff00_0000 | ((i % 17) * 0x0f0b07))
         .collect();
     let q = Materials::quantize(&seventeen, 16).unwrap();
     assert!(q.palette.len() <= 16 && q.palette.len() >= 15);
