@@ -455,6 +455,11 @@ pub fn stats(args: &StatsArgs, quiet: bool) -> Result<()> {
         _ => None,
     };
     let stored = file.stored_colors.take();
+    // Palette size, ids and their bytes of a material scene.
+    let materials = file.materials.take().map(|m| {
+        let (palette, ids) = (m.palette.len() as u64, m.ids.len() as u64);
+        (palette, ids, 80 + ids.div_ceil(2))
+    });
     let dag = file.into_svdag(&args.file)?;
     let colors = ColorStats::new(dag.colors.len() as u64, stored.as_ref());
     let (stats, bytes) = if args.quick {
@@ -467,6 +472,10 @@ pub fn stats(args: &StatsArgs, quiet: bool) -> Result<()> {
         if let Some(obj) = json.as_object_mut() {
             obj.insert("encoding".into(), encoding.into());
             obj.insert("tsvdag_mode".into(), mode.into());
+            if let Some((palette, ids, bytes)) = materials {
+                let m = serde_json::json!({ "palette": palette, "ids": ids, "bytes": bytes });
+                obj.insert("materials".into(), m);
+            }
         }
         println!("{}", serde_json::to_string(&json)?);
     } else {
@@ -474,6 +483,9 @@ pub fn stats(args: &StatsArgs, quiet: bool) -> Result<()> {
         print!("{}", stats_table(&args.file, &stats, &bytes));
         println!("  stored      {encoding}{mode}");
         print!("{}", color_line(&colors));
+        if let Some((palette, ids, bytes)) = materials {
+            println!("  materials   {ids} 4-bit ids, {palette}-entry palette: {bytes} bytes");
+        }
     }
     Ok(())
 }
