@@ -412,6 +412,7 @@ fn huge_valid_scene() {
             crc32: 0,
         }),
         stored_colors: None,
+        materials: None,
     }
     .save(&tsv)
     .unwrap();
@@ -531,6 +532,138 @@ fn verify_is_honest() {
         2,
         &["no digest: the voxels are not proven"],
     );
+}
+
+/// Offset and length of section `id` in a `.vdag` file's table.
+fn section(b: &[u8], id: u32) -> (usize, usize, usize) {
+    let count = u32::from_le_bytes(b[28..32].try_into().unwrap()) as usize;
+    let u64_at = |at: usize| u64::from_le_bytes(b[at..at + 8].try_into().unwrap()) as usize;
+    (0..count)
+        .map(|i| 64 + 24 * i)
+        .find(|&e| u32::from_le_bytes(b[e..e + 4].try_into().unwrap()) == id)
+        .map(|e| (e, u64_at(e + 8), u64_at(e + 16)))
+        .expect("section listed")
+}
+
+/// Class 2 and 4: a corrupt or truncated material section (palette size, ids, counts, padding,
+/// colours alongside) is one error line naming the problem; a changed id under a repaired
+/// checksum fails `verify`'s content digest.
+#[test]
+fn material_sections_fail_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let dag = colored();
+    let m = voxdag::attr::Materials::quantize(&dag.colors, 4).unwrap();
+    let voxels = m.ids.len();
+    let mut geometry = dag.clone();
+    geometry.colors.clear();
+    let good = dir.path().join("good.vdag");
+    VdagFile {
+        encoded: EncodedDag::Svdag32(geometry),
+        colors: Vec::new(),
+        digest: None,
+        stored_colors: None,
+        materials: Some(m.clone()),
+    }
+    .save(&good)
+    .unwrap();
+    let o = run(&["verify", s(&good)]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let bytes = std::fs::read(&good).unwrap();
+    let (entry, at, len) = section(&bytes, 8);
+    type Patch = Box<dyn Fn(&mut Vec<u8>)>;
+    fn put32(b: &mut [u8], at: usize, v: u32) {
+        b[at..at + 4].copy_from_slice(&v.to_le_bytes());
+    }
+    let mut cases: Vec<(&str, Patch, Vec<String>)> = vec![
+        (
+            "palette0",
+            Box::new(move |b| put32(b, at, 0)),
+            vec!["palette of 0 entries".into()],
+        ),
+        (
+            "palette17",
+            Box::new(move |b| put32(b, at, 17)),
+            vec!["palette of 17 entries".into()],
+        ),
+        (
+            "reserved",
+            Box::new(move |b| put32(b, at + 4, 1)),
+            vec!["reserved material field".into()],
+        ),
+        (
+            "unused entry",
+            Box::new(move |b| put32(b, at + 16 + 4 * 15, 7)),
+            vec!["palette entry 15".into()],
+        ),
+        (
+            "id past the palette",
+            Box::new(move |b| b[at + 80] = 0xff),
+            vec!["material 15 of a".into(), "-entry palette".into()],
+        ),
+        (
+            "count beyond the section",
+            Box::new(move |b| b[at + 8..at + 16].copy_from_slice(&u64::MAX.to_le_bytes())),
+            vec!["material ids do not fill".into()],
+        ),
+        (
+            // Two ids fewer, the section one byte shorter: consistent, but not the voxel count.
+            "count below the voxels",
+            Box::new(move |b| {
+                b[at + 8..at + 16].copy_from_slice(&(voxels as u64 - 2).to_le_bytes());
+                b[entry + 16..entry + 24].copy_from_slice(&(len as u64 - 1).to_le_bytes());
+                if voxels % 2 == 1 {
+                    b[at + 80 + (voxels - 2) / 2] &= 0x0f; // now the padding nibble
+                }
+            }),
+            vec![format!("{} material ids for {voxels} voxels", voxels - 2)],
+        ),
+        (
+            "with colours",
+            Box::new(|b| put32(b, 24, 1)),
+            vec!["material section 8 in a file with colours".into()],
+        ),
+        (
+            // A different id, checksum repaired: the content digest tells.
+            "changed id",
+            Box::new(move |b| b[at + 80] ^= 0x01),
+            vec!["colours".into(), "differ".into()],
+        ),
+    ];
+    if voxels % 2 == 1 {
+        cases.push((
+            "padding nibble",
+            Box::new(move |b| b[at + len - 1] |= 0x10),
+            vec!["unused high nibble".into()],
+        ));
+    }
+    for (name, patch, needles) in &cases {
+        let mut b = bytes.clone();
+        patch(&mut b);
+        fix_crc(&mut b);
+        let path = dir.path().join(format!("{name}.vdag"));
+        std::fs::write(&path, &b).unwrap();
+        let needles: Vec<&str> = needles.iter().map(String::as_str).collect();
+        let stderr = expect(&run(&["verify", s(&path)]), 1, &needles);
+        assert!(!stderr.is_empty(), "{name}");
+        // Loading for a render fails the same way (before any GPU work).
+        if *name != "changed id" {
+            expect(
+                &run(&[
+                    "render",
+                    "--cpu",
+                    s(&path),
+                    "--out",
+                    s(&dir.path().join("x.png")),
+                ]),
+                1,
+                &needles,
+            );
+        }
+    }
+    // Truncated inside the section.
+    let cut = dir.path().join("cut.vdag");
+    std::fs::write(&cut, &bytes[..at + 40]).unwrap();
+    expect(&run(&["verify", s(&cut)]), 1, &["truncated"]);
 }
 
 /// Class 5: Output files: SIGTERM mid-export leaves nothing; FIFOs are written in place; `-o -`;

@@ -75,6 +75,7 @@ fn compact_translations_need_version_2() {
         colors: Vec::new(),
         digest: Some(VoxelDigest::of_codes(&voxels.codes)),
         stored_colors: None,
+        materials: None,
     };
     let mut bytes = file.to_bytes().unwrap();
     assert_eq!(

@@ -523,6 +523,7 @@ fn chunked_file(codec: &str) -> voxdag::dag::VdagFile {
         digest: Some(VoxelDigest::of_codes(&v.codes)),
         encoded: EncodedDag::Svdag32(decoded),
         stored_colors: Some(stored),
+        materials: None,
     }
 }
 

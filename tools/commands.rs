@@ -8,8 +8,8 @@ use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
 use voxdag::atomic_file::{check_output_path, write_atomic};
-use voxdag::attr::{ColorCodec, LosslessVariant, StoredColors};
-use voxdag::dag::digest::ContentDigest;
+use voxdag::attr::{ColorCodec, LosslessVariant, Materials, StoredColors};
+use voxdag::dag::digest::{attributes_hash, ContentDigest};
 use voxdag::dag::encode::{
     DigestBuilder, EncodeError, EncodedDag, SsvdagEncoding, TransformGraph, TsvdagEncoding,
     TsvdagOptions, VoxelDigest,
@@ -273,9 +273,11 @@ pub fn load_svdag(path: &Path) -> Result<Svdag> {
     Ok(load_svdag_stored(path)?.0)
 }
 
-/// [`load_svdag`] with the file's encoded colours, if it stores them chunked.
+/// [`load_svdag`] with the file's encoded colours, if it stores them chunked. A material
+/// scene's voxels come with their palette colours (`palette[id]`).
 pub fn load_svdag_stored(path: &Path) -> Result<(Svdag, Option<StoredColors>)> {
     let mut file = VdagFile::load(path)?;
+    expand_materials(&mut file);
     let kind = file.encoded.kind();
     if kind != voxdag::dag::encode::EncodingKind::Svdag32 {
         log::info!(
@@ -286,6 +288,13 @@ pub fn load_svdag_stored(path: &Path) -> Result<(Svdag, Option<StoredColors>)> {
     }
     let stored_colors = file.stored_colors.take();
     Ok((file.into_svdag(path)?, stored_colors))
+}
+
+/// Gives a material scene's voxels their palette colours (what renderers show).
+pub fn expand_materials(file: &mut VdagFile) {
+    if let Some(m) = file.materials.take() {
+        file.colors = m.to_colors();
+    }
 }
 
 /// `voxdag build`.
@@ -309,12 +318,19 @@ pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
         EncodedDag::Tsvdag(e) => format!("tsvdag ({} mode)", e.options.mode_name()),
         other => other.kind().name().to_string(),
     };
-    let (colors, stored_colors) = encode_colors(&dag, args, quiet)?;
+    let (colors, stored_colors, materials) = match args.materials {
+        Some(k) => (Vec::new(), None, Some(quantize_materials(&dag, k)?)),
+        None => {
+            let (colors, stored) = encode_colors(&dag, args, quiet)?;
+            (colors, stored, None)
+        }
+    };
     let file = VdagFile {
         encoded,
         colors,
         digest: Some(digest),
         stored_colors,
+        materials,
     };
     file.save(&args.output)?;
     println!(
@@ -334,6 +350,28 @@ pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
         write_json(path, &report)?;
     }
     Ok(())
+}
+
+/// `--materials K`: the DAG's colours quantized into a palette of at most `k` entries
+/// (`docs/materials.md`); a scene without colours gets one white material.
+fn quantize_materials(dag: &Svdag, k: u32) -> Result<Materials> {
+    let start = Instant::now();
+    let materials = if dag.colors.is_empty() {
+        Materials::new(vec![0xffff_ffff], vec![0; dag.voxel_count() as usize])?
+    } else {
+        Materials::quantize(&dag.colors, k)?
+    };
+    let time = start.elapsed();
+    let rmse = voxdag::attr::rmse(&dag.colors, &materials.to_colors());
+    println!(
+        "materials: {} voxels, palette of {} (at most {k} asked), 4-bit ids {} bytes, RMSE {:.4}, in {}",
+        materials.ids.len(),
+        materials.palette.len(),
+        materials.ids.len().div_ceil(2),
+        rmse,
+        seconds(time)
+    );
+    Ok(materials)
 }
 
 /// Encodes the DAG's colours as `--colors` asks; returns the colours a reader will decode and
@@ -417,6 +455,11 @@ pub fn stats(args: &StatsArgs, quiet: bool) -> Result<()> {
         _ => None,
     };
     let stored = file.stored_colors.take();
+    // Palette size, ids and their bytes of a material scene.
+    let materials = file.materials.take().map(|m| {
+        let (palette, ids) = (m.palette.len() as u64, m.ids.len() as u64);
+        (palette, ids, 80 + ids.div_ceil(2))
+    });
     let dag = file.into_svdag(&args.file)?;
     let colors = ColorStats::new(dag.colors.len() as u64, stored.as_ref());
     let (stats, bytes) = if args.quick {
@@ -429,6 +472,10 @@ pub fn stats(args: &StatsArgs, quiet: bool) -> Result<()> {
         if let Some(obj) = json.as_object_mut() {
             obj.insert("encoding".into(), encoding.into());
             obj.insert("tsvdag_mode".into(), mode.into());
+            if let Some((palette, ids, bytes)) = materials {
+                let m = serde_json::json!({ "palette": palette, "ids": ids, "bytes": bytes });
+                obj.insert("materials".into(), m);
+            }
         }
         println!("{}", serde_json::to_string(&json)?);
     } else {
@@ -436,6 +483,9 @@ pub fn stats(args: &StatsArgs, quiet: bool) -> Result<()> {
         print!("{}", stats_table(&args.file, &stats, &bytes));
         println!("  stored      {encoding}{mode}");
         print!("{}", color_line(&colors));
+        if let Some((palette, ids, bytes)) = materials {
+            println!("  materials   {ids} 4-bit ids, {palette}-entry palette: {bytes} bytes");
+        }
     }
     Ok(())
 }
@@ -525,8 +575,18 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
     if let EncodedDag::Svdag32(dag) = &file.encoded {
         dag.validate()?;
     }
-    let digest = ContentDigest::of(&file.encoded, &file.colors)
+    let mut digest = ContentDigest::of(&file.encoded, &file.colors)
         .with_context(|| format!("{name}: traversing the {kind} encoding"))?;
+    digest.colors = attributes_hash(&file.colors, file.materials.as_ref());
+    if let Some(m) = file.materials.as_ref() {
+        if m.ids.len() as u64 != digest.voxels {
+            bail!(
+                "{name}: {} material ids for {} decoded voxels",
+                m.ids.len(),
+                digest.voxels
+            );
+        }
+    }
     if !file.colors.is_empty() && file.colors.len() as u64 != digest.voxels {
         bail!(
             "{name}: {} colours for {} decoded voxels",
@@ -578,8 +638,15 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
             s.chunks.chunk_count(),
             s.chunks.codec.name()
         ),
-        None if file.colors.is_empty() => String::new(),
-        None => format!(", {} colours", file.colors.len()),
+        None => match &file.materials {
+            Some(m) => format!(
+                ", {} material ids of a {}-entry palette",
+                m.ids.len(),
+                m.palette.len()
+            ),
+            None if file.colors.is_empty() => String::new(),
+            None => format!(", {} colours", file.colors.len()),
+        },
     };
     println!(
         "ok: {name} ({kind}, {} voxels, digest {}{colors}, matching the content digest)",
@@ -840,6 +907,7 @@ pub fn render(args: &RenderArgs) -> Result<()> {
         render_cpu_with(&dag, &index, colors, &settings)?
     } else {
         let mut file = VdagFile::load(&args.file)?;
+        expand_materials(&mut file);
         let stored = file.stored_colors.take();
         let colors = match &stored {
             Some(s) => ColorSource::Chunked(&s.chunks),
@@ -912,6 +980,7 @@ pub fn demo(args: &DemoArgs, quiet: bool) -> Result<()> {
         asset_root: None,
         no_colors: false,
         colors: ColorsArg(Some(ColorCodec::Lossless(LosslessVariant::Rgb888))),
+        materials: None,
         chunk_depth: None,
         output: vdag.clone(),
         report: Some(args.out_dir.join("avocado-build.json")),

@@ -6,11 +6,14 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use serde::Serialize;
+use voxdag::attr::Materials;
+use voxdag::dag::encode::EncodedDag;
+use voxdag::dag::VdagFile;
 use voxdag::edit::cpu::{CpuEditor, HashDag};
 use voxdag::edit::replay::{Replay, Step};
 use voxdag::edit::tool::Tool;
 
-use crate::commands::{check_output, load_svdag, seconds, write_json};
+use crate::commands::{check_output, seconds, write_json};
 
 /// Arguments of `voxdag edit`.
 #[derive(Args)]
@@ -96,7 +99,19 @@ pub fn edit(args: &EditArgs) -> Result<()> {
         check_output(report)?;
     }
     let replay = Replay::load(&args.replay)?;
-    let svdag = load_svdag(&args.scene)?;
+    // A material scene (`build --materials`) is edited with its materials (docs/materials.md).
+    let mut file = VdagFile::load(&args.scene)?;
+    let materials = file.materials.take();
+    let svdag = file.into_svdag(&args.scene)?;
+    if let Some(m) = &materials {
+        if args.material as usize >= m.palette.len() {
+            bail!(
+                "--material {} is not in the scene's {}-entry palette",
+                args.material,
+                m.palette.len()
+            );
+        }
+    }
     let depth = svdag.resolution.trailing_zeros();
     let replay_depth = args.replay_depth.unwrap_or(depth);
     // Every line is checked before the first edit: a bad line applies nothing.
@@ -108,8 +123,8 @@ pub fn edit(args: &EditArgs) -> Result<()> {
             args.scene.display()
         );
     }
-    let mut dag = HashDag::new(svdag.resolution, false)?;
-    let root = dag.insert_svdag(&svdag, None)?;
+    let mut dag = HashDag::new(svdag.resolution, materials.is_some())?;
+    let root = dag.insert_svdag(&svdag, materials.as_ref().map(|m| m.ids.as_slice()))?;
     drop(svdag);
     let mut editor = CpuEditor::new(dag, root, args.undo_depth);
     let mut edits = Vec::new();
@@ -137,7 +152,24 @@ pub fn edit(args: &EditArgs) -> Result<()> {
     let gc_time = start.elapsed();
     let unique = editor.unique_nodes_per_level()?;
     let out = editor.dag().to_svdag(editor.root())?;
-    out.save(&args.output)?;
+    let resolution = out.resolution;
+    match &materials {
+        Some(m) => {
+            let ids = editor.dag().voxels(editor.root())?;
+            VdagFile {
+                encoded: EncodedDag::Svdag32(out),
+                colors: Vec::new(),
+                digest: None,
+                stored_colors: None,
+                materials: Some(Materials::new(
+                    m.palette.clone(),
+                    ids.into_iter().map(|(_, id)| id).collect(),
+                )?),
+            }
+            .save(&args.output)?
+        }
+        None => out.save(&args.output)?,
+    }
     let total: f64 = edits.iter().map(|e| e.ms).sum();
     println!(
         "{} edits ({} undo, {} redo) in {:.1} ms (CPU editor, {} threads); GC {} freed {} items; \
@@ -158,7 +190,7 @@ pub fn edit(args: &EditArgs) -> Result<()> {
             &EditReport {
                 scene: args.scene.clone(),
                 replay: args.replay.clone(),
-                resolution: out.resolution,
+                resolution,
                 replay_depth,
                 editor: "cpu",
                 threads: rayon::current_num_threads(),

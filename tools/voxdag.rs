@@ -80,6 +80,11 @@ pub struct BuildArgs {
     /// (T: per-channel error threshold in (0, 1], default 0.06). See docs/colors.md.
     #[arg(long, default_value = "lossless", value_parser = commands::parse_colors)]
     colors: ColorsArg,
+    /// Quantize the colours into a palette of at most K (1..=16) materials, stored as one
+    /// 4-bit id per voxel instead of colours (see docs/materials.md).
+    #[arg(long, value_name = "K", conflicts_with_all = ["colors", "no_colors"],
+          value_parser = clap::value_parser!(u32).range(1..=16))]
+    materials: Option<u32>,
     /// Depth below the root of the SVO nodes that own one colour chunk each (default: nodes of
     /// 256^3 voxels for the exact codecs, 128^3 for the lossy ones).
     #[arg(long)]

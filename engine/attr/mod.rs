@@ -22,6 +22,7 @@ pub mod dado;
 pub mod dolonius;
 pub mod lossless;
 pub mod lossy;
+pub mod materials;
 pub mod raw;
 pub mod varbit;
 
@@ -29,6 +30,7 @@ use serde::{Deserialize, Serialize};
 
 pub use chunks::{ChunkOp, ChunkedColors, StoredColors};
 pub use lossless::LosslessVariant;
+pub use materials::Materials;
 
 /// Stored format of an encoded colour chunk; the ids are part of the `.vdag` format.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]

@@ -14,6 +14,7 @@ use rustc_hash::FxHashMap;
 
 use super::encode::{EncodeError, EncodedDag, TreeView};
 use super::Svdag;
+use crate::attr::Materials;
 
 /// What section 7 stores.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -116,6 +117,33 @@ pub fn colors_hash(colors: &[u32]) -> u64 {
         h.absorb(v);
     }
     h.0[0] ^ h.0[1].rotate_left(17)
+}
+
+/// Hash of a material scene's attributes (palette and ids; `docs/vdag-format.md` section 7),
+/// stored in the digest's colour field in place of [`colors_hash`].
+pub fn materials_hash(m: &Materials) -> u64 {
+    let mut h = Hasher2::new(1 << 63 | m.ids.len() as u64);
+    h.absorb(m.palette.len() as u64);
+    for c in m.palette16() {
+        h.absorb(c as u64);
+    }
+    for word in m.ids.chunks(16) {
+        let v = word
+            .iter()
+            .enumerate()
+            .fold(0u64, |v, (i, &id)| v | (id as u64) << (4 * i));
+        h.absorb(v);
+    }
+    h.0[0] ^ h.0[1].rotate_left(17)
+}
+
+/// The colour field of the digest: [`materials_hash`] of a material scene, else
+/// [`colors_hash`] of its colours.
+pub fn attributes_hash(colors: &[u32], materials: Option<&Materials>) -> u64 {
+    match materials {
+        Some(m) => materials_hash(m),
+        None => colors_hash(colors),
+    }
 }
 
 impl ContentDigest {

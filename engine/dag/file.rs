@@ -9,13 +9,13 @@ use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::path::Path;
 
-use super::digest::{ContentDigest, CONTENT_DIGEST_LEN};
+use super::digest::{attributes_hash, ContentDigest, CONTENT_DIGEST_LEN};
 use super::encode::{
     EncodeError, EncodedDag, EncodingKind, SsvdagEncoding, TsvdagEncoding, VoxelDigest,
 };
 use super::validate::Place;
 use super::{DagError, Svdag, MAX_RESOLUTION};
-use crate::attr::{AttrError, ChunkedColors, ColorCodec, StoredColors};
+use crate::attr::{AttrError, ChunkedColors, ColorCodec, Materials, StoredColors};
 use rayon::prelude::*;
 
 /// The 8 bytes every `.vdag` file starts with.
@@ -45,6 +45,12 @@ const SECTION_PAYLOAD: u32 = 5;
 const SECTION_CHUNKED_COLORS: u32 = 6;
 /// Section id: content digest (canonical DAG hash and colour hash, `dag::digest`).
 const SECTION_CONTENT_DIGEST: u32 = 7;
+/// Section id: materials (palette and 4-bit ids; layout in `docs/vdag-format.md`).
+const SECTION_MATERIALS: u32 = 8;
+/// Known section ids are `1..=KNOWN_SECTIONS`.
+const KNOWN_SECTIONS: usize = 8;
+/// Bytes of the fixed fields at the start of the material section (with the 16-entry palette).
+const MATERIALS_HEADER_LEN: u64 = 80;
 /// Bytes of the fixed fields at the start of the chunked colour section.
 const CHUNKED_HEADER_LEN: u64 = 40;
 
@@ -239,6 +245,85 @@ fn parse_stored_colors(
         rmse,
     };
     Ok((stored, colors))
+}
+
+/// The material section's bytes (layout in `docs/vdag-format.md`).
+fn materials_bytes(m: &Materials) -> Vec<u8> {
+    let packed = m.packed_ids();
+    let mut b = Vec::with_capacity(MATERIALS_HEADER_LEN as usize + packed.len());
+    b.extend_from_slice(&(m.palette.len() as u32).to_le_bytes());
+    b.extend_from_slice(&0u32.to_le_bytes());
+    b.extend_from_slice(&(m.ids.len() as u64).to_le_bytes());
+    for c in m.palette16() {
+        b.extend_from_slice(&c.to_le_bytes());
+    }
+    b.extend_from_slice(&packed);
+    b
+}
+
+/// Parses and checks the material section at `at` (`len` bytes): palette size 1..=16, unused
+/// palette entries zero, the length matching the id count before the ids are allocated, every
+/// id below the palette size. The id count is checked against the voxels by the caller.
+fn parse_materials(
+    bytes: &[u8],
+    (at, len): (u64, u64),
+    name: &Path,
+) -> Result<Materials, DagError> {
+    let err = |offset: u64, reason: String| DagError::Format {
+        path: name.to_path_buf(),
+        offset,
+        reason,
+    };
+    if len < MATERIALS_HEADER_LEN {
+        return Err(err(at, format!("material section of {len} bytes")));
+    }
+    let size = u32_at(bytes, at);
+    if !(1..=crate::attr::materials::MAX_MATERIALS).contains(&size) {
+        return Err(err(at, format!("palette of {size} entries (1..=16)")));
+    }
+    if u32_at(bytes, at + 4) != 0 {
+        return Err(err(at + 4, "reserved material field is not zero".into()));
+    }
+    let count = u64_at(bytes, at + 8);
+    let palette: Vec<u32> = (0..16).map(|i| u32_at(bytes, at + 16 + 4 * i)).collect();
+    if let Some(i) = (size as usize..16).find(|&i| palette[i] != 0) {
+        return Err(err(
+            at + 16 + 4 * i as u64,
+            format!("palette entry {i} past the {size} used is not zero"),
+        ));
+    }
+    let expected = count
+        .checked_add(1)
+        .map(|n| n / 2)
+        .and_then(|n| n.checked_add(MATERIALS_HEADER_LEN));
+    if expected != Some(len) {
+        return Err(err(
+            at + 8,
+            format!("{count} material ids do not fill a {len}-byte section"),
+        ));
+    }
+    // The count is now bounded by the section length: allocate.
+    let ids_at = at + MATERIALS_HEADER_LEN;
+    let packed = &bytes[ids_at as usize..(at + len) as usize];
+    let ids = Materials::unpack_ids(packed, count as usize).map_err(|byte| {
+        err(
+            ids_at + byte as u64,
+            "unused high nibble of the last material byte is not zero".into(),
+        )
+    })?;
+    if let Some(i) = ids.iter().position(|&id| id as u32 >= size) {
+        return Err(err(
+            ids_at + i as u64 / 2,
+            format!(
+                "voxel {i} has material {} of a {size}-entry palette",
+                ids[i]
+            ),
+        ));
+    }
+    Ok(Materials {
+        palette: palette[..size as usize].to_vec(),
+        ids,
+    })
 }
 
 /// A `Write` that counts bytes and feeds them to a CRC-32.
@@ -444,8 +529,8 @@ struct Parsed {
     level_count: u32,
     color_format: ColorFormat,
     color_count: u64,
-    /// `(offset, length)` of sections 1..=7.
-    sections: [Option<(u64, u64)>; 7],
+    /// `(offset, length)` of sections `1..=KNOWN_SECTIONS`.
+    sections: [Option<(u64, u64)>; KNOWN_SECTIONS],
 }
 
 /// Checks everything up to and including the section table (reading rules 1-3 of
@@ -555,7 +640,7 @@ fn parse_header(bytes: &[u8], name: &Path) -> Result<Parsed, DagError> {
     }
 
     // Section table: known ids at most once, inside the file, expected lengths, no overlap.
-    let mut sections: [Option<(u64, u64)>; 7] = [None; 7];
+    let mut sections: [Option<(u64, u64)>; KNOWN_SECTIONS] = [None; KNOWN_SECTIONS];
     let mut ranges: Vec<(u64, u64, u64)> = Vec::new(); // (start, end, table entry offset)
     for i in 0..section_count as u64 {
         let at = HEADER_LEN + i * ENTRY_LEN;
@@ -583,6 +668,12 @@ fn parse_header(bytes: &[u8], name: &Path) -> Result<Parsed, DagError> {
                     format!("section {id} in a file whose colour format is not chunked"),
                 ))
             }
+            SECTION_MATERIALS if color_format != ColorFormat::None => {
+                return Err(err(
+                    at,
+                    format!("material section {id} in a file with colours"),
+                ))
+            }
             SECTION_DIGEST => Some(16),
             SECTION_CONTENT_DIGEST => Some(CONTENT_DIGEST_LEN),
             SECTION_PAYLOAD if !svdag32 => Some(count),
@@ -600,7 +691,7 @@ fn parse_header(bytes: &[u8], name: &Path) -> Result<Parsed, DagError> {
                 format!("section {id} is {length} bytes, expected {expected:?}"),
             ));
         }
-        if (1..=7).contains(&id) {
+        if (1..=KNOWN_SECTIONS as u32).contains(&id) {
             let slot = &mut sections[id as usize - 1];
             if slot.is_some() {
                 return Err(err(at, format!("section {id} listed twice")));
@@ -652,16 +743,17 @@ fn u32s(bytes: &[u8], (at, n): (u64, u64)) -> Vec<u32> {
 impl Svdag {
     /// Serialises the DAG in `.vdag` v1 format (encoding `svdag32`) to a writer.
     pub fn write_to(&self, w: &mut impl Write) -> io::Result<()> {
-        self.write_with(w, None, None, None)
+        self.write_with(w, None, None, None, None)
     }
 
-    /// `write_to`, with optional digest sections and optional encoded colours (which replace
-    /// `self.colors` in the file).
+    /// `write_to`, with optional digest sections, optional encoded colours (which replace
+    /// `self.colors` in the file) and optional materials.
     fn write_with(
         &self,
         w: &mut impl Write,
         digest: Option<&VoxelDigest>,
         stored: Option<&StoredColors>,
+        materials: Option<&Materials>,
         content: Option<&ContentDigest>,
     ) -> io::Result<()> {
         let (color_format, raw_colors, chunked) = color_sections(&self.colors, stored);
@@ -683,6 +775,9 @@ impl Svdag {
         }
         if let Some(c) = chunked {
             sections.push((SECTION_CHUNKED_COLORS, c));
+        }
+        if let Some(m) = materials {
+            sections.push((SECTION_MATERIALS, Data::Owned(materials_bytes(m))));
         }
         let content = content.map(|c| c.to_bytes());
         if let Some(c) = &content {
@@ -707,7 +802,9 @@ impl Svdag {
             path: path.to_path_buf(),
             source: io::Error::other(e.to_string()),
         })?;
-        write_atomic(path, |w| self.write_with(w, None, None, Some(&content)))
+        write_atomic(path, |w| {
+            self.write_with(w, None, None, None, Some(&content))
+        })
     }
 
     /// Loads and validates a `.vdag` file whose encoding is `svdag32` (see [`VdagFile::load`]
@@ -789,6 +886,9 @@ pub struct VdagFile {
     /// The colours as an encoder stored them; when present they are written instead of the
     /// raw colours, and `colors` holds their decoded values.
     pub stored_colors: Option<StoredColors>,
+    /// Palette and per-voxel material ids (section 8); a file has materials or colours, not
+    /// both (`docs/materials.md`).
+    pub materials: Option<Materials>,
 }
 
 impl VdagFile {
@@ -796,17 +896,35 @@ impl VdagFile {
     /// Every file written here stores the content digest (section 7) of its nodes and its
     /// decoded colours.
     pub fn write_to(&self, w: &mut impl Write) -> io::Result<()> {
-        let content = ContentDigest::of(&self.encoded, &self.colors)
+        let materials = self.materials.as_ref();
+        if materials.is_some() && (!self.colors.is_empty() || self.stored_colors.is_some()) {
+            return Err(io::Error::other(
+                "a .vdag file holds materials or colours, not both",
+            ));
+        }
+        if let Some(m) = materials {
+            m.validate().map_err(|e| io::Error::other(e.to_string()))?;
+        }
+        let mut content = ContentDigest::of(&self.encoded, &self.colors)
             .map_err(|e| io::Error::other(format!("content digest: {e}")))?;
+        content.colors = attributes_hash(&self.colors, materials);
+        if materials.is_some_and(|m| m.ids.len() as u64 != content.voxels) {
+            return Err(io::Error::other(format!(
+                "{} material ids for {} voxels",
+                materials.map_or(0, |m| m.ids.len()),
+                content.voxels
+            )));
+        }
         let payload = match &self.encoded {
             EncodedDag::Svdag32(dag) => {
                 let stored = self.stored_colors.as_ref();
+                let digest = self.digest.as_ref();
                 if dag.colors == self.colors {
-                    return dag.write_with(w, self.digest.as_ref(), stored, Some(&content));
+                    return dag.write_with(w, digest, stored, materials, Some(&content));
                 }
                 let mut dag = dag.clone();
                 dag.colors = self.colors.clone();
-                return dag.write_with(w, self.digest.as_ref(), stored, Some(&content));
+                return dag.write_with(w, digest, stored, materials, Some(&content));
             }
             other => other.payload(),
         };
@@ -830,6 +948,9 @@ impl VdagFile {
         ];
         if let Some(c) = chunked {
             sections.push((SECTION_CHUNKED_COLORS, c));
+        }
+        if let Some(m) = materials {
+            sections.push((SECTION_MATERIALS, Data::Owned(materials_bytes(m))));
         }
         let content = content.to_bytes();
         sections.push((SECTION_CONTENT_DIGEST, Data::Bytes(&content)));
@@ -914,14 +1035,38 @@ impl VdagFile {
             }
             None => (None, None),
         };
+        let section = parsed.sections[SECTION_MATERIALS as usize - 1];
+        let materials = match section {
+            Some(section) => Some(parse_materials(bytes, section, name)?),
+            None => None,
+        };
+        // Material ids must match the voxels: the digest's count here, the DAG's below.
+        let count_err = |m: &Materials, voxels: u64| {
+            err(
+                section.expect("materials parsed").0 + 8,
+                format!("{} material ids for {voxels} voxels", m.ids.len()),
+            )
+        };
+        if let (Some(m), Some(d)) = (&materials, digest) {
+            if m.ids.len() as u64 != d.voxels {
+                return Err(count_err(m, d.voxels));
+            }
+        }
         if parsed.encoding == Encoding::Svdag32 {
             let dag = Svdag::from_parsed(bytes, name, &parsed, decoded)?;
+            if let Some(m) = &materials {
+                let voxels = dag.voxel_count();
+                if m.ids.len() as u64 != voxels {
+                    return Err(count_err(m, voxels));
+                }
+            }
             let colors = dag.colors.clone();
             return Ok(VdagFile {
                 encoded: EncodedDag::Svdag32(dag),
                 colors,
                 digest,
                 stored_colors,
+                materials,
             });
         }
         let (at, n) = parsed.sections[SECTION_PAYLOAD as usize - 1].expect("required");
@@ -962,6 +1107,7 @@ impl VdagFile {
             colors,
             digest,
             stored_colors,
+            materials,
         })
     }
 

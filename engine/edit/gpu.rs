@@ -11,6 +11,8 @@
 //! walks the tool's region top-down (`traverse`, then `leaves` with one invocation per voxel),
 //! building the temporary SVO the merge consumes. See `docs/editing-gpu.md`.
 
+mod load;
+
 use std::sync::Arc;
 
 use rustc_hash::FxHashSet;
@@ -152,6 +154,8 @@ pub struct GpuHashDag {
     fill_flood: ComputePipeline,
     root_level: u32,
     with_materials: bool,
+    /// RGBA8 sRGB palette of a material scene (`load_materials`); empty without materials.
+    palette: Vec<u32>,
     roots: Vec<Root>,
     /// Index of the current root in `roots` (undo moves it back, redo forward).
     current: usize,
@@ -238,6 +242,7 @@ impl GpuHashDag {
             fill_flood: pipeline("edit fill flood", shaders::EDIT_FILL_FLOOD)?,
             root_level,
             with_materials,
+            palette: Vec::new(),
             roots: vec![Root::Empty],
             current: 0,
         })
