@@ -168,7 +168,11 @@ fn synthetic(resolution: u32, seed: u64) -> Voxels {
 /// Checks every live root of the GPU DAG against the CPU editor's, and the stored items against
 /// the reachable ones.
 fn check_after_gc(hd: &GpuHashDag, cpu: &CpuEditor, what: &str) {
-    assert_eq!(hd.roots().len(), cpu.live_roots().len(), "{what}: live roots");
+    assert_eq!(
+        hd.roots().len(),
+        cpu.live_roots().len(),
+        "{what}: live roots"
+    );
     let image = hd.download().unwrap();
     for (i, (&g, &c)) in hd.roots().iter().zip(cpu.live_roots()).enumerate() {
         assert_eq!(
@@ -180,7 +184,11 @@ fn check_after_gc(hd: &GpuHashDag, cpu: &CpuEditor, what: &str) {
     let stored = stored_per_table(&image);
     let reachable = gpu_reachable(&image, hd.roots());
     assert_eq!(stored, reachable, "{what}: stored = reachable, per table");
-    assert_eq!(reachable, cpu_reachable(cpu), "{what}: GPU = CPU, per table");
+    assert_eq!(
+        reachable,
+        cpu_reachable(cpu),
+        "{what}: GPU = CPU, per table"
+    );
     assert_eq!(
         stored.iter().sum::<u64>(),
         cpu.dag().item_count(),
@@ -191,7 +199,12 @@ fn check_after_gc(hd: &GpuHashDag, cpu: &CpuEditor, what: &str) {
 /// Random edits with undo / redo and an undo depth, GC on the GPU and on the CPU reference
 /// after every few steps; then undo through every kept root.
 /// Returns the items the collections freed.
-fn edits_undo_gc(ctx: &Arc<GpuContext>, variant: HashVariant, resolution: u32, steps: usize) -> u64 {
+fn edits_undo_gc(
+    ctx: &Arc<GpuContext>,
+    variant: HashVariant,
+    resolution: u32,
+    steps: usize,
+) -> u64 {
     let seed = 77 + variant.id() as u64 + resolution as u64;
     let dag = Svdag::from_voxels(&synthetic(resolution, seed)).unwrap();
     let depth = 3;
@@ -326,15 +339,15 @@ fn auto_gc_lets_a_tiny_pool_run_a_long_edit_sequence() {
     let resolution = 128;
     let mut rng = common::Rng(11);
     let coords: Vec<[u32; 3]> = (0..resolution)
-        .flat_map(|z| (0..resolution).flat_map(move |y| (0..56).map(move |x| [x, y, z])))
+        .flat_map(|z| (0..resolution).flat_map(move |y| (0..48).map(move |x| [x, y, z])))
         .filter(|_| rng.below(2) == 0)
         .collect();
     let dag = Svdag::from_voxels(&Voxels::from_coords(resolution, coords)).unwrap();
-    let tools: Vec<Tool> = (0..60)
+    let tools: Vec<Tool> = (0..80)
         .map(|_| Tool::Remove {
             shape: Shape::Sphere,
             center: [
-                rng.below(56) as f32 + 0.3,
+                rng.below(48) as f32 + 0.3,
                 rng.below(128) as f32,
                 rng.below(128) as f32,
             ],
@@ -348,24 +361,24 @@ fn auto_gc_lets_a_tiny_pool_run_a_long_edit_sequence() {
     };
     // Without GC the pool runs out.
     let mut hd = GpuHashDag::load(&ctx, &capped(None), &dag, None).unwrap();
-    let failed = tools.iter().position(|t| {
-        match gpu_edit(&mut hd, t) {
-            Ok(()) => false,
-            Err(GpuDagError::Hash(HashError::Exhausted { .. })) => true,
-            Err(e) => panic!("{e}"),
-        }
+    let failed = tools.iter().position(|t| match gpu_edit(&mut hd, t) {
+        Ok(()) => false,
+        Err(GpuDagError::Hash(HashError::Exhausted { .. })) => true,
+        Err(e) => panic!("{e}"),
     });
     assert!(failed.is_some(), "the capped pool never ran out");
     eprintln!("without GC the pool ran out at edit {failed:?}");
     drop(hd);
     // With automatic GC the whole sequence runs.
-    let mut hd = GpuHashDag::load(&ctx, &capped(Some(0.95)), &dag, None).unwrap();
+    let mut hd = GpuHashDag::load(&ctx, &capped(Some(0.8)), &dag, None).unwrap();
     let mut cpu_dag = HashDag::new(resolution, false).unwrap();
     let root = cpu_dag.insert_svdag(&dag, None).unwrap();
     let mut cpu = CpuEditor::new(cpu_dag, root, 1);
     let mut runs = Vec::new();
     for (i, t) in tools.iter().enumerate() {
-        gpu_edit(&mut hd, t).unwrap_or_else(|e| panic!("edit {i}: {e}"));
+        let slabs = hd.pool_use().unwrap()[0].0;
+        gpu_edit(&mut hd, t)
+            .unwrap_or_else(|e| panic!("edit {i} ({slabs} leaf slabs before): {e}"));
         cpu.edit(t).unwrap();
         runs.extend(hd.take_auto_gc());
     }
