@@ -11,9 +11,7 @@ use std::sync::Arc;
 use rustc_hash::FxHashSet;
 use voxdag::dag::Svdag;
 use voxdag::edit::cpu::{CpuEditor, HashDag};
-use voxdag::edit::gpu::{
-    EditTool, GpuDagError, GpuHashDag, GpuHashDagConfig, HashDagImage, ToolShape,
-};
+use voxdag::edit::gpu::{GpuDagError, GpuHashDag, GpuHashDagConfig, HashDagImage};
 use voxdag::edit::item::{InnerNode, NodePtr, Root, TABLE_COUNT};
 use voxdag::edit::tool::{Shape, Tool};
 use voxdag::gpu::{GpuContext, Profiler};
@@ -26,33 +24,9 @@ fn assert_clean(ctx: &Arc<GpuContext>) {
     assert_eq!(ctx.validation_errors(), 0, "validation messages (see log)");
 }
 
-/// Applies an add / remove tool on the GPU.
+/// Applies a tool on the GPU.
 fn gpu_edit(hd: &mut GpuHashDag, tool: &Tool) -> Result<(), GpuDagError> {
-    let (shape, center, radius, remove) = match *tool {
-        Tool::Add {
-            shape,
-            center,
-            radius,
-            ..
-        } => (shape, center, radius, false),
-        Tool::Remove {
-            shape,
-            center,
-            radius,
-        } => (shape, center, radius, true),
-        _ => panic!("the GC tests use add / remove tools"),
-    };
-    let shape = match shape {
-        Shape::Sphere => ToolShape::Sphere,
-        Shape::Cube => ToolShape::Cube,
-    };
-    let tool = EditTool {
-        shape,
-        center,
-        radius,
-        remove,
-    };
-    hd.edit(&tool, None).map(|_| ())
+    hd.edit(tool, None).map(|_| ())
 }
 
 /// A random add / remove sphere or cube inside a grid of side `n`.
