@@ -13,7 +13,7 @@ use std::sync::Arc;
 use common::{build_scene, gpu, repo};
 use voxdag::dag::Svdag;
 use voxdag::edit::cpu::HashDag;
-use voxdag::edit::gpu::{EditTool, GpuHashDag, GpuHashDagConfig, ToolShape};
+use voxdag::edit::gpu::{GpuHashDag, GpuHashDagConfig};
 use voxdag::edit::item::{InnerNode, NodePtr, Root};
 use voxdag::edit::tool::{Shape, Tool};
 use voxdag::gpu::GpuContext;
@@ -91,19 +91,30 @@ fn geometry_only(mut dag: Svdag) -> Svdag {
 
 /// The edits of the test: large solid additions (full nodes at several levels), removals
 /// that cut through them, cubes and spheres.
-fn edits(n: f32) -> Vec<EditTool> {
-    let tool = |shape, c: [f32; 3], r: f32, remove| EditTool {
-        shape,
-        center: c.map(|v| v * n),
-        radius: r * n,
-        remove,
+fn edits(n: f32) -> Vec<Tool> {
+    let tool = |shape, c: [f32; 3], r: f32, remove| {
+        let (center, radius) = (c.map(|v| v * n), r * n);
+        if remove {
+            Tool::Remove {
+                shape,
+                center,
+                radius,
+            }
+        } else {
+            Tool::Add {
+                shape,
+                center,
+                radius,
+                material: 0,
+            }
+        }
     };
     vec![
-        tool(ToolShape::Sphere, [0.4, 0.45, 0.5], 0.3, false),
-        tool(ToolShape::Cube, [0.7, 0.3, 0.35], 0.2, false),
-        tool(ToolShape::Sphere, [0.55, 0.5, 0.4], 0.17, true),
-        tool(ToolShape::Cube, [0.3, 0.6, 0.6], 0.09, true),
-        tool(ToolShape::Sphere, [0.2, 0.2, 0.8], 0.13, false),
+        tool(Shape::Sphere, [0.4, 0.45, 0.5], 0.3, false),
+        tool(Shape::Cube, [0.7, 0.3, 0.35], 0.2, false),
+        tool(Shape::Sphere, [0.55, 0.5, 0.4], 0.17, true),
+        tool(Shape::Cube, [0.3, 0.6, 0.6], 0.09, true),
+        tool(Shape::Sphere, [0.2, 0.2, 0.8], 0.13, false),
     ]
 }
 
@@ -261,11 +272,11 @@ fn path_tracers_match_svdag32_every_variant() {
         loaded
             .dag
             .edit(
-                &EditTool {
-                    shape: ToolShape::Cube,
+                &Tool::Add {
+                    shape: Shape::Cube,
                     center: [10.0, 20.0, 12.0],
                     radius: 5.0,
-                    remove: false,
+                    material: 0,
                 },
                 None,
             )
