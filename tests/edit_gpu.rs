@@ -835,3 +835,41 @@ fn fixed_tool_cases_match_the_cpu_editor_and_brute_force() {
     }
     assert_clean(&ctx);
 }
+
+/// Host waits of one sphere edit on a 64^3 scene, per level touched (the folded merge: per
+/// level one wait for the traversal count, one for the size counters, one for the dedup and
+/// search of every size, one for the insert rounds, one for the resolve, one for the merge's
+/// index upload; plus the uploads of the tool and the first entry and the root's readback).
+/// Printed for docs/editing-gpu.md.
+#[test]
+fn an_edit_waits_for_the_host_a_bounded_number_of_times_per_level() {
+    let ctx = common::gpu();
+    let dag = Svdag::from_voxels(&synthetic(64, 9)).unwrap();
+    let mut hd = GpuHashDag::load(
+        &ctx,
+        &GpuHashDagConfig::new(HashVariant::TicketBoard, 1024),
+        &dag,
+        None,
+    )
+    .unwrap();
+    for tool in [
+        shaped(Shape::Sphere, [40.0, 30.0, 31.0], 12.0, false),
+        shaped(Shape::Sphere, [40.0, 30.0, 31.0], 12.0, true),
+    ] {
+        let before = ctx.stats();
+        let report = hd.edit(&tool, None).unwrap();
+        let waits = ctx.stats().since(before).host_waits;
+        let levels = report.temporary_nodes.iter().filter(|&&n| n > 0).count() as u64;
+        let sizes: u64 = report.items.iter().map(|&n| (n > 0) as u64).sum();
+        println!(
+            "host waits: {waits} for {levels} levels ({sizes} levels with items) {:?}",
+            report.items
+        );
+        assert!(
+            waits <= 6 * levels + 3,
+            "{waits} host waits for {levels} levels"
+        );
+    }
+    drop(hd);
+    assert_clean(&ctx);
+}

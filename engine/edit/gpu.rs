@@ -27,7 +27,7 @@ use crate::gpu::{
     shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, MemLocation,
     Profiler,
 };
-use crate::hash::dedup::{DedupError, GpuDedup};
+use crate::hash::dedup::{DedupError, DedupResult, GpuDedup};
 use crate::hash::layout::SLABS_PER_SUPER_BLOCK;
 use crate::hash::{GpuHashTable, Handle, HashError, HashTableConfig, HashVariant, TableImage};
 use crate::scene::Voxels;
@@ -841,56 +841,96 @@ impl GpuHashDag {
             let max = *counts.iter().max().unwrap_or(&0);
             let iota: Vec<u32> = (0..max).collect();
             let values = ctx.upload("edit iota", &iota)?;
-            for (s, &count) in counts.iter().enumerate() {
-                if count == 0 {
-                    continue;
-                }
-                self.dedups[s].dedup_buffers(
-                    &items[s],
-                    &values,
-                    count,
-                    &reps[s],
-                    profiler.as_deref_mut(),
-                )?;
-                let table = &mut self.tables[s];
-                if table.config().grow_before_insert {
-                    table.reserve(count)?;
-                }
-                let pending = {
-                    let table = &self.tables[s];
-                    let mut cmd = ctx.begin_commands("edit insert")?;
-                    table.record_search(
+            let sizes: Vec<usize> = (0..counts.len()).filter(|&s| counts[s] > 0).collect();
+            let scratch = sizes
+                .iter()
+                .map(|&s| self.dedups[s].scratch(counts[s], None))
+                .collect::<Result<Vec<_>, _>>()?;
+            // One submission for the dedup and the search of every size (the search does not
+            // read the representatives), one host wait.
+            let pending = {
+                let mut cmd = ctx.begin_commands("edit dedup and search")?;
+                let mut pending = Vec::new();
+                for (k, &s) in sizes.iter().enumerate() {
+                    pending.push(self.dedups[s].record_dedup(
+                        &mut cmd,
+                        &items[s],
+                        &values,
+                        counts[s],
+                        &reps[s],
+                        &scratch[k],
+                        profiler.as_deref_mut(),
+                    )?);
+                    cmd.barrier();
+                    self.tables[s].record_search(
                         &mut cmd,
                         &items[s],
                         &handles[s],
-                        count,
+                        counts[s],
                         profiler.as_deref_mut(),
                     )?;
+                }
+                cmd.submit_async()?;
+                pending
+            };
+            for (pending, &s) in pending.into_iter().zip(&sizes) {
+                if let DedupResult::Retry { .. } =
+                    self.dedups[s].finish_dedup(pending, counts[s])?
+                {
+                    // Rare: the overflow pool ran out; the batch runs again on its own, before
+                    // any representative is used.
+                    self.dedups[s].dedup_buffers(
+                        &items[s],
+                        &values,
+                        counts[s],
+                        &reps[s],
+                        profiler.as_deref_mut(),
+                    )?;
+                }
+            }
+            for &s in &sizes {
+                if self.tables[s].config().grow_before_insert {
+                    self.tables[s].reserve(counts[s])?;
+                }
+            }
+            // One submission for the mark and the insert round of every size, one host wait
+            // (more only when a pool runs out: `finish_insert` grows it and runs more rounds).
+            let pending = {
+                let mut cmd = ctx.begin_commands("edit insert")?;
+                let mut pending = Vec::new();
+                for &s in &sizes {
                     let mark = EditPush {
                         src: reps[s].address(),
                         dst: handles[s].address(),
-                        count,
+                        count: counts[s],
                         ..EditPush::default()
                     };
                     cmd.begin_pass(&mut profiler, "edit mark");
-                    cmd.dispatch(&self.mark, groups(count), bytemuck::bytes_of(&mark), None)?;
+                    cmd.dispatch(
+                        &self.mark,
+                        groups(counts[s]),
+                        bytemuck::bytes_of(&mark),
+                        None,
+                    )?;
                     cmd.end_pass(&mut profiler);
                     cmd.barrier();
-                    let pending = table.record_insert_round(
+                    pending.push(self.tables[s].record_insert_round(
                         &mut cmd,
                         &items[s],
                         &handles[s],
-                        count,
+                        counts[s],
                         profiler.as_deref_mut(),
-                    )?;
-                    cmd.submit_async()?;
-                    pending
-                };
+                    )?);
+                }
+                cmd.submit_async()?;
+                pending
+            };
+            for (pending, &s) in pending.into_iter().zip(&sizes) {
                 let report = self.tables[s].finish_insert(
                     pending,
                     &items[s],
                     &handles[s],
-                    count,
+                    counts[s],
                     profiler.as_deref_mut(),
                 )?;
                 retried += report.rounds - 1;
