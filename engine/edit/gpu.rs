@@ -17,6 +17,7 @@ use std::sync::Arc;
 
 use rustc_hash::FxHashSet;
 
+use super::gpu_gc;
 use super::gpu_shared::EditPush;
 use super::item::{
     Child, InnerNode, ItemError, Leaf, NodePtr, Root, MAX_ITEM_WORDS, MAX_TABLE_SLABS,
@@ -88,7 +89,7 @@ impl From<ItemError> for GpuDagError {
 }
 
 /// How the nine tables are built.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct GpuHashDagConfig {
     /// Slab layout of every table (chosen at run time).
     pub variant: HashVariant,
@@ -103,6 +104,11 @@ pub struct GpuHashDagConfig {
     pub grow_before_insert: bool,
     /// Insert rounds (pass + grow) before an insert fails.
     pub max_insert_rounds: u32,
+    /// Undo steps an edit keeps (older roots are dropped; GC frees what only they reached).
+    pub undo_depth: usize,
+    /// Collect garbage before an edit once a table's allocated slabs pass this fraction of its
+    /// largest pool (`max_super_blocks`); `None`: only on request. See `edit::gpu_gc`.
+    pub auto_gc_threshold: Option<f32>,
 }
 
 /// Super blocks that keep every handle below 2^28 ([`MAX_TABLE_SLABS`] slabs).
@@ -112,7 +118,7 @@ pub fn max_super_blocks() -> u32 {
 
 impl GpuHashDagConfig {
     /// Tables of `variant` with `buckets` buckets each, one initial super block, growth before
-    /// inserts, 8 insert rounds.
+    /// inserts, 8 insert rounds, the default undo depth and auto-GC threshold (`edit::gpu_gc`).
     pub fn new(variant: HashVariant, buckets: u32) -> GpuHashDagConfig {
         GpuHashDagConfig {
             variant,
@@ -121,6 +127,8 @@ impl GpuHashDagConfig {
             max_super_blocks: max_super_blocks(),
             grow_before_insert: true,
             max_insert_rounds: 8,
+            undo_depth: gpu_gc::DEFAULT_UNDO_DEPTH,
+            auto_gc_threshold: Some(gpu_gc::DEFAULT_AUTO_GC_THRESHOLD),
         }
     }
 }
@@ -138,12 +146,12 @@ pub struct EditReport {
 
 /// The scene as nine per-size slab hash tables on the GPU, with its history of roots.
 pub struct GpuHashDag {
-    ctx: Arc<GpuContext>,
-    config: GpuHashDagConfig,
-    tables: Vec<GpuHashTable>,
+    pub(super) ctx: Arc<GpuContext>,
+    pub(super) config: GpuHashDagConfig,
+    pub(super) tables: Vec<GpuHashTable>,
     dedups: Vec<GpuDedup>,
     /// The tables' super-block table addresses (`u64` each), read by the passes.
-    table_addresses: Buffer,
+    pub(super) table_addresses: Buffer,
     expand: ComputePipeline,
     build_items: ComputePipeline,
     mark: ComputePipeline,
@@ -152,13 +160,15 @@ pub struct GpuHashDag {
     leaves: ComputePipeline,
     fill_init: ComputePipeline,
     fill_flood: ComputePipeline,
-    root_level: u32,
+    pub(super) root_level: u32,
     with_materials: bool,
     /// RGBA8 sRGB palette of a material scene (`load_materials`); empty without materials.
     palette: Vec<u32>,
-    roots: Vec<Root>,
+    pub(super) roots: Vec<Root>,
     /// Index of the current root in `roots` (undo moves it back, redo forward).
-    current: usize,
+    pub(super) current: usize,
+    /// GC pipelines and the log of automatic collections (`edit::gpu_gc`).
+    pub(super) gc_state: gpu_gc::GcState,
 }
 
 /// One level of a bottom-up merge: where its nodes are and where their results go.
@@ -245,6 +255,7 @@ impl GpuHashDag {
             palette: Vec::new(),
             roots: vec![Root::Empty],
             current: 0,
+            gc_state: gpu_gc::GcState::default(),
         })
     }
 
@@ -422,6 +433,7 @@ impl GpuHashDag {
     ) -> Result<EditReport, GpuDagError> {
         tool.validate()
             .map_err(|e| GpuDagError::Invalid(format!("tool {tool:?}: {e}")))?;
+        self.auto_gc()?;
         let ctx = Arc::clone(&self.ctx);
         let materials = self.with_materials;
         let material = |m: u8| if materials { m as u32 } else { 0 };
@@ -636,13 +648,6 @@ impl GpuHashDag {
         }
         self.push_root(root);
         Ok(report)
-    }
-
-    /// Makes `root` the new current root; a new edit drops the redo branch.
-    fn push_root(&mut self, root: Root) {
-        self.roots.truncate(self.current + 1);
-        self.roots.push(root);
-        self.current += 1;
     }
 
     /// The fill's flood on the GPU (`tool.rs` `FillSet`): fills the box fields of `params`,
