@@ -10,8 +10,9 @@ use std::sync::Arc;
 
 use rustc_hash::FxHashMap;
 use voxdag::dag::Svdag;
-use voxdag::edit::gpu::{EditTool, GpuDagError, GpuHashDag, GpuHashDagConfig, ToolShape};
+use voxdag::edit::gpu::{GpuDagError, GpuHashDag, GpuHashDagConfig};
 use voxdag::edit::item::Root;
+use voxdag::edit::tool::{self, Shape, Tool};
 use voxdag::gpu::{GpuContext, Profiler};
 use voxdag::hash::{HashError, HashVariant};
 use voxdag::scene::{morton, Voxels};
@@ -86,19 +87,60 @@ impl Grid {
             .collect()
     }
 
-    /// Applies the tool to every voxel of its bounding box.
-    fn apply(&mut self, tool: &EditTool) {
+    /// Applies an add / remove tool to every voxel of its bounding box.
+    fn apply(&mut self, t: &Tool) {
+        let (shape, center, radius, remove) = shape_of(t);
         let n = self.resolution as i64;
-        let lo = |c: f32| ((c - tool.radius).floor() as i64 - 1).clamp(0, n) as u32;
-        let hi = |c: f32| ((c + tool.radius).ceil() as i64 + 1).clamp(0, n) as u32;
-        for z in lo(tool.center[2])..hi(tool.center[2]) {
-            for y in lo(tool.center[1])..hi(tool.center[1]) {
-                for x in lo(tool.center[0])..hi(tool.center[0]) {
-                    if tool.contains([x, y, z]) {
-                        self.solid[morton::encode(x, y, z) as usize] = !tool.remove;
+        let lo = |c: f32| ((c - radius).floor() as i64 - 1).clamp(0, n) as u32;
+        let hi = |c: f32| ((c + radius).ceil() as i64 + 1).clamp(0, n) as u32;
+        for z in lo(center[2])..hi(center[2]) {
+            for y in lo(center[1])..hi(center[1]) {
+                for x in lo(center[0])..hi(center[0]) {
+                    let inside = match shape {
+                        Shape::Sphere => tool::in_sphere(center, radius, [x, y, z]),
+                        Shape::Cube => tool::in_cube(center, radius, [x, y, z]),
+                    };
+                    if inside {
+                        self.solid[morton::encode(x, y, z) as usize] = !remove;
                     }
                 }
             }
+        }
+    }
+}
+
+/// Shape, centre, radius and remove flag of an add / remove tool.
+fn shape_of(t: &Tool) -> (Shape, [f32; 3], f32, bool) {
+    match *t {
+        Tool::Add {
+            shape,
+            center,
+            radius,
+            ..
+        } => (shape, center, radius, false),
+        Tool::Remove {
+            shape,
+            center,
+            radius,
+        } => (shape, center, radius, true),
+        _ => panic!("not an add / remove tool: {t:?}"),
+    }
+}
+
+/// An add (material 0) or remove tool.
+fn shaped(shape: Shape, center: [f32; 3], radius: f32, remove: bool) -> Tool {
+    if remove {
+        Tool::Remove {
+            shape,
+            center,
+            radius,
+        }
+    } else {
+        Tool::Add {
+            shape,
+            center,
+            radius,
+            material: 0,
         }
     }
 }
@@ -220,16 +262,16 @@ fn random_edits(ctx: &Arc<GpuContext>, variant: HashVariant, resolution: u32, ed
     let mut rng = common::Rng(seed ^ 0xed17);
     let n = resolution as f32;
     for step in 0..edits {
-        let tool = EditTool {
-            shape: if rng.below(2) == 0 {
-                ToolShape::Sphere
+        let tool = shaped(
+            if rng.below(2) == 0 {
+                Shape::Sphere
             } else {
-                ToolShape::Cube
+                Shape::Cube
             },
-            center: [0, 1, 2].map(|_| rng.below(resolution as u64 * 8) as f32 / 8.0),
-            radius: 1.0 + rng.below((n * 2.0) as u64) as f32 / 8.0,
-            remove: rng.below(3) == 0,
-        };
+            [0, 1, 2].map(|_| rng.below(resolution as u64 * 8) as f32 / 8.0),
+            1.0 + rng.below((n * 2.0) as u64) as f32 / 8.0,
+            rng.below(3) == 0,
+        );
         hd.edit(&tool, None).unwrap();
         grid.apply(&tool);
         let expected = grid.codes();
@@ -273,12 +315,12 @@ fn undo_and_redo_move_between_roots_and_a_new_edit_drops_the_redo_branch() {
     let mut states = vec![grid.codes()];
     assert!(!hd.undo(), "nothing to undo after a load");
     for (i, remove) in [false, true, false].into_iter().enumerate() {
-        let tool = EditTool {
-            shape: ToolShape::Sphere,
-            center: [8.0 + 7.0 * i as f32, 16.5, 12.0],
-            radius: 6.5,
+        let tool = shaped(
+            Shape::Sphere,
+            [8.0 + 7.0 * i as f32, 16.5, 12.0],
+            6.5,
             remove,
-        };
+        );
         hd.edit(&tool, None).unwrap();
         grid.apply(&tool);
         states.push(grid.codes());
@@ -294,12 +336,7 @@ fn undo_and_redo_move_between_roots_and_a_new_edit_drops_the_redo_branch() {
     assert_eq!(read_back(&hd).0, states[2]);
     // A new edit from state 2 drops states 3 and 4.
     let mut grid = Grid::from_codes(32, &states[2]);
-    let tool = EditTool {
-        shape: ToolShape::Cube,
-        center: [20.0, 20.0, 20.0],
-        radius: 5.0,
-        remove: true,
-    };
+    let tool = shaped(Shape::Cube, [20.0, 20.0, 20.0], 5.0, true);
     hd.edit(&tool, None).unwrap();
     grid.apply(&tool);
     assert_eq!(hd.roots().len(), 4);
@@ -322,36 +359,13 @@ fn edit_on_empty_and_full_roots_and_outside_the_grid() {
     )
     .unwrap();
     let mut grid = Grid::from_codes(32, &[]);
-    let big = EditTool {
-        shape: ToolShape::Cube,
-        center: [16.0, 16.0, 16.0],
-        radius: 40.0,
-        remove: false,
-    };
+    let big = shaped(Shape::Cube, [16.0, 16.0, 16.0], 40.0, false);
     let tools = [
-        EditTool {
-            shape: ToolShape::Sphere,
-            center: [10.3, 12.0, 7.5],
-            radius: 6.2,
-            remove: false,
-        },
+        shaped(Shape::Sphere, [10.3, 12.0, 7.5], 6.2, false),
         big,
-        EditTool {
-            shape: ToolShape::Sphere,
-            center: [100.0, 100.0, 100.0],
-            radius: 3.0,
-            remove: true,
-        },
-        EditTool {
-            shape: ToolShape::Cube,
-            center: [20.0, 3.0, 31.5],
-            radius: 2.5,
-            remove: true,
-        },
-        EditTool {
-            remove: true,
-            ..big
-        },
+        shaped(Shape::Sphere, [100.0, 100.0, 100.0], 3.0, true),
+        shaped(Shape::Cube, [20.0, 3.0, 31.5], 2.5, true),
+        shaped(Shape::Cube, [16.0, 16.0, 16.0], 40.0, true),
     ];
     for tool in &tools {
         hd.edit(tool, None).unwrap();
@@ -366,10 +380,7 @@ fn edit_on_empty_and_full_roots_and_outside_the_grid() {
         "an edit outside changes nothing"
     );
     assert_eq!(hd.root(), Root::Empty);
-    let bad = EditTool {
-        radius: f32::NAN,
-        ..big
-    };
+    let bad = shaped(Shape::Cube, [16.0, 16.0, 16.0], f32::NAN, false);
     assert!(matches!(hd.edit(&bad, None), Err(GpuDagError::Invalid(_))));
     assert_eq!(hd.roots().len(), tools.len() + 1);
     drop(hd);
@@ -425,16 +436,16 @@ fn pool_exhaustion_grows_or_fails_with_the_previous_root_intact() {
     let mut failed = false;
     for step in 0..40 {
         let before = hd.root();
-        let tool = EditTool {
-            shape: ToolShape::Sphere,
-            center: [
+        let tool = shaped(
+            Shape::Sphere,
+            [
                 rng.below(72) as f32 + 0.3,
                 rng.below(128) as f32,
                 rng.below(100) as f32,
             ],
-            radius: 14.5,
-            remove: true,
-        };
+            14.5,
+            true,
+        );
         match hd.edit(&tool, None) {
             Ok(_) => grid.apply(&tool),
             Err(GpuDagError::Hash(HashError::Exhausted { .. })) => {
@@ -465,12 +476,7 @@ fn profiled_edit_names_its_passes() {
     )
     .unwrap();
     let mut profiler = Profiler::new(&ctx).unwrap();
-    let tool = EditTool {
-        shape: ToolShape::Sphere,
-        center: [20.0, 20.0, 20.0],
-        radius: 9.0,
-        remove: false,
-    };
+    let tool = shaped(Shape::Sphere, [20.0, 20.0, 20.0], 9.0, false);
     let report = hd.edit(&tool, Some(&mut profiler)).unwrap();
     assert_eq!(report.temporary_nodes.len(), 4);
     assert!(report.items.iter().sum::<u32>() > 0);

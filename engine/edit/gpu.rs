@@ -20,7 +20,7 @@ use super::item::{
     Child, InnerNode, ItemError, Leaf, NodePtr, Root, MAX_ITEM_WORDS, MAX_TABLE_SLABS,
     MIN_ITEM_WORDS, TABLE_COUNT,
 };
-use super::tool;
+use super::tool::{Shape, Tool};
 use crate::dag::{DagError, Svdag};
 use crate::gpu::{
     shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, MemLocation,
@@ -114,50 +114,6 @@ impl GpuHashDagConfig {
             grow_before_insert: true,
             max_insert_rounds: 8,
         }
-    }
-}
-
-/// Shape of an edit tool.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ToolShape {
-    /// Voxels whose centre lies within `radius` of `center`.
-    Sphere,
-    /// Voxels whose centre lies in `[center - radius, center + radius]` on every axis.
-    Cube,
-}
-
-/// A sphere or cube edit: add (fill with material 0) or remove the voxels inside.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct EditTool {
-    /// Sphere or cube.
-    pub shape: ToolShape,
-    /// Centre in voxel units (voxel (x, y, z) spans `[x, x + 1)`).
-    pub center: [f32; 3],
-    /// Sphere radius or cube half-size, in voxels.
-    pub radius: f32,
-    /// Remove (true) or add (false).
-    pub remove: bool,
-}
-
-impl EditTool {
-    /// Whether voxel (x, y, z) is inside the tool: the shared rules of `edit::tool`
-    /// (`in_sphere`, `in_cube`), which the GPU passes (`edit/common.glsl`) compute the same way.
-    pub fn contains(&self, voxel: [u32; 3]) -> bool {
-        match self.shape {
-            ToolShape::Cube => tool::in_cube(self.center, self.radius, voxel),
-            ToolShape::Sphere => tool::in_sphere(self.center, self.radius, voxel),
-        }
-    }
-
-    fn check(&self) -> Result<(), GpuDagError> {
-        let finite = self.center.iter().all(|c| c.is_finite()) && self.radius.is_finite();
-        if !finite || self.radius <= 0.0 {
-            return Err(GpuDagError::Invalid(format!(
-                "tool centre {:?} radius {} (need finite values and radius > 0)",
-                self.center, self.radius
-            )));
-        }
-        Ok(())
     }
 }
 
@@ -431,30 +387,45 @@ impl GpuHashDag {
         })
     }
 
-    /// Applies a sphere or cube edit to the current root; the result becomes the new current
-    /// root (the redo branch is dropped). All-or-nothing: stored items are never changed, so on an error the previous root
-    /// stays current and intact.
+    /// Applies `tool` (validated with [`Tool::validate`]) to the current root; the result
+    /// becomes the new current root (the redo branch is dropped). All-or-nothing: stored items
+    /// are never changed, so on an error the previous root stays current and intact.
     pub fn edit(
         &mut self,
-        tool: &EditTool,
+        tool: &Tool,
         mut profiler: Option<&mut Profiler>,
     ) -> Result<EditReport, GpuDagError> {
-        tool.check()?;
+        tool.validate()
+            .map_err(|e| GpuDagError::Invalid(format!("tool {tool:?}: {e}")))?;
+        let (shape, center, radius, remove) = match *tool {
+            Tool::Add {
+                shape,
+                center,
+                radius,
+                ..
+            } => (shape, center, radius, false),
+            Tool::Remove {
+                shape,
+                center,
+                radius,
+            } => (shape, center, radius, true),
+            Tool::Paint { .. } | Tool::Fill { .. } | Tool::Copy(_) => {
+                return Err(not_on_gpu_yet(tool));
+            }
+        };
         if self.with_materials {
-            return Err(GpuDagError::Invalid(
-                "the GPU edit tools build geometry-only leaves; this hash DAG has materials".into(),
-            ));
+            return Err(not_on_gpu_yet(tool));
         }
         let ctx = Arc::clone(&self.ctx);
-        let flags = if tool.remove { FLAG_REMOVE } else { 0 };
+        let flags = if remove { FLAG_REMOVE } else { 0 };
         let base_push = EditPush {
             tables: self.table_addresses.address(),
             flags,
             variant: self.config.variant.id(),
-            tool: [tool.center[0], tool.center[1], tool.center[2], tool.radius],
-            shape: match tool.shape {
-                ToolShape::Sphere => 0,
-                ToolShape::Cube => 1,
+            tool: [center[0], center[1], center[2], radius],
+            shape: match shape {
+                Shape::Sphere => 0,
+                Shape::Cube => 1,
             },
             ..EditPush::default()
         };
@@ -763,6 +734,11 @@ impl GpuHashDag {
         }
         Ok((total, retried))
     }
+}
+
+/// The error of a tool the GPU edit pipeline does not run yet.
+fn not_on_gpu_yet(tool: &Tool) -> GpuDagError {
+    GpuDagError::Invalid(format!("tool {tool:?} is not on the GPU yet"))
 }
 
 /// Workgroups for one invocation per record (grid-stride beyond 65 535 groups).
