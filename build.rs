@@ -111,7 +111,7 @@ fn main() {
 }
 
 /// The DAG formats of the traversal variants (shared with engine/render/format.rs).
-const TRAVERSAL_VARIANTS: [(&str, &[&str]); 10] = include!("engine/render/traversal_variants.rs");
+const TRAVERSAL_VARIANTS: [(&str, &[&str]); 11] = include!("engine/render/traversal_variants.rs");
 
 /// Compiles `src` with `defines` to `$OUT_DIR/<stem>.spv`; returns the SPIR-V bytes and the
 /// files it includes (from glslc's depfile). Any glslc error or diagnostic panics.

@@ -368,6 +368,13 @@ impl GpuHashDag {
         self.tables.get(words.checked_sub(MIN_ITEM_WORDS)? as usize)
     }
 
+    /// The table of `words`-word items, mutable: for loaders that insert canonical items
+    /// themselves (items of a CPU hash DAG with materials, say) and render a root they built.
+    pub fn table_mut(&mut self, words: u32) -> Option<&mut GpuHashTable> {
+        self.tables
+            .get_mut(words.checked_sub(MIN_ITEM_WORDS)? as usize)
+    }
+
     /// Device memory of the nine tables, in bytes.
     pub fn gpu_bytes(&self) -> u64 {
         self.tables.iter().map(|t| t.gpu_bytes()).sum()

@@ -2,7 +2,9 @@
 //!
 //! Every shader that includes `render/traverse.glsl` is compiled once per [`TraversalFormat`]
 //! (build.rs, list in `traversal_variants.rs`); the format-specific child fetch is
-//! `render/dag_formats.glsl`. [`GpuDagData::new`] lays a DAG out for it without decoding:
+//! `render/dag_formats.glsl` (the hash DAG's in `render/dag_hash.glsl`: it is bound in place by
+//! `GpuRenderer::bind_hash_dag`, nothing is laid out). [`GpuDagData::new`] lays a DAG out for
+//! the other formats without decoding:
 //! - svdag32: `Svdag::words`, `VoxelIndex::node_voxels`, a one-word info block (unused).
 //! - SSVDAG / TSVDAG: the words are the encoding's leaves (two words each), pointer tables
 //!   (TSVDAG with tables, two words per entry, child levels in order) and node streams (levels
@@ -16,7 +18,7 @@ use crate::dag::transform::{Transform, TransformSet, TRANSFORM_COUNT};
 use crate::dag::{Svdag, VoxelIndex};
 
 /// `(name, GLSL defines)` of every traversal variant, in [`TraversalFormat::index`] order.
-pub const TRAVERSAL_VARIANTS: [(&str, &[&str]); 10] = include!("traversal_variants.rs");
+pub const TRAVERSAL_VARIANTS: [(&str, &[&str]); 11] = include!("traversal_variants.rs");
 
 /// Word offsets of the format info block (`DAG_INFO_*` in `render/dag_formats.glsl`).
 pub mod info {
@@ -70,11 +72,14 @@ pub enum TraversalFormat {
         /// Translated subtrees (S+A+T).
         translations: bool,
     },
+    /// The live hash DAG of the editor (`edit::gpu::GpuHashDag`): items read in place from its
+    /// nine slab hash tables (`render/dag_hash.glsl`, bound by `GpuRenderer::bind_hash_dag`).
+    HashDag,
 }
 
 impl TraversalFormat {
     /// Every variant, in index order.
-    pub fn all() -> [TraversalFormat; 10] {
+    pub fn all() -> [TraversalFormat; 11] {
         std::array::from_fn(TraversalFormat::from_index)
     }
 
@@ -82,6 +87,7 @@ impl TraversalFormat {
         match i {
             0 => TraversalFormat::Svdag32,
             1 => TraversalFormat::Ssvdag,
+            10 => TraversalFormat::HashDag,
             _ => {
                 let mode = (i - 2) % 4;
                 TraversalFormat::Tsvdag {
@@ -124,6 +130,7 @@ impl TraversalFormat {
                 };
                 2 + mode + 4 * translations as usize
             }
+            TraversalFormat::HashDag => 10,
         }
     }
 

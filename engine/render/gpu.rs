@@ -19,6 +19,8 @@ use super::{RenderOutput, RenderSettings};
 use crate::attr::ColorFormat;
 use crate::dag::encode::EncodedDag;
 use crate::dag::Svdag;
+use crate::edit::gpu::GpuHashDag;
+use crate::edit::item::{Root, MATERIAL_COUNT, MAX_ITEM_WORDS, MIN_ITEM_WORDS, TABLE_COUNT};
 use crate::gpu::{
     shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, Image,
     MemLocation, Profiler,
@@ -52,8 +54,54 @@ pub struct GpuScene {
     pub(super) chunk_offsets: Buffer,
     pub(super) color_format: ColorFormat,
     pub(super) chunk_count: u32,
+    /// The root the traversal starts from, per dispatch (`PrimaryPush::dag_root`): the hash
+    /// DAG's root child value; 0 for the other formats (their root is in their data).
+    pub(super) dag_root: u32,
+    /// The hash DAG's super-block table addresses this scene reads (empty for other formats).
+    hash_tables: Vec<u64>,
     resolution: u32,
     color_count: u64,
+}
+
+/// Palette of a hash DAG with materials: the sRGB RGB8 colour of each material id.
+pub type Palette = [[u8; 3]; MATERIAL_COUNT as usize];
+
+/// Words of the hash DAG binding's info block (`HDAG_INFO_*` in `render/dag_hash.glsl`): the
+/// table variant id, a reserved word, then each table's super-block table address (u64, low
+/// word first).
+const HASH_INFO_VARIANT: usize = 0;
+const HASH_INFO_TABLES: usize = 2;
+const HASH_INFO_WORDS: usize = HASH_INFO_TABLES + 2 * TABLE_COUNT as usize;
+
+/// The child value the hash DAG traversal starts from (`EDIT_EMPTY`, `EDIT_FULL | m`, or the
+/// pointer), after checking that it names a slab the tables have.
+fn hash_root_value(dag: &GpuHashDag, root: Root) -> Result<u32, GpuError> {
+    match root {
+        Root::Empty => Ok(0xFFFF_FFFF),
+        Root::Full(m) if (m as u32) < MATERIAL_COUNT => Ok(0xF000_0000 | m as u32),
+        Root::Node(p) => {
+            let slabs = dag
+                .table(p.words())
+                .map_or(0, |t| t.pool().capacity_slabs());
+            if p.words() > MAX_ITEM_WORDS || (p.handle() >> 5) as u64 >= slabs {
+                return Err(GpuError::InvalidArgument(format!(
+                    "hash DAG root {:#010x} names no slab of its tables",
+                    p.0
+                )));
+            }
+            Ok(p.0)
+        }
+        Root::Full(m) => Err(GpuError::InvalidArgument(format!(
+            "hash DAG root full with material {m} (materials are 0..{MATERIAL_COUNT})"
+        ))),
+    }
+}
+
+/// The super-block table address of each of the hash DAG's nine tables.
+fn hash_table_addresses(dag: &GpuHashDag) -> Vec<u64> {
+    (MIN_ITEM_WORDS..=MAX_ITEM_WORDS)
+        .map(|w| dag.table(w).map_or(0, |t| t.pool().table_address()))
+        .collect()
 }
 
 impl GpuScene {
@@ -90,6 +138,24 @@ impl GpuScene {
     /// Stored format of the uploaded colours.
     pub fn color_format(&self) -> ColorFormat {
         self.color_format
+    }
+
+    /// Makes `root` (of the hash DAG this scene was bound to with
+    /// [`GpuRenderer::bind_hash_dag`]) the root later recordings traverse: the editor calls it
+    /// every frame with the current root (no allocation, nothing recorded; recordings already
+    /// made keep the root they were recorded with). Errors when the scene is not a binding of
+    /// `dag` (its tables moved or it is another DAG) or `root` names no slab of its tables.
+    pub fn set_hash_root(&mut self, dag: &GpuHashDag, root: Root) -> Result<(), GpuError> {
+        if self.format != TraversalFormat::HashDag
+            || dag.resolution() != self.resolution
+            || hash_table_addresses(dag) != self.hash_tables
+        {
+            return Err(GpuError::InvalidArgument(
+                "set_hash_root: the scene is not a binding of this hash DAG (bind it again)".into(),
+            ));
+        }
+        self.dag_root = hash_root_value(dag, root)?;
+        Ok(())
     }
 }
 
@@ -151,8 +217,60 @@ impl GpuRenderer {
         self.upload_data(&data, colors)
     }
 
+    /// Binds a live hash DAG for rendering, read in place: the scene holds the device addresses
+    /// of `dag`'s nine super-block tables (no copy, no conversion) and its current root. Edits
+    /// and pool growth keep the binding valid (a pool's super-block table has a fixed capacity
+    /// and growth only appends to it); switch roots with [`GpuScene::set_hash_root`]. Keep `dag`
+    /// alive while the scene is rendered. `palette`: the colour of each material (scenes with
+    /// materials); `None` shades every voxel grey, like svdag32 scenes without colours.
+    pub fn bind_hash_dag(
+        &self,
+        dag: &GpuHashDag,
+        palette: Option<&Palette>,
+    ) -> Result<GpuScene, GpuError> {
+        if palette.is_some() && !dag.with_materials() {
+            return Err(GpuError::InvalidArgument(
+                "a palette needs a hash DAG with materials (this one is geometry only)".into(),
+            ));
+        }
+        let tables = hash_table_addresses(dag);
+        let mut info = vec![0u32; HASH_INFO_WORDS];
+        info[HASH_INFO_VARIANT] = dag.config().variant.id();
+        for (t, a) in tables.iter().enumerate() {
+            info[HASH_INFO_TABLES + 2 * t] = *a as u32;
+            info[HASH_INFO_TABLES + 2 * t + 1] = (*a >> 32) as u32;
+        }
+        let data = GpuDagData {
+            format: TraversalFormat::HashDag,
+            resolution: dag.resolution(),
+            words: vec![0],
+            node_voxels: vec![0],
+            info,
+        };
+        // The palette is one raw colour chunk indexed by material (the hits' colour index).
+        let colors: Vec<u32> = palette.map_or(Vec::new(), |p| {
+            p.iter()
+                .map(|c| c[0] as u32 | (c[1] as u32) << 8 | (c[2] as u32) << 16 | 0xff00_0000)
+                .collect()
+        });
+        let mut scene = self.upload_layout(&data, ColorSource::Raw(&colors))?;
+        scene.hash_tables = tables;
+        scene.dag_root = hash_root_value(dag, dag.root())?;
+        Ok(scene)
+    }
+
     /// Uploads a laid-out DAG and its colours.
     pub fn upload_data(&self, dag: &GpuDagData, colors: ColorSource) -> Result<GpuScene, GpuError> {
+        if dag.format == TraversalFormat::HashDag {
+            return Err(GpuError::InvalidArgument(
+                "a hash DAG is not uploaded: bind it with bind_hash_dag".into(),
+            ));
+        }
+        self.upload_layout(dag, colors)
+    }
+
+    /// [`GpuRenderer::upload_data`] for every format.
+    fn upload_layout(&self, dag: &GpuDagData, colors: ColorSource) -> Result<GpuScene, GpuError> {
         let invalid = |m: String| GpuError::InvalidArgument(m);
         if dag.words.is_empty() || dag.words.len() as u64 > u32::MAX as u64 {
             return Err(invalid(format!(
@@ -210,6 +328,8 @@ impl GpuRenderer {
             chunk_offsets,
             color_format: format,
             chunk_count: chunk_count as u32,
+            dag_root: 0,
+            hash_tables: Vec::new(),
             resolution: dag.resolution,
             color_count,
         })
@@ -327,6 +447,8 @@ impl GpuRenderer {
             first_hits: first_hits.map_or(0, Buffer::address),
             color_format: scene.color_format as u32,
             chunk_count: scene.chunk_count,
+            dag_root: scene.dag_root,
+            _pad: 0,
         };
         let groups = [w.div_ceil(WORKGROUP[0]), h.div_ceil(WORKGROUP[1]), 1];
         // begin_pass orders its begin timestamp before the dispatch (lavapipe flush).

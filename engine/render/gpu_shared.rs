@@ -56,6 +56,11 @@ gpu_shared! {
         pub(crate) color_format: uint,
         /// Number of colour chunks.
         pub(crate) chunk_count: uint,
+        /// The root to traverse for formats whose root changes per frame (hash DAG: the root's
+        /// child value, `render/dag_hash.glsl`); 0 otherwise.
+        pub(crate) dag_root: uint,
+        /// Explicit padding to 8 bytes.
+        pub(crate) _pad: uint,
     }
 
     /// The primary ray's first hit of one pixel (`GpuRenderer::render_first_hits`): what every
@@ -70,7 +75,8 @@ gpu_shared! {
         pub voxel: [uint; 3],
         /// Entry face normal (x, y, z), pointing against the ray.
         pub normal: [int; 3],
-        /// Depth-first Morton index of the voxel (index into the colours).
+        /// Depth-first Morton index of the voxel (index into the colours); hash DAG: the voxel's
+        /// material (index into the palette).
         pub color_index: uint64_t,
     }
 
@@ -139,5 +145,10 @@ gpu_shared! {
         pub(crate) sample_index: uint,
         /// Wavefront: the bounce of this pass (0 = camera rays).
         pub(crate) bounce: uint,
+        /// The root to traverse for formats whose root changes per frame (hash DAG: the root's
+        /// child value, `render/dag_hash.glsl`); 0 otherwise.
+        pub(crate) dag_root: uint,
+        /// Explicit padding to 8 bytes.
+        pub(crate) _pad: uint,
     }
 }

@@ -9,6 +9,7 @@ pub mod cpu;
 pub mod format;
 pub mod gpu;
 mod gpu_shared;
+pub mod hash_scene;
 pub mod params;
 pub mod pathtrace;
 pub mod pathtrace_gpu;

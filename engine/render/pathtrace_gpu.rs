@@ -280,6 +280,8 @@ impl GpuPathTracer {
             chunk_count: scene.chunk_count,
             sample_index: sample,
             bounce: 0,
+            dag_root: scene.dag_root,
+            _pad: 0,
         };
         let pixels = target.width * target.height;
         let Some(w) = &target.wave else {

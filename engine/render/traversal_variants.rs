@@ -13,4 +13,5 @@
     ("tsvdag_lut_t", &["DAG_FORMAT_TSVDAG", "TSVDAG_LUT", "TSVDAG_TRANSLATIONS"]),
     ("tsvdag_huffman_t", &["DAG_FORMAT_TSVDAG", "TSVDAG_LUT", "TSVDAG_HUFFMAN", "TSVDAG_TRANSLATIONS"]),
     ("tsvdag_huffman_nolut_t", &["DAG_FORMAT_TSVDAG", "TSVDAG_HUFFMAN", "TSVDAG_TRANSLATIONS"]),
+    ("hash_dag", &["DAG_FORMAT_HASH"]),
 ]

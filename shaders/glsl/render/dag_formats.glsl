@@ -6,6 +6,7 @@
 //   DAG_FORMAT_TSVDAG  TSVDAG: 16/32/48-bit pointers with transform ids; TSVDAG_LUT (pointer
 //                      tables), TSVDAG_HUFFMAN (Huffman-coded symbols), TSVDAG_TRANSLATIONS
 //                      (translated subtrees: traverse.glsl's second stack).
+//   DAG_FORMAT_HASH    the live hash DAG of the editor, read in place: render/dag_hash.glsl.
 // Layouts: docs/encodings.md; what is uploaded where: engine/render/format.rs.
 //
 // The includer defines, BEFORE including traverse.glsl:
@@ -321,7 +322,11 @@ void dag_child(uint node, uint xform, uint mask, uint level, uint c, out uint ch
 }
 #endif
 
-#if !defined(DAG_ENCODED)
+#if defined(DAG_FORMAT_HASH)
+#include "render/dag_hash.glsl"
+#endif
+
+#if !defined(DAG_ENCODED) && !defined(DAG_FORMAT_HASH)
 // svdag32: word offsets, no transforms (xform is always 0).
 void dag_root(uint root_level, out uint node, out uint xform) {
     node = 0u;

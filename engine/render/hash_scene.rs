@@ -1,0 +1,45 @@
+//! A live hash DAG ready to render: an svdag32 DAG loaded into a [`GpuHashDag`] (nine slab hash
+//! tables, `docs/editing-gpu.md`) together with the renderer's binding of it
+//! ([`GpuRenderer::bind_hash_dag`]). `voxdag render --hash-dag` and the benchmarks use it; the
+//! editor binds its own `GpuHashDag` the same way.
+
+use std::sync::Arc;
+
+use super::gpu::{GpuRenderer, GpuScene};
+use crate::dag::Svdag;
+use crate::edit::gpu::{GpuDagError, GpuHashDag, GpuHashDagConfig};
+use crate::gpu::{GpuContext, Profiler};
+use crate::hash::HashVariant;
+
+/// A hash DAG and the scene that renders it in place. The scene is declared first, so it is
+/// dropped before the tables it reads.
+pub struct HashDagScene {
+    /// The binding: pass it to `GpuRenderer::record` / `render` and `GpuPathTracer`.
+    pub scene: GpuScene,
+    /// The tables (edit it, then `scene.set_hash_root(&dag, dag.root())`).
+    pub dag: GpuHashDag,
+}
+
+/// Buckets per table for a DAG of `words` svdag32 words: about 64 items per bucket over all
+/// nine tables (chains of one or two slabs for the largest table), at least 64.
+pub fn buckets_for(words: usize) -> u32 {
+    ((words / 256).max(64) as u32)
+        .next_power_of_two()
+        .min(1 << 22)
+}
+
+impl HashDagScene {
+    /// Loads `dag` (geometry only) into tables of `variant` and binds them for `renderer`.
+    pub fn load(
+        ctx: &Arc<GpuContext>,
+        renderer: &GpuRenderer,
+        dag: &Svdag,
+        variant: HashVariant,
+        profiler: Option<&mut Profiler>,
+    ) -> Result<HashDagScene, GpuDagError> {
+        let config = GpuHashDagConfig::new(variant, buckets_for(dag.words.len()));
+        let hash = GpuHashDag::load(ctx, &config, dag, profiler)?;
+        let scene = renderer.bind_hash_dag(&hash, None)?;
+        Ok(HashDagScene { scene, dag: hash })
+    }
+}
