@@ -20,6 +20,7 @@ use super::item::{
     Child, InnerNode, ItemError, Leaf, NodePtr, Root, MAX_ITEM_WORDS, MAX_TABLE_SLABS,
     MIN_ITEM_WORDS, TABLE_COUNT,
 };
+use super::gpu_gc;
 use super::tool::{Shape, Tool};
 use crate::dag::{DagError, Svdag};
 use crate::gpu::{
@@ -80,7 +81,7 @@ impl From<ItemError> for GpuDagError {
 }
 
 /// How the nine tables are built.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct GpuHashDagConfig {
     /// Slab layout of every table (chosen at run time).
     pub variant: HashVariant,
@@ -95,6 +96,11 @@ pub struct GpuHashDagConfig {
     pub grow_before_insert: bool,
     /// Insert rounds (pass + grow) before an insert fails.
     pub max_insert_rounds: u32,
+    /// Undo steps an edit keeps (older roots are dropped; GC frees what only they reached).
+    pub undo_depth: usize,
+    /// Collect garbage before an edit once a table's allocated slabs pass this fraction of its
+    /// largest pool (`max_super_blocks`); `None`: only on request. See `edit::gpu_gc`.
+    pub auto_gc_threshold: Option<f32>,
 }
 
 /// Super blocks that keep every handle below 2^28 ([`MAX_TABLE_SLABS`] slabs).
@@ -104,7 +110,7 @@ pub fn max_super_blocks() -> u32 {
 
 impl GpuHashDagConfig {
     /// Tables of `variant` with `buckets` buckets each, one initial super block, growth before
-    /// inserts, 8 insert rounds.
+    /// inserts, 8 insert rounds, the default undo depth and auto-GC threshold (`edit::gpu_gc`).
     pub fn new(variant: HashVariant, buckets: u32) -> GpuHashDagConfig {
         GpuHashDagConfig {
             variant,
@@ -113,6 +119,8 @@ impl GpuHashDagConfig {
             max_super_blocks: max_super_blocks(),
             grow_before_insert: true,
             max_insert_rounds: 8,
+            undo_depth: gpu_gc::DEFAULT_UNDO_DEPTH,
+            auto_gc_threshold: Some(gpu_gc::DEFAULT_AUTO_GC_THRESHOLD),
         }
     }
 }
@@ -130,23 +138,25 @@ pub struct EditReport {
 
 /// The scene as nine per-size slab hash tables on the GPU, with its history of roots.
 pub struct GpuHashDag {
-    ctx: Arc<GpuContext>,
-    config: GpuHashDagConfig,
-    tables: Vec<GpuHashTable>,
+    pub(super) ctx: Arc<GpuContext>,
+    pub(super) config: GpuHashDagConfig,
+    pub(super) tables: Vec<GpuHashTable>,
     dedups: Vec<GpuDedup>,
     /// The tables' super-block table addresses (`u64` each), read by the passes.
-    table_addresses: Buffer,
+    pub(super) table_addresses: Buffer,
     expand: ComputePipeline,
     build_items: ComputePipeline,
     mark: ComputePipeline,
     resolve: ComputePipeline,
     traverse: ComputePipeline,
     leaves: ComputePipeline,
-    root_level: u32,
+    pub(super) root_level: u32,
     with_materials: bool,
-    roots: Vec<Root>,
+    pub(super) roots: Vec<Root>,
     /// Index of the current root in `roots` (undo moves it back, redo forward).
-    current: usize,
+    pub(super) current: usize,
+    /// GC pipelines and the log of automatic collections (`edit::gpu_gc`).
+    pub(super) gc_state: gpu_gc::GcState,
 }
 
 /// One level of a bottom-up merge: where its nodes are and where their results go.
@@ -230,6 +240,7 @@ impl GpuHashDag {
             with_materials,
             roots: vec![Root::Empty],
             current: 0,
+            gc_state: gpu_gc::GcState::default(),
         })
     }
 
@@ -420,6 +431,7 @@ impl GpuHashDag {
                 return Err(not_on_gpu_yet(tool));
             }
         };
+        self.auto_gc()?;
         if self.with_materials {
             return Err(not_on_gpu_yet(tool));
         }
@@ -557,10 +569,7 @@ impl GpuHashDag {
         if let Some(p) = profiler {
             p.resolve()?;
         }
-        // A new edit drops the redo branch.
-        self.roots.truncate(self.current + 1);
-        self.roots.push(root);
-        self.current += 1;
+        self.push_root(root);
         Ok(report)
     }
 

@@ -3,6 +3,7 @@
 
 pub mod cpu;
 pub mod gpu;
+pub mod gpu_gc;
 mod gpu_shared;
 pub mod item;
 pub mod replay;

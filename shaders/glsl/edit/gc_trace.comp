@@ -1,0 +1,64 @@
+#version 460
+// GC of the hash DAG, mark (dissertation §4.4.3), one level top-down: every node of the
+// frontier sets the GC bit of each child it points to in the child's slab `active` word (the
+// word the tables' sweep reads, engine/hash/gc.rs); a child whose bit was clear is new and
+// joins the next level's frontier, so every reachable item is expanded once.
+//   src = frontier (NodePtrs), count = its length, dst = next frontier (capacity entries),
+//   dst2 = slabs in each table's pool (9 u32), tables = the nine super-block tables,
+//   counters: [0] next frontier length, [1 + t] items newly marked in table t, [10] pointers
+//   naming no allocated slab.
+//   EDIT_FLAG_GC_ROOTS: the frontier items are marked too (the live roots, distinct).
+//   EDIT_FLAG_GC_LAST: the children are leaves; they are marked and counted, not listed.
+#include "edit/common.glsl"
+layout(local_size_x = 64) in;
+
+#define EDIT_FLAG_GC_ROOTS 16u
+#define EDIT_FLAG_GC_LAST 32u
+
+// Sets the GC bit of the item `ptr` names; true when it was clear. A pointer naming no
+// allocated slab of its table is counted and not marked (a bit in a free slab would break the
+// allocator's all-zero invariant).
+bool gc_mark(uint ptr) {
+    Words counters = Words(push.counters);
+    uint table = ptr >> 28u;
+    uint handle = ptr & EDIT_INDEX_MASK;
+    uint slab = handle >> 5u;
+    if (table >= 9u || slab >= Words(push.dst2).w[table]) {
+        atomicAdd(counters.w[10], 1u);
+        return false;
+    }
+    uint64_t base = Addresses(Addresses(push.tables).a[table]).a[slab / HASH_SLABS_PER_SUPER_BLOCK];
+    uint local = slab % HASH_SLABS_PER_SUPER_BLOCK;
+    if (((Words(base).w[local / 32u] >> (local % 32u)) & 1u) == 0u) {
+        atomicAdd(counters.w[10], 1u);
+        return false;
+    }
+    uint64_t at = base + uint64_t(HASH_SUPER_BLOCK_BITMASK_WORDS * 4u)
+                + uint64_t(local) * uint64_t(edit_slab_words(table + 2u) * 4u);
+    uint bit = 1u << (handle & 31u);
+    uint old = atomicOr(Words(at).w[HASH_SLAB_ACTIVE], bit);
+    if ((old & bit) != 0u) return false;
+    atomicAdd(counters.w[1u + table], 1u);
+    return true;
+}
+
+void main() {
+    Words frontier = Words(push.src);
+    Words next = Words(push.dst);
+    Words counters = Words(push.counters);
+    uint stride = gl_NumWorkGroups.x * 64u;
+    for (uint i = gl_GlobalInvocationID.x; i < push.count; i += stride) {
+        uint ptr = frontier.w[i];
+        // Roots are distinct and the bits clear between collections: a false here is a bad root.
+        if ((push.flags & EDIT_FLAG_GC_ROOTS) != 0u && !gc_mark(ptr)) continue;
+        uint children[8];
+        edit_children(ptr, children);
+        for (uint o = 0u; o < 8u; ++o) {
+            uint c = children[o];
+            if (!edit_is_ptr(c) || !gc_mark(c)) continue;
+            if ((push.flags & EDIT_FLAG_GC_LAST) != 0u) continue;
+            uint at = atomicAdd(counters.w[0], 1u);
+            if (at < push.capacity) next.w[at] = c;
+        }
+    }
+}
