@@ -142,7 +142,11 @@ fn synthetic(resolution: u32, seed: u64) -> Voxels {
 /// Checks every live root of the GPU DAG against the CPU editor's, and the stored items against
 /// the reachable ones.
 fn check_after_gc(hd: &GpuHashDag, cpu: &CpuEditor, what: &str) {
-    assert_eq!(hd.roots().len(), cpu.live_roots().len(), "{what}: live roots");
+    assert_eq!(
+        hd.roots().len(),
+        cpu.live_roots().len(),
+        "{what}: live roots"
+    );
     let image = hd.download().unwrap();
     for (i, (&g, &c)) in hd.roots().iter().zip(cpu.live_roots()).enumerate() {
         assert_eq!(
@@ -154,7 +158,11 @@ fn check_after_gc(hd: &GpuHashDag, cpu: &CpuEditor, what: &str) {
     let stored = stored_per_table(&image);
     let reachable = gpu_reachable(&image, hd.roots());
     assert_eq!(stored, reachable, "{what}: stored = reachable, per table");
-    assert_eq!(reachable, cpu_reachable(cpu), "{what}: GPU = CPU, per table");
+    assert_eq!(
+        reachable,
+        cpu_reachable(cpu),
+        "{what}: GPU = CPU, per table"
+    );
     assert_eq!(
         stored.iter().sum::<u64>(),
         cpu.dag().item_count(),
@@ -165,7 +173,12 @@ fn check_after_gc(hd: &GpuHashDag, cpu: &CpuEditor, what: &str) {
 /// Random edits with undo / redo and an undo depth, GC on the GPU and on the CPU reference
 /// after every few steps; then undo through every kept root.
 /// Returns the items the collections freed.
-fn edits_undo_gc(ctx: &Arc<GpuContext>, variant: HashVariant, resolution: u32, steps: usize) -> u64 {
+fn edits_undo_gc(
+    ctx: &Arc<GpuContext>,
+    variant: HashVariant,
+    resolution: u32,
+    steps: usize,
+) -> u64 {
     let seed = 77 + variant.id() as u64 + resolution as u64;
     let dag = Svdag::from_voxels(&synthetic(resolution, seed)).unwrap();
     let depth = 3;
@@ -322,12 +335,10 @@ fn auto_gc_lets_a_tiny_pool_run_a_long_edit_sequence() {
     };
     // Without GC the pool runs out.
     let mut hd = GpuHashDag::load(&ctx, &capped(None), &dag, None).unwrap();
-    let failed = tools.iter().position(|t| {
-        match gpu_edit(&mut hd, t) {
-            Ok(()) => false,
-            Err(GpuDagError::Hash(HashError::Exhausted { .. })) => true,
-            Err(e) => panic!("{e}"),
-        }
+    let failed = tools.iter().position(|t| match gpu_edit(&mut hd, t) {
+        Ok(()) => false,
+        Err(GpuDagError::Hash(HashError::Exhausted { .. })) => true,
+        Err(e) => panic!("{e}"),
     });
     assert!(failed.is_some(), "the capped pool never ran out");
     eprintln!("without GC the pool ran out at edit {failed:?}");

@@ -15,12 +15,12 @@ use std::sync::Arc;
 
 use rustc_hash::FxHashSet;
 
+use super::gpu_gc;
 use super::gpu_shared::EditPush;
 use super::item::{
     Child, InnerNode, ItemError, Leaf, NodePtr, Root, MAX_ITEM_WORDS, MAX_TABLE_SLABS,
     MIN_ITEM_WORDS, TABLE_COUNT,
 };
-use super::gpu_gc;
 use super::tool::{Shape, Tool};
 use crate::dag::{DagError, Svdag};
 use crate::gpu::{
