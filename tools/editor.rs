@@ -378,6 +378,8 @@ impl App<'_> {
                 .to_string(),
             open_path: args.scene.display().to_string(),
             exit: false,
+            clicks: 0,
+            ui_clicks: 0,
         })
     }
 }
@@ -548,6 +550,10 @@ struct Status<'a> {
     replay_done: bool,
     last_edit: Option<&'a LastEdit>,
     message: Option<&'a str>,
+    /// Left-button presses on the scene (not taken by a panel) so far.
+    clicks: usize,
+    /// Presses a panel took.
+    ui_clicks: usize,
 }
 
 /// The open editor. The window (presenter: waits for the GPU) drops first.
@@ -590,6 +596,9 @@ struct Running {
     save_path: String,
     open_path: String,
     exit: bool,
+    /// Left-button presses on the scene and on the panels.
+    clicks: usize,
+    ui_clicks: usize,
 }
 
 impl Running {
@@ -625,6 +634,10 @@ impl Running {
                 _ => {}
             },
             WindowEvent::CursorMoved { position, .. } => self.input.cursor_moved(*position),
+            WindowEvent::MouseInput {
+                button: MouseButton::Left,
+                ..
+            } if consumed => self.ui_clicks += 1,
             _ if consumed => {}
             WindowEvent::KeyboardInput { event, .. } => {
                 let PhysicalKey::Code(code) = event.physical_key else {
@@ -670,6 +683,7 @@ impl Running {
             } => match button {
                 MouseButton::Left if self.modifiers.alt_key() => self.input.orbit_drag = true,
                 MouseButton::Left => {
+                    self.clicks += 1;
                     self.painting = true;
                     self.click = Some(Instant::now());
                 }
@@ -760,12 +774,14 @@ impl Running {
             self.message = Some(format!("edit failed: {e}"));
             return Ok(());
         }
-        let kernels = self
-            .edit_profiler
-            .resolve()?
-            .into_iter()
-            .map(|p| (p.name, p.gpu_ms))
-            .collect();
+        // The edit resolved its passes; sum them per kernel (one pass per level).
+        let mut kernels: Vec<(String, f64)> = Vec::new();
+        for p in self.edit_profiler.passes() {
+            match kernels.iter_mut().find(|k| k.0 == p.name) {
+                Some(k) => k.1 += p.gpu_ms,
+                None => kernels.push((p.name.clone(), p.gpu_ms)),
+            }
+        }
         self.doc.undo = (self.doc.undo + 1).min(self.doc.dag.undo_depth());
         self.doc.redo = 0;
         self.doc.unsaved += 1;
@@ -1015,6 +1031,8 @@ impl Running {
                 replay_done: self.replay_done,
                 last_edit: self.last_edit.as_ref(),
                 message: self.message.as_deref(),
+                clicks: self.clicks,
+                ui_clicks: self.ui_clicks,
             };
             write_json(path, &status)?;
         }
@@ -1073,7 +1091,6 @@ impl Running {
                     ui.label(format!("material {m}"));
                     ui.color_edit_button_srgb(&mut self.palette[m]);
                 });
-                ui.label("(the GPU hash DAG is geometry only: materials are not drawn yet)");
                 ui.horizontal(|ui| {
                     if ui
                         .add_enabled(self.doc.undo > 0, egui::Button::new("undo"))
