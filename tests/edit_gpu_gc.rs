@@ -24,7 +24,7 @@ fn assert_clean(ctx: &Arc<GpuContext>) {
     assert_eq!(ctx.validation_errors(), 0, "validation messages (see log)");
 }
 
-/// Applies an add / remove tool on the GPU.
+/// Applies a tool on the GPU.
 fn gpu_edit(hd: &mut GpuHashDag, tool: &Tool) -> Result<(), GpuDagError> {
     hd.edit(tool, None).map(|_| ())
 }
@@ -313,15 +313,15 @@ fn auto_gc_lets_a_tiny_pool_run_a_long_edit_sequence() {
     let resolution = 128;
     let mut rng = common::Rng(11);
     let coords: Vec<[u32; 3]> = (0..resolution)
-        .flat_map(|z| (0..resolution).flat_map(move |y| (0..56).map(move |x| [x, y, z])))
+        .flat_map(|z| (0..resolution).flat_map(move |y| (0..48).map(move |x| [x, y, z])))
         .filter(|_| rng.below(2) == 0)
         .collect();
     let dag = Svdag::from_voxels(&Voxels::from_coords(resolution, coords)).unwrap();
-    let tools: Vec<Tool> = (0..60)
+    let tools: Vec<Tool> = (0..80)
         .map(|_| Tool::Remove {
             shape: Shape::Sphere,
             center: [
-                rng.below(56) as f32 + 0.3,
+                rng.below(48) as f32 + 0.3,
                 rng.below(128) as f32,
                 rng.below(128) as f32,
             ],
@@ -344,13 +344,15 @@ fn auto_gc_lets_a_tiny_pool_run_a_long_edit_sequence() {
     eprintln!("without GC the pool ran out at edit {failed:?}");
     drop(hd);
     // With automatic GC the whole sequence runs.
-    let mut hd = GpuHashDag::load(&ctx, &capped(Some(0.95)), &dag, None).unwrap();
+    let mut hd = GpuHashDag::load(&ctx, &capped(Some(0.8)), &dag, None).unwrap();
     let mut cpu_dag = HashDag::new(resolution, false).unwrap();
     let root = cpu_dag.insert_svdag(&dag, None).unwrap();
     let mut cpu = CpuEditor::new(cpu_dag, root, 1);
     let mut runs = Vec::new();
     for (i, t) in tools.iter().enumerate() {
-        gpu_edit(&mut hd, t).unwrap_or_else(|e| panic!("edit {i}: {e}"));
+        let slabs = hd.pool_use().unwrap()[0].0;
+        gpu_edit(&mut hd, t)
+            .unwrap_or_else(|e| panic!("edit {i} ({slabs} leaf slabs before): {e}"));
         cpu.edit(t).unwrap();
         runs.extend(hd.take_auto_gc());
     }

@@ -189,7 +189,7 @@ fn gc_keeps_exactly_the_marked_items_for_every_layout() {
 }
 
 #[test]
-fn gc_of_nothing_live_empties_the_table_but_keeps_first_slabs() {
+fn gc_of_nothing_live_empties_the_table_and_frees_every_slab() {
     let ctx = common::gpu();
     for team in TEAMS {
         nothing_live(&ctx, team);
@@ -210,14 +210,10 @@ fn nothing_live(ctx: &Arc<GpuContext>, team: TeamMode) {
     let image = table.download().unwrap();
     let walk = image.walk().unwrap();
     assert!(walk.items.is_empty());
-    assert_eq!(
-        walk.slabs, buckets as u64,
-        "one (first) slab per bucket stays"
-    );
-    assert_eq!(walk.max_chain, 1);
+    assert_eq!(walk.slabs, 0, "every slab freed, first slabs too");
+    assert_eq!(walk.max_chain, 0);
 
-    // Stale handles: those in freed slabs are counted and ignored (a free slab stays all
-    // zeros), those in the kept first slabs name empty slots and change nothing.
+    // Stale handles: all name freed slabs, counted and ignored (a free slab stays all zeros).
     let mut expected = image.clone();
     let cpu = collect_cpu(&mut expected, &stale);
     let report = gc.collect(&mut table, &stale, None).unwrap();
@@ -226,7 +222,7 @@ fn nothing_live(ctx: &Arc<GpuContext>, team: TeamMode) {
         .iter()
         .filter(|h| !image.is_allocated(h.slab()))
         .count();
-    assert!(in_free_slabs > 0);
+    assert_eq!(in_free_slabs, stale.len());
     assert_eq!(report.bad_handles as usize, in_free_slabs);
     assert!(
         table.download().unwrap() == expected,

@@ -242,7 +242,7 @@ fn replay_on_the_cpu_editor_matches_brute_force() {
 }
 
 #[test]
-fn edit_command_replays_on_the_cpu_and_refuses_without_cpu() {
+fn edit_command_replays_on_the_cpu_and_the_gpu() {
     let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("teapot.vdag");
     let svdag = common::build_scene(&common::repo().join("tests/data/teapot.obj"), Some(64));
@@ -261,10 +261,15 @@ fn edit_command_replays_on_the_cpu_and_refuses_without_cpu() {
         out.to_str().unwrap(),
         report.to_str().unwrap(),
     );
-    let gpu = common::voxdag_cli(&["edit", scene_s, "--replay", replay_s, "-o", out_s]);
-    assert!(!gpu.status.success());
-    assert!(String::from_utf8_lossy(&gpu.stderr).contains("--cpu"));
-    assert!(!out.exists());
+    // The GPU editor (the default) writes what the CPU editor writes.
+    let gpu_out = dir.path().join("gpu.vdag");
+    let gpu_s = gpu_out.to_str().unwrap();
+    let gpu = common::voxdag_cli(&["edit", scene_s, "--replay", replay_s, "-o", gpu_s]);
+    assert!(
+        gpu.status.success(),
+        "{}",
+        String::from_utf8_lossy(&gpu.stderr)
+    );
     let run = common::voxdag_cli(&[
         "edit", scene_s, "--replay", replay_s, "-o", out_s, "--cpu", "--report", report_s,
     ]);
@@ -289,6 +294,7 @@ fn edit_command_replays_on_the_cpu_and_refuses_without_cpu() {
     let saved = voxdag::dag::Svdag::load(&out).unwrap();
     let codes: Vec<u64> = map.sorted().iter().map(|e| e.0).collect();
     assert_eq!(saved.to_voxels().codes, codes);
+    assert!(std::fs::read(&gpu_out).unwrap() == std::fs::read(&out).unwrap());
     let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
     assert_eq!(json["edits"].as_array().unwrap().len(), 2);
     assert_eq!(json["unique_nodes_per_level"].as_array().unwrap().len(), 5);

@@ -2,6 +2,7 @@
 
 mod colors;
 mod compress;
+mod edit;
 mod hash;
 mod ooc;
 mod pathtrace;
@@ -46,6 +47,8 @@ pub enum BenchCommand {
     Primitives(primitives::BenchPrimitivesArgs),
     /// Path tracing: ms per sample of the megakernel and wavefront GPU tracers vs the CPU reference.
     Pathtrace(pathtrace::BenchPathtraceArgs),
+    /// Figure 4.8: GPU edit pipeline per-kernel times and bytes per table layout vs the CPU editor.
+    Edit(edit::BenchEditArgs),
 }
 
 /// Arguments of `voxdag bench build`.
@@ -114,6 +117,7 @@ pub fn run(command: BenchCommand, quiet: bool) -> Result<()> {
         BenchCommand::Primitives(args) => args.outputs(),
         BenchCommand::Ooc(args) => args.outputs(),
         BenchCommand::Pathtrace(args) => args.outputs(),
+        BenchCommand::Edit(args) => args.outputs(),
     };
     check_outputs(&outputs)?;
     match command {
@@ -125,6 +129,7 @@ pub fn run(command: BenchCommand, quiet: bool) -> Result<()> {
         BenchCommand::Primitives(args) => primitives::bench_primitives(&args),
         BenchCommand::Ooc(args) => ooc::bench_ooc(&args, quiet),
         BenchCommand::Pathtrace(args) => pathtrace::bench_pathtrace(&args),
+        BenchCommand::Edit(args) => edit::bench_edit(&args),
     }
 }
 

@@ -781,7 +781,7 @@ fn free_space(output: &Path) -> Option<u64> {
 
 /// Builds render settings from the CLI camera flags; the default camera frames `bounds` (the
 /// occupied coarse nodes) or, for an empty scene, the whole grid of side `resolution`.
-fn render_settings(
+pub fn render_settings(
     args: &RenderArgs,
     bounds: Option<([u32; 3], [u32; 3])>,
     resolution: u32,
@@ -819,6 +819,9 @@ pub fn render(args: &RenderArgs) -> Result<()> {
     }
     if args.pt.pt {
         crate::pathtrace::check(&args.pt, &args.out)?;
+    }
+    if args.hash_dag || args.hash_table.is_some() {
+        return crate::hash_render::render(args);
     }
     let start;
     let image = if args.cpu {
@@ -928,6 +931,8 @@ pub fn demo(args: &DemoArgs, quiet: bool) -> Result<()> {
         fov: None,
         no_shadows: false,
         cpu: false,
+        hash_dag: false,
+        hash_table: None,
         profile: true,
         trace: Some(args.out_dir.join("avocado-trace.json")),
         pt: Default::default(),

@@ -1,16 +1,51 @@
-//! `voxdag edit`: replays a HashDAG replay file on a scene and saves the result.
+//! `voxdag edit`: replays a HashDAG replay file on a scene and saves the result, on the GPU
+//! hash DAG (default) or the CPU reference editor (`--cpu`).
 
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
-use clap::Args;
+use anyhow::{Context, Result};
+use clap::{Args, ValueEnum};
 use serde::Serialize;
+use voxdag::dag::Svdag;
 use voxdag::edit::cpu::{CpuEditor, HashDag};
+use voxdag::edit::gpu::{GpuHashDag, GpuHashDagConfig};
+use voxdag::edit::gpu_gc::GcStats;
 use voxdag::edit::replay::{Replay, Step};
 use voxdag::edit::tool::Tool;
+use voxdag::gpu::{GpuContext, GpuOptions, Profiler};
+use voxdag::hash::HashVariant;
+use voxdag::render::gpu::GpuRenderer;
+use voxdag::render::{Camera, RenderSettings};
 
-use crate::commands::{check_output, load_svdag, seconds, write_json};
+use crate::commands::{check_output, load_svdag, write_json};
+
+/// Slab layout of the GPU hash DAG's tables.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum TableArg {
+    /// 64-bit CAS on the slot prefix.
+    Atomic64,
+    /// Occupancy mask per slab.
+    #[value(name = "ticket_board")]
+    TicketBoard,
+    /// Ticket Board plus a 32-bit secondary hash per slot.
+    Accel32,
+    /// Ticket Board plus an 8-bit secondary hash per slot.
+    Accel8,
+}
+
+impl TableArg {
+    /// The table variant.
+    pub fn variant(self) -> HashVariant {
+        match self {
+            TableArg::Atomic64 => HashVariant::Atomic64,
+            TableArg::TicketBoard => HashVariant::TicketBoard,
+            TableArg::Accel32 => HashVariant::AccelHash32,
+            TableArg::Accel8 => HashVariant::AccelHash8,
+        }
+    }
+}
 
 /// Arguments of `voxdag edit`.
 #[derive(Args)]
@@ -33,10 +68,22 @@ pub struct EditArgs {
     /// Undo steps kept.
     #[arg(long, default_value_t = 64)]
     undo_depth: usize,
-    /// Run the CPU reference editor (required until the GPU editor is wired into this command).
+    /// Run the CPU reference editor instead of the GPU hash DAG.
     #[arg(long)]
     cpu: bool,
-    /// Write a JSON report (per-edit times, unique nodes per level at the end).
+    /// Slab layout of the GPU hash DAG's tables.
+    #[arg(long, value_enum, default_value_t = TableArg::Accel32)]
+    table: TableArg,
+    /// Print the GPU profile (per-pass times) at the end; the report gets per-edit kernel times.
+    #[arg(long)]
+    profile: bool,
+    /// Write the GPU profiler's Chrome trace (open in Perfetto).
+    #[arg(long)]
+    trace: Option<PathBuf>,
+    /// Render the final scene to this PNG (GPU: the live hash DAG, traversed in place).
+    #[arg(long)]
+    render_after: Option<PathBuf>,
+    /// Write a JSON report (per-edit times, GC, unique nodes per level at the end).
     #[arg(long)]
     report: Option<PathBuf>,
 }
@@ -50,6 +97,9 @@ struct EditTime {
     tool: &'static str,
     /// Wall time in milliseconds.
     ms: f64,
+    /// GPU milliseconds per pass name (`--profile`, GPU only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    kernels_ms: Option<BTreeMap<String, f64>>,
 }
 
 /// What `voxdag edit --report` writes.
@@ -60,20 +110,56 @@ struct EditReport {
     resolution: u32,
     replay_depth: u32,
     editor: &'static str,
+    /// GPU table layout (GPU only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    table: Option<&'static str>,
     threads: usize,
+    undo_depth: usize,
+    load_ms: f64,
     edits: Vec<EditTime>,
     undos: usize,
     redos: usize,
     edit_ms_total: f64,
-    gc_ms: f64,
-    gc_freed_items: u64,
+    /// Automatic collections during the replay (GPU only).
+    auto_gc: Vec<GcReport>,
+    /// The final collection from every live root.
+    gc: GcReport,
     items_after_gc: u64,
     item_bytes_after_gc: u64,
     /// Unique stored items reachable from the current root, per level (index 0 = leaves).
     unique_nodes_per_level: Vec<u64>,
 }
 
-fn tool_name(tool: &Tool) -> &'static str {
+/// One garbage collection in the report.
+#[derive(Serialize, Default)]
+struct GcReport {
+    ms: f64,
+    live_items: u64,
+    freed_items: u64,
+    /// GPU only: items kept per table (index = item words - 2).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    live_per_table: Vec<u64>,
+    /// GPU only: slabs returned to the allocators.
+    freed_slabs: u64,
+    /// GPU only: device bytes of the allocated slabs after.
+    slab_bytes_after: u64,
+}
+
+impl From<&GcStats> for GcReport {
+    fn from(s: &GcStats) -> GcReport {
+        GcReport {
+            ms: s.ms,
+            live_items: s.live,
+            freed_items: s.freed,
+            live_per_table: s.live_per_table.clone(),
+            freed_slabs: s.freed_slabs,
+            slab_bytes_after: s.slab_bytes_after,
+        }
+    }
+}
+
+/// The name of a tool in reports.
+pub fn tool_name(tool: &Tool) -> &'static str {
     match tool {
         Tool::Add { .. } => "add",
         Tool::Remove { .. } => "remove",
@@ -83,17 +169,22 @@ fn tool_name(tool: &Tool) -> &'static str {
     }
 }
 
+/// Buckets per table for a scene: about one per 16 stored words (the largest table holds at
+/// most every node), a power of two in 1024..=2^22.
+pub fn buckets_for(svdag: &Svdag) -> u32 {
+    ((svdag.words.len() / 16) as u32)
+        .next_power_of_two()
+        .clamp(1024, 1 << 22)
+}
+
 /// `voxdag edit`.
 pub fn edit(args: &EditArgs) -> Result<()> {
-    if !args.cpu {
-        bail!(
-            "the GPU editor is not wired into `voxdag edit` yet: pass --cpu to run the CPU \
-             reference editor"
-        );
-    }
     check_output(&args.output)?;
-    if let Some(report) = &args.report {
-        check_output(report)?;
+    for path in [&args.report, &args.trace, &args.render_after]
+        .into_iter()
+        .flatten()
+    {
+        check_output(path)?;
     }
     let replay = Replay::load(&args.replay)?;
     let svdag = load_svdag(&args.scene)?;
@@ -108,12 +199,68 @@ pub fn edit(args: &EditArgs) -> Result<()> {
             args.scene.display()
         );
     }
+    let mut report = EditReport {
+        scene: args.scene.clone(),
+        replay: args.replay.clone(),
+        resolution: svdag.resolution,
+        replay_depth,
+        editor: if args.cpu { "cpu" } else { "gpu" },
+        table: (!args.cpu).then(|| args.table.variant().name()),
+        threads: rayon::current_num_threads(),
+        undo_depth: args.undo_depth,
+        load_ms: 0.0,
+        edits: Vec::new(),
+        undos: 0,
+        redos: 0,
+        edit_ms_total: 0.0,
+        auto_gc: Vec::new(),
+        gc: GcReport::default(),
+        items_after_gc: 0,
+        item_bytes_after_gc: 0,
+        unique_nodes_per_level: Vec::new(),
+    };
+    if args.cpu {
+        edit_cpu(args, svdag, steps, &mut report)?;
+    } else {
+        edit_gpu(args, svdag, steps, &mut report)?;
+    }
+    report.edit_ms_total = report.edits.iter().map(|e| e.ms).sum();
+    println!(
+        "{} edits ({} undo, {} redo) in {:.1} ms ({} editor{}); GC {:.1} ms freed {} items; {} \
+         unique nodes; wrote {}",
+        report.edits.len(),
+        report.undos,
+        report.redos,
+        report.edit_ms_total,
+        report.editor,
+        report
+            .table
+            .map_or(format!(", {} threads", report.threads), |t| format!(
+                ", {t} tables"
+            )),
+        report.gc.ms,
+        report.gc.freed_items,
+        report.unique_nodes_per_level.iter().sum::<u64>(),
+        args.output.display()
+    );
+    if let Some(path) = &args.report {
+        write_json(path, &report)?;
+    }
+    Ok(())
+}
+
+fn edit_cpu(
+    args: &EditArgs,
+    svdag: Svdag,
+    steps: Vec<(usize, Step)>,
+    report: &mut EditReport,
+) -> Result<()> {
+    let start = Instant::now();
     let mut dag = HashDag::new(svdag.resolution, false)?;
     let root = dag.insert_svdag(&svdag, None)?;
     drop(svdag);
+    report.load_ms = start.elapsed().as_secs_f64() * 1e3;
     let mut editor = CpuEditor::new(dag, root, args.undo_depth);
-    let mut edits = Vec::new();
-    let (mut undos, mut redos) = (0, 0);
     for (line, step) in steps {
         match step {
             Step::Edit(tool) => {
@@ -121,58 +268,132 @@ pub fn edit(args: &EditArgs) -> Result<()> {
                 editor
                     .edit(&tool)
                     .with_context(|| format!("{}:{line}", args.replay.display()))?;
-                edits.push(EditTime {
+                report.edits.push(EditTime {
                     line,
                     tool: tool_name(&tool),
                     ms: start.elapsed().as_secs_f64() * 1e3,
+                    kernels_ms: None,
                 });
             }
-            Step::Undo => undos += editor.undo() as usize,
-            Step::Redo => redos += editor.redo() as usize,
+            Step::Undo => report.undos += editor.undo() as usize,
+            Step::Redo => report.redos += editor.redo() as usize,
             Step::EndFrame => {}
         }
     }
     let start = Instant::now();
     let gc = editor.gc()?;
-    let gc_time = start.elapsed();
-    let unique = editor.unique_nodes_per_level()?;
+    report.gc = GcReport {
+        ms: start.elapsed().as_secs_f64() * 1e3,
+        live_items: gc.live,
+        freed_items: gc.freed,
+        ..GcReport::default()
+    };
+    report.unique_nodes_per_level = editor.unique_nodes_per_level()?;
+    report.items_after_gc = editor.dag().item_count();
+    report.item_bytes_after_gc = editor.dag().item_bytes();
     let out = editor.dag().to_svdag(editor.root())?;
     out.save(&args.output)?;
-    let total: f64 = edits.iter().map(|e| e.ms).sum();
-    println!(
-        "{} edits ({} undo, {} redo) in {:.1} ms (CPU editor, {} threads); GC {} freed {} items; \
-         {} unique nodes; wrote {}",
-        edits.len(),
-        undos,
-        redos,
-        total,
-        rayon::current_num_threads(),
-        seconds(gc_time),
-        gc.freed,
-        unique.iter().sum::<u64>(),
-        args.output.display()
-    );
-    if let Some(path) = &args.report {
-        write_json(
-            path,
-            &EditReport {
-                scene: args.scene.clone(),
-                replay: args.replay.clone(),
-                resolution: out.resolution,
-                replay_depth,
-                editor: "cpu",
-                threads: rayon::current_num_threads(),
-                edits,
-                undos,
-                redos,
-                edit_ms_total: total,
-                gc_ms: gc_time.as_secs_f64() * 1e3,
-                gc_freed_items: gc.freed,
-                items_after_gc: editor.dag().item_count(),
-                item_bytes_after_gc: editor.dag().item_bytes(),
-                unique_nodes_per_level: unique,
-            },
-        )?;
+    if let Some(png) = &args.render_after {
+        let ctx = GpuContext::new(&GpuOptions::default())?;
+        let renderer = GpuRenderer::new(&ctx)?;
+        let scene = renderer.upload(&out)?;
+        let image = renderer.render(&scene, &render_settings(&out), None)?;
+        image.save_png(png)?;
+        println!("{}: rendered (svdag32 of the result)", png.display());
+    }
+    Ok(())
+}
+
+/// The render of `--render-after`: 1024x768, the default orbit camera framing the scene.
+fn render_settings(dag: &Svdag) -> RenderSettings {
+    let camera = match dag.occupied_bounds() {
+        Some((min, max)) => Camera::orbit(min.map(|v| v as f32), max.map(|v| v as f32)),
+        None => Camera::orbit_default(dag.resolution),
+    };
+    RenderSettings::new(1024, 768, camera)
+}
+
+/// GPU milliseconds per pass name of the passes from `from` on.
+fn kernel_times(profiler: &Profiler, from: usize) -> BTreeMap<String, f64> {
+    let mut out = BTreeMap::new();
+    for p in &profiler.passes()[from..] {
+        *out.entry(p.name.clone()).or_insert(0.0) += p.gpu_ms;
+    }
+    out
+}
+
+fn edit_gpu(
+    args: &EditArgs,
+    svdag: Svdag,
+    steps: Vec<(usize, Step)>,
+    report: &mut EditReport,
+) -> Result<()> {
+    let ctx = GpuContext::new(&GpuOptions::default())?;
+    let mut profiler = if args.profile || args.trace.is_some() {
+        Some(Profiler::new(&ctx)?)
+    } else {
+        None
+    };
+    let config = GpuHashDagConfig::new(args.table.variant(), buckets_for(&svdag))
+        .with_undo_depth(args.undo_depth);
+    let start = Instant::now();
+    let mut hd = GpuHashDag::load(&ctx, &config, &svdag, profiler.as_mut())?;
+    report.load_ms = start.elapsed().as_secs_f64() * 1e3;
+    drop(svdag);
+    for (line, step) in steps {
+        match step {
+            Step::Edit(tool) => {
+                let from = profiler.as_ref().map_or(0, |p| p.passes().len());
+                let start = Instant::now();
+                hd.edit(&tool, profiler.as_mut())
+                    .with_context(|| format!("{}:{line}", args.replay.display()))?;
+                let ms = start.elapsed().as_secs_f64() * 1e3;
+                report
+                    .auto_gc
+                    .extend(hd.take_auto_gc().iter().map(GcReport::from));
+                report.edits.push(EditTime {
+                    line,
+                    tool: tool_name(&tool),
+                    ms,
+                    kernels_ms: profiler.as_ref().map(|p| kernel_times(p, from)),
+                });
+            }
+            Step::Undo => report.undos += hd.undo() as usize,
+            Step::Redo => report.redos += hd.redo() as usize,
+            Step::EndFrame => {}
+        }
+    }
+    let gc = hd.gc(profiler.as_mut())?;
+    report.gc = GcReport::from(&gc);
+    let image = hd.download()?;
+    report.unique_nodes_per_level = image.level_counts(hd.root())?;
+    report.items_after_gc = gc.live;
+    report.item_bytes_after_gc = gc
+        .live_per_table
+        .iter()
+        .enumerate()
+        .map(|(t, &n)| n * 4 * (t as u64 + 2))
+        .sum();
+    let out = image.to_svdag(hd.root())?;
+    out.save(&args.output)?;
+    if let Some(png) = &args.render_after {
+        let renderer = GpuRenderer::new(&ctx)?;
+        let scene = renderer.bind_hash_dag(&hd, None)?;
+        let image = renderer.render(&scene, &render_settings(&out), profiler.as_mut())?;
+        image.save_png(png)?;
+        println!("{}: rendered from the live hash DAG", png.display());
+    }
+    if let Some(p) = &profiler {
+        if args.profile {
+            print!("{}", p.table());
+        }
+    }
+    if let (Some(p), Some(path)) = (&profiler, &args.trace) {
+        p.write_chrome_trace(path)?;
+        println!(
+            "{}: Chrome trace written (open in Perfetto)",
+            path.display()
+        );
     }
     Ok(())
 }

@@ -4,6 +4,7 @@ mod bench;
 mod commands;
 mod edit;
 mod editor;
+mod hash_render;
 mod limited_alloc;
 mod ooc;
 mod pathtrace;
@@ -232,6 +233,13 @@ pub struct RenderArgs {
     /// Write a Chrome trace-event JSON of the GPU passes (opens in Perfetto).
     #[arg(long)]
     trace: Option<PathBuf>,
+    /// Load the scene into the GPU hash DAG of the editor (nine slab hash tables) and render
+    /// that, traversed in place (geometry only; docs/rendering.md).
+    #[arg(long)]
+    hash_dag: bool,
+    /// With --hash-dag: the tables' slab layout (atomic64, ticket_board, accel32, accel8).
+    #[arg(long, value_name = "VARIANT")]
+    hash_table: Option<String>,
     /// Path tracing (--pt and its flags).
     #[command(flatten)]
     pt: pathtrace::PtArgs,

@@ -21,7 +21,7 @@ use super::item::{
     Child, InnerNode, ItemError, Leaf, NodePtr, Root, MAX_ITEM_WORDS, MAX_TABLE_SLABS,
     MIN_ITEM_WORDS, TABLE_COUNT,
 };
-use super::tool::{Shape, Tool};
+use super::tool::{self, CopyRegion, Shape, Tool};
 use crate::dag::{DagError, Svdag};
 use crate::gpu::{
     shaders, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, MemLocation,
@@ -41,8 +41,14 @@ const VALUE_TEMP: u32 = 0x9000_0000;
 /// Pass flags (GLSL `EDIT_FLAG_*`).
 const FLAG_LEAVES: u32 = 1;
 const FLAG_MATERIALS: u32 = 2;
-const FLAG_REMOVE: u32 = 4;
 const FLAG_RESULT_INDEX: u32 = 8;
+/// Shift of the tool kind in the flags of traverse / leaves / fill passes (GLSL
+/// `EDIT_TOOL_SHIFT`).
+const TOOL_SHIFT: u32 = 4;
+/// Words of the tool parameter buffer (GLSL `EDIT_P_*`).
+const TOOL_PARAMS: usize = 28;
+/// Flood passes (one per axis) recorded per host wait of the fill.
+const FLOOD_ROUNDS_PER_WAIT: u32 = 2;
 /// Words of the per-level address buffer (GLSL `EDIT_LEVEL_*`): 9 items, 1 slots, 9 reps,
 /// 9 handles.
 const LEVEL_ADDRESSES: usize = 28;
@@ -150,6 +156,8 @@ pub struct GpuHashDag {
     resolve: ComputePipeline,
     traverse: ComputePipeline,
     leaves: ComputePipeline,
+    fill_init: ComputePipeline,
+    fill_flood: ComputePipeline,
     pub(super) root_level: u32,
     with_materials: bool,
     pub(super) roots: Vec<Root>,
@@ -236,6 +244,8 @@ impl GpuHashDag {
             resolve: pipeline("edit resolve", shaders::EDIT_RESOLVE)?,
             traverse: pipeline("edit traverse", shaders::EDIT_TRAVERSE)?,
             leaves: pipeline("edit leaves", shaders::EDIT_LEAVES)?,
+            fill_init: pipeline("edit fill init", shaders::EDIT_FILL_INIT)?,
+            fill_flood: pipeline("edit fill flood", shaders::EDIT_FILL_FLOOD)?,
             root_level,
             with_materials,
             roots: vec![Root::Empty],
@@ -406,8 +416,11 @@ impl GpuHashDag {
     }
 
     /// Applies `tool` (validated with [`Tool::validate`]) to the current root; the result
-    /// becomes the new current root (the redo branch is dropped). All-or-nothing: stored items
-    /// are never changed, so on an error the previous root stays current and intact.
+    /// becomes the new current root (the redo branch is dropped). Every tool of
+    /// `edit::tool` gives the CPU reference editor's voxels and materials (`Edit::voxel`); in
+    /// a scene without materials the tool's material is 0 and paint changes nothing.
+    /// All-or-nothing: stored items are never changed, so on an error the previous root stays
+    /// current and intact.
     pub fn edit(
         &mut self,
         tool: &Tool,
@@ -415,29 +428,87 @@ impl GpuHashDag {
     ) -> Result<EditReport, GpuDagError> {
         tool.validate()
             .map_err(|e| GpuDagError::Invalid(format!("tool {tool:?}: {e}")))?;
-        let (shape, center, radius, remove) = match *tool {
+        self.auto_gc()?;
+        let ctx = Arc::clone(&self.ctx);
+        let materials = self.with_materials;
+        let material = |m: u8| if materials { m as u32 } else { 0 };
+        let root_value = value_of_root(self.root());
+        let mut params = [0u32; TOOL_PARAMS];
+        params[7] = self.root_level;
+        let mut fill_bitmap = None;
+        // (kind, shape, region centre, region radius, material); None: nothing changes.
+        let setup = match *tool {
             Tool::Add {
                 shape,
                 center,
                 radius,
-                ..
-            } => (shape, center, radius, false),
+                material: m,
+            } => Some((ToolKind::Add, shape, center, radius, material(m))),
             Tool::Remove {
                 shape,
                 center,
                 radius,
-            } => (shape, center, radius, true),
-            Tool::Paint { .. } | Tool::Fill { .. } | Tool::Copy(_) => {
-                return Err(not_on_gpu_yet(tool));
+            } => Some((ToolKind::Remove, shape, center, radius, 0)),
+            // Geometry-only scenes have one material: painting changes nothing (as on the CPU).
+            Tool::Paint {
+                center,
+                radius,
+                material: m,
+            } => materials.then_some((ToolKind::Paint, Shape::Sphere, center, radius, m as u32)),
+            Tool::Fill {
+                center,
+                radius,
+                material: m,
+            } => {
+                let flooded = self.flood(center, radius, root_value, &mut params, &mut profiler)?;
+                flooded.map(|bitmap| {
+                    fill_bitmap = Some(bitmap);
+                    (ToolKind::Fill, Shape::Cube, center, radius, material(m))
+                })
+            }
+            Tool::Copy(p) => {
+                let region = CopyRegion::new(p)
+                    .map_err(|e| GpuDagError::Invalid(format!("tool {tool:?}: {e}")))?;
+                let floats = |at: usize, v: &[f32], params: &mut [u32; TOOL_PARAMS]| {
+                    for (k, x) in v.iter().enumerate() {
+                        params[at + k] = x.to_bits();
+                    }
+                };
+                floats(8, &p.source, &mut params);
+                floats(11, &p.dest, &mut params);
+                floats(14, &p.center, &mut params);
+                floats(17, &[p.radius], &mut params);
+                if let Some(inv) = region.inverse {
+                    params[18] = 1;
+                    floats(19, inv.as_flattened(), &mut params);
+                }
+                Some((
+                    ToolKind::Copy,
+                    Shape::Cube,
+                    region.dest_center,
+                    region.dest_radius,
+                    0,
+                ))
             }
         };
-        self.auto_gc()?;
-        if self.with_materials {
-            return Err(not_on_gpu_yet(tool));
+        let levels = self.root_level as usize + 1;
+        let Some((kind, shape, center, radius, material)) = setup else {
+            // The edit changes no voxel: the new root is the current one.
+            self.push_root(self.root());
+            return Ok(EditReport {
+                temporary_nodes: vec![0; levels],
+                items: vec![0; levels],
+                retried_rounds: 0,
+            });
+        };
+        let param_buf = ctx.upload("edit tool params", &params)?;
+        let mut flags = (kind as u32) << TOOL_SHIFT;
+        if materials {
+            flags |= FLAG_MATERIALS;
         }
-        let ctx = Arc::clone(&self.ctx);
-        let flags = if remove { FLAG_REMOVE } else { 0 };
         let base_push = EditPush {
+            src2: param_buf.address(),
+            dst2: fill_bitmap.as_ref().map_or(0, |b: &Buffer| b.address()),
             tables: self.table_addresses.address(),
             flags,
             variant: self.config.variant.id(),
@@ -446,9 +517,10 @@ impl GpuHashDag {
                 Shape::Sphere => 0,
                 Shape::Cube => 1,
             },
+            material,
+            root: root_value,
             ..EditPush::default()
         };
-        let levels = self.root_level as usize + 1;
         let mut report = EditReport {
             temporary_nodes: vec![0; levels],
             items: vec![0; levels],
@@ -456,7 +528,6 @@ impl GpuHashDag {
         };
         // Top-down: entries[l] = the level-l cubes the tool may change; temp[l] = their
         // temporary nodes (inner levels) or leaves (level 0).
-        let root_value = value_of_root(self.root());
         let mut entries: Vec<Option<Buffer>> = (0..levels).map(|_| None).collect();
         let mut temp: Vec<Option<Buffer>> = (0..levels).map(|_| None).collect();
         let first = ctx.upload("edit entries", &[0u32, 0, 0, root_value])?;
@@ -470,9 +541,10 @@ impl GpuHashDag {
             }
             let input = entries[level].as_ref().expect("entries of a visited level");
             if level == 0 {
+                let record = if materials { 40 } else { 8 };
                 let leaves = ctx.create_buffer(
                     "edit temporary leaves",
-                    8 * count as u64,
+                    record * count as u64,
                     MemLocation::GpuOnly,
                 )?;
                 let mut cmd = ctx.begin_commands("edit leaves")?;
@@ -571,6 +643,111 @@ impl GpuHashDag {
         }
         self.push_root(root);
         Ok(report)
+    }
+
+    /// The fill's flood on the GPU (`tool.rs` `FillSet`): fills the box fields of `params`,
+    /// marks the free voxels of the fill box (`fill_init`), then repeats flood passes along x,
+    /// y, z (`fill_flood`) until a round changes nothing. Returns the flooded bitmap, or None
+    /// when the fill reaches no voxel (the box misses the grid, or the start voxel is outside
+    /// the grid or the cube).
+    fn flood(
+        &self,
+        center: [f32; 3],
+        radius: f32,
+        root_value: u32,
+        params: &mut [u32; TOOL_PARAMS],
+        profiler: &mut Option<&mut Profiler>,
+    ) -> Result<Option<Buffer>, GpuDagError> {
+        let n = self.resolution();
+        let Some((min, max)) = tool::voxel_box(center, radius, n) else {
+            return Ok(None);
+        };
+        let start = center.map(|c| c.floor());
+        if start.iter().any(|&s| !(s >= 0.0 && s < n as f32)) {
+            return Ok(None);
+        }
+        let start = start.map(|s| s as u32);
+        if !tool::in_cube(center, radius, start) {
+            return Ok(None);
+        }
+        let dims = [0, 1, 2].map(|a| max[a] - min[a] + 1);
+        let volume = dims.iter().map(|&d| d as u64).product::<u64>();
+        if volume >= 1 << 32 {
+            return Err(GpuDagError::Invalid(format!(
+                "fill box of {volume} voxels (the GPU flood indexes voxels with 32 bits)"
+            )));
+        }
+        let index =
+            |v: [u32; 3]| (v[0] - min[0]) + dims[0] * ((v[1] - min[1]) + dims[1] * (v[2] - min[2]));
+        params[0..3].copy_from_slice(&min);
+        params[3..6].copy_from_slice(&dims);
+        params[6] = index(start);
+        let ctx = &self.ctx;
+        let param_buf = ctx.upload("edit fill params", &params[..])?;
+        let bytes = 4 * volume.div_ceil(32);
+        let free = ctx.create_buffer("edit fill free", bytes, MemLocation::GpuOnly)?;
+        let flooded = ctx.create_buffer("edit fill flooded", bytes, MemLocation::GpuOnly)?;
+        let counter = ctx.create_buffer("edit fill counter", 4, MemLocation::GpuOnly)?;
+        let push = EditPush {
+            src2: param_buf.address(),
+            dst: free.address(),
+            dst2: flooded.address(),
+            counters: counter.address(),
+            tables: self.table_addresses.address(),
+            count: volume as u32,
+            flags: if self.with_materials {
+                FLAG_MATERIALS
+            } else {
+                0
+            } | (ToolKind::Fill as u32) << TOOL_SHIFT,
+            variant: self.config.variant.id(),
+            tool: [center[0], center[1], center[2], radius],
+            shape: 1,
+            root: root_value,
+            ..EditPush::default()
+        };
+        let mut cmd = ctx.begin_commands("edit fill init")?;
+        cmd.fill_buffer(&free, 0);
+        cmd.fill_buffer(&flooded, 0);
+        cmd.begin_pass(profiler, "edit fill init");
+        cmd.dispatch(
+            &self.fill_init,
+            groups(push.count),
+            bytemuck::bytes_of(&push),
+            None,
+        )?;
+        cmd.end_pass(profiler);
+        cmd.barrier();
+        cmd.submit_async()?;
+        loop {
+            let mut cmd = ctx.begin_commands("edit fill flood")?;
+            cmd.fill_buffer(&counter, 0);
+            for _ in 0..FLOOD_ROUNDS_PER_WAIT {
+                for axis in 0..3u32 {
+                    let rows = (volume / dims[axis as usize] as u64) as u32;
+                    let flood = EditPush {
+                        count: rows,
+                        level: axis,
+                        ..push
+                    };
+                    cmd.begin_pass(profiler, "edit fill flood");
+                    cmd.dispatch(
+                        &self.fill_flood,
+                        groups(rows),
+                        bytemuck::bytes_of(&flood),
+                        None,
+                    )?;
+                    cmd.end_pass(profiler);
+                    cmd.barrier();
+                }
+            }
+            let back = cmd.readback::<u32>(&counter, 0, 1)?;
+            cmd.submit_async()?;
+            if back.read()?[0] == 0 {
+                break;
+            }
+        }
+        Ok(Some(flooded))
     }
 
     /// Merges one level (see the module docs); returns the items built and the extra insert
@@ -752,9 +929,14 @@ impl GpuHashDag {
     }
 }
 
-/// The error of a tool the GPU edit pipeline does not run yet.
-fn not_on_gpu_yet(tool: &Tool) -> GpuDagError {
-    GpuDagError::Invalid(format!("tool {tool:?} is not on the GPU yet"))
+/// The tool a traverse / leaves pass applies (GLSL `EDIT_TOOL_*`).
+#[derive(Clone, Copy)]
+enum ToolKind {
+    Add = 0,
+    Remove = 1,
+    Paint = 2,
+    Fill = 3,
+    Copy = 4,
 }
 
 /// Workgroups for one invocation per record (grid-stride beyond 65 535 groups).

@@ -32,7 +32,9 @@ gpu_shared! {
         pub(crate) shape: uint,
         /// Capacity of the output queue (records).
         pub(crate) capacity: uint,
-        /// Padding to 16 bytes.
-        pub(crate) pad: [uint; 2],
+        /// Material of the tool's new voxels (add, paint, fill).
+        pub(crate) material: uint,
+        /// The pre-edit root's child value (fill and copy read the scene before the edit).
+        pub(crate) root: uint,
     }
 }

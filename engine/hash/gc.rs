@@ -8,7 +8,8 @@
 //! 2. sweep: one team per bucket (the table's [`TeamMode`](super::TeamMode): the whole subgroup,
 //!    or a single lane on CPU devices) walks the chain, clears every occupied slot whose bit is
 //!    clear (the slot's words, the occupancy bit, the secondary hash), resets `active` to zero,
-//!    and unlinks, zeroes and frees every slab left empty except the bucket's first.
+//!    and unlinks, zeroes and frees every slab left empty (the bucket's first too: its head then
+//!    links the next slab, or nothing, and the next insert into the bucket starts a new chain).
 //!
 //! Handles of kept items do not change. [`collect_cpu`] does the same on a [`TableImage`]; since
 //! GC allocates nothing its result is deterministic, and the GPU's image equals the CPU's word
@@ -113,10 +114,15 @@ pub fn collect_cpu(image: &mut TableImage, live: &[Handle]) -> GcReport {
                 }
             }
             match prev {
-                Some(prev_slab) if kept == 0 => {
+                _ if kept == 0 => {
                     words.fill(0);
-                    let (psb, pstart) = slab_start(&layout, prev_slab);
-                    image.super_blocks[psb][pstart + SLAB_NEXT as usize] = next;
+                    match prev {
+                        Some(prev_slab) => {
+                            let (psb, pstart) = slab_start(&layout, prev_slab);
+                            image.super_blocks[psb][pstart + SLAB_NEXT as usize] = next;
+                        }
+                        None => image.heads[bucket] = next,
+                    }
                     let local = slab % SLABS_PER_SUPER_BLOCK;
                     image.super_blocks[sb][(local / 32) as usize] &= !(1 << (local % 32));
                     image.status.allocated_slabs = image.status.allocated_slabs.wrapping_sub(1);

@@ -29,8 +29,30 @@ layout(buffer_reference, std430, buffer_reference_align = 16) buffer Entries {
 
 #define EDIT_FLAG_LEAVES 1u
 #define EDIT_FLAG_MATERIALS 2u
-#define EDIT_FLAG_REMOVE 4u
 #define EDIT_FLAG_RESULT_INDEX 8u
+// The tool of traverse / leaves / fill passes: flags >> EDIT_TOOL_SHIFT & 7 (engine/edit/gpu.rs
+// `ToolKind`).
+#define EDIT_TOOL_SHIFT 4u
+#define EDIT_TOOL_ADD 0u
+#define EDIT_TOOL_REMOVE 1u
+#define EDIT_TOOL_PAINT 2u
+#define EDIT_TOOL_FILL 3u
+#define EDIT_TOOL_COPY 4u
+
+// The tool parameter buffer (push.src2 of leaves and the fill passes, u32 / f32 words; twin of
+// `tool_params` in engine/edit/gpu.rs): the fill box (min corner, dims, start voxel index),
+// the root level, and the copy's source anchor, destination anchor, source cube (centre,
+// half-size) and inverse transform (flag, 9 floats by rows).
+#define EDIT_P_MIN 0u
+#define EDIT_P_DIMS 3u
+#define EDIT_P_START 6u
+#define EDIT_P_ROOT_LEVEL 7u
+#define EDIT_P_SOURCE 8u
+#define EDIT_P_DEST 11u
+#define EDIT_P_SRC_CENTER 14u
+#define EDIT_P_SRC_RADIUS 17u
+#define EDIT_P_HAS_INVERSE 18u
+#define EDIT_P_INVERSE 19u
 
 // The per-level address buffer (push.tables of build_items / resolve): per size table s
 // (0..9) its items, its dedup representatives and its handles, and one slot per node (the
@@ -108,19 +130,30 @@ void edit_children(uint v, out uint children[8]) {
 
 // ---- tools (voxel-centre inclusion, exactly as engine/edit/tool.rs's `in_sphere` / `in_cube`) ----
 
-// Whether the voxel with integer corner p is inside the tool. `precise`: no fused
-// multiply-add, so the CPU twin's f32 arithmetic gives the same answer bit for bit.
-bool edit_voxel_inside(uvec3 p) {
-    if (push.shape == EDIT_SHAPE_CUBE) {
-        precise vec3 centre = vec3(p) + 0.5;
-        precise vec3 lo = push.tool.xyz - push.tool.w;
-        precise vec3 hi = push.tool.xyz + push.tool.w;
-        return all(lessThanEqual(lo, centre)) && all(lessThanEqual(centre, hi));
-    }
-    precise vec3 d = (vec3(p) + 0.5) - push.tool.xyz;
+uint edit_tool() {
+    return push.flags >> EDIT_TOOL_SHIFT & 7u;
+}
+
+// `precise`: no fused multiply-add, so the CPU twin's f32 arithmetic gives the same answer bit
+// for bit.
+bool edit_in_cube(vec3 c, float r, uvec3 p) {
+    precise vec3 centre = vec3(p) + 0.5;
+    precise vec3 lo = c - r;
+    precise vec3 hi = c + r;
+    return all(lessThanEqual(lo, centre)) && all(lessThanEqual(centre, hi));
+}
+
+bool edit_in_sphere(vec3 c, float r, uvec3 p) {
+    precise vec3 d = (vec3(p) + 0.5) - c;
     precise float d2 = d.x * d.x + d.y * d.y + d.z * d.z;
-    precise float r2 = push.tool.w * push.tool.w;
+    precise float r2 = r * r;
     return d2 <= r2;
+}
+
+// Whether the voxel with integer corner p is inside the tool's region (push.shape, push.tool).
+bool edit_voxel_inside(uvec3 p) {
+    if (push.shape == EDIT_SHAPE_CUBE) return edit_in_cube(push.tool.xyz, push.tool.w, p);
+    return edit_in_sphere(push.tool.xyz, push.tool.w, p);
 }
 
 // Whether every voxel of the cube [p, p + side) is inside: the computed distance grows with
@@ -152,4 +185,105 @@ bool edit_cube_all_outside(uvec3 p, uint side) {
     }
     vec3 d = max(max(lo - c, c - hi), vec3(0.0));
     return dot(d, d) > r * r;
+}
+
+// ---- reading the scene before the edit ----
+
+// State of voxel p (grid coordinates) under the stored value v of a level-`level` cube that
+// contains it: EDIT_EMPTY, or the voxel's material.
+uint edit_lookup(uint v, uint level, uvec3 p) {
+    bool materials = (push.flags & EDIT_FLAG_MATERIALS) != 0u;
+    for (;;) {
+        if (v == EDIT_EMPTY) return EDIT_EMPTY;
+        if (edit_is_full(v)) return v & 15u;
+        if (level == 0u) {
+            // Bit = Morton code of the voxel inside its 4^3 leaf.
+            uvec3 l = p & 3u;
+            uint bit = (l.x & 1u) | (l.y & 1u) << 1u | (l.z & 1u) << 2u
+                     | (l.x >> 1u) << 3u | (l.y >> 1u) << 4u | (l.z >> 1u) << 5u;
+            uint lo = edit_read(v, 0u);
+            uint hi = edit_read(v, 1u);
+            uint word = bit < 32u ? lo : hi;
+            if ((word >> (bit & 31u) & 1u) == 0u) return EDIT_EMPTY;
+            if (!materials) return 0u;
+            // Materials are packed by rank among the set bits (item.rs `Leaf`).
+            uint rank = bit < 32u ? bitCount(lo & ((1u << bit) - 1u))
+                                  : bitCount(lo) + bitCount(hi & ((1u << (bit - 32u)) - 1u));
+            return edit_read(v, 2u + rank / 8u) >> (4u * (rank % 8u)) & 15u;
+        }
+        uint s = level + 1u;
+        uint o = (p.x >> s & 1u) | (p.y >> s & 1u) << 1u | (p.z >> s & 1u) << 2u;
+        uint header = edit_read(v, 0u);
+        if ((header >> o & 1u) == 0u) return EDIT_EMPTY;
+        uint word = edit_read(v, 1u + bitCount(header & ((1u << o) - 1u) & 0xFFu));
+        v = (header >> (8u + o) & 1u) != 0u ? EDIT_FULL | word : word;
+        level--;
+    }
+    return EDIT_EMPTY;
+}
+
+uint edit_param(uint at) {
+    return Words(push.src2).w[at];
+}
+
+float edit_param_f(uint at) {
+    return uintBitsToFloat(Words(push.src2).w[at]);
+}
+
+vec3 edit_param_vec3(uint at) {
+    return vec3(edit_param_f(at), edit_param_f(at + 1u), edit_param_f(at + 2u));
+}
+
+// Bit i of a bitmap (u32 words).
+bool edit_bit(uint64_t bitmap, uint i) {
+    return (Words(bitmap).w[i >> 5u] >> (i & 31u) & 1u) != 0u;
+}
+
+// Index of voxel p in the fill box's bitmap (x fastest), or 0xFFFFFFFF outside the box.
+uint edit_fill_index(uvec3 p) {
+    uvec3 lo = uvec3(edit_param(EDIT_P_MIN), edit_param(EDIT_P_MIN + 1u), edit_param(EDIT_P_MIN + 2u));
+    uvec3 dims = uvec3(edit_param(EDIT_P_DIMS), edit_param(EDIT_P_DIMS + 1u), edit_param(EDIT_P_DIMS + 2u));
+    if (any(lessThan(p, lo)) || any(greaterThanEqual(p - lo, dims))) return 0xFFFFFFFFu;
+    uvec3 d = p - lo;
+    return d.x + dims.x * (d.y + dims.y * d.z);
+}
+
+// The copy's source voxel state for destination voxel p (tool.rs `CopyRegion::source_voxel`
+// with its f32 operation order, then the source cube test and a lookup in the pre-edit root).
+uint edit_copy_source(uvec3 p) {
+    uint root_level = edit_param(EDIT_P_ROOT_LEVEL);
+    precise vec3 rel = (vec3(p) + 0.5) - edit_param_vec3(EDIT_P_DEST);
+    if (edit_param(EDIT_P_HAS_INVERSE) != 0u) {
+        precise vec3 t;
+        for (uint r = 0u; r < 3u; ++r) {
+            uint at = EDIT_P_INVERSE + 3u * r;
+            t[r] = edit_param_f(at) * rel.x + edit_param_f(at + 1u) * rel.y + edit_param_f(at + 2u) * rel.z;
+        }
+        rel = t;
+    }
+    precise vec3 s = floor(edit_param_vec3(EDIT_P_SOURCE) + rel);
+    float side = float(4u << root_level);
+    if (any(lessThan(s, vec3(0.0))) || any(greaterThanEqual(s, vec3(side)))) return EDIT_EMPTY;
+    uvec3 sv = uvec3(s);
+    if (!edit_in_cube(edit_param_vec3(EDIT_P_SRC_CENTER), edit_param_f(EDIT_P_SRC_RADIUS), sv)) {
+        return EDIT_EMPTY;
+    }
+    return edit_lookup(push.root, root_level, sv);
+}
+
+// The new state of voxel p (EDIT_EMPTY or a material) whose state before the edit is `old`:
+// tool.rs `Edit::voxel`. Fill reads its flooded bitmap at push.dst2.
+uint edit_new_voxel(uvec3 p, uint old) {
+    uint tool = edit_tool();
+    if (tool == EDIT_TOOL_ADD) return edit_voxel_inside(p) ? push.material : old;
+    if (tool == EDIT_TOOL_REMOVE) return edit_voxel_inside(p) ? EDIT_EMPTY : old;
+    if (tool == EDIT_TOOL_PAINT) return old != EDIT_EMPTY && edit_voxel_inside(p) ? push.material : old;
+    // Fill and copy only change empty voxels.
+    if (old != EDIT_EMPTY) return old;
+    if (tool == EDIT_TOOL_FILL) {
+        uint i = edit_fill_index(p);
+        return i != 0xFFFFFFFFu && edit_bit(push.dst2, i) ? push.material : old;
+    }
+    if (!edit_voxel_inside(p)) return EDIT_EMPTY;
+    return edit_copy_source(p);
 }

@@ -1,8 +1,12 @@
 #version 460
 // Edit, top-down, one invocation per node of an inner level inside the tool's reach
-// (push.level >= 1): the tool decides per child: fill (EDIT_FULL | 0) or clear (EDIT_EMPTY) when
-// every voxel is inside, keep the existing child when none can be, keep a homogeneous child the
-// tool cannot change, else subdivide (append the child to the next level's entries).
+// (push.level >= 1). Per child the tool (edit_tool(), push.material, region push.shape /
+// push.tool) decides: keep the existing child when no voxel of it can change (outside the
+// region, or a homogeneous child the tool cannot change: full of the added / painted material,
+// empty under remove / paint, full under fill / copy, which only fill empty voxels); fill
+// (EDIT_FULL | material) or clear (EDIT_EMPTY) when add / remove / paint covers every voxel
+// (paint only of a uniform child: it keeps the geometry); else subdivide (append the child to
+// the next level's entries).
 //   src      entries (uvec4: min corner xyz in voxels, the existing value there)
 //   dst      temporary nodes (8 child values; EDIT_TEMP | j names next entry j)
 //   dst2     next level's entries; counters[0] = their count
@@ -14,7 +18,8 @@ void main() {
     Words nodes = Words(push.dst);
     Entries next = Entries(push.dst2);
     Words counters = Words(push.counters);
-    bool remove = (push.flags & EDIT_FLAG_REMOVE) != 0u;
+    uint tool = edit_tool();
+    uint full = EDIT_FULL | push.material;
     uint child_side = 2u << push.level;
     uint stride = gl_NumWorkGroups.x * 64u;
     for (uint i = gl_GlobalInvocationID.x; i < push.count; i += stride) {
@@ -24,13 +29,22 @@ void main() {
         for (uint o = 0u; o < 8u; ++o) {
             uvec3 p = e.xyz + child_side * uvec3(o & 1u, o >> 1u & 1u, o >> 2u);
             uint c = children[o];
+            bool keep;
+            if (tool == EDIT_TOOL_ADD) {
+                keep = c == full;
+            } else if (tool == EDIT_TOOL_REMOVE) {
+                keep = c == EDIT_EMPTY;
+            } else if (tool == EDIT_TOOL_PAINT) {
+                keep = c == EDIT_EMPTY || c == full;
+            } else {
+                keep = edit_is_full(c);
+            }
             uint value = c;
-            if (edit_cube_all_inside(p, child_side)) {
-                value = remove ? EDIT_EMPTY : EDIT_FULL;
-            } else if (edit_cube_all_outside(p, child_side)) {
+            if (keep || edit_cube_all_outside(p, child_side)) {
                 value = c;
-            } else if (remove ? c == EDIT_EMPTY : edit_is_full(c)) {
-                value = c;
+            } else if (tool <= EDIT_TOOL_PAINT && (tool != EDIT_TOOL_PAINT || !edit_is_ptr(c))
+                       && edit_cube_all_inside(p, child_side)) {
+                value = tool == EDIT_TOOL_REMOVE ? EDIT_EMPTY : full;
             } else {
                 uint j = atomicAdd(counters.w[0], 1u);
                 if (j < push.capacity) next.e[j] = uvec4(p, c);

@@ -3,7 +3,7 @@
 // its chain. In every slab it clears the occupied slots whose active bit is not set (all their
 // words zero again, plus the layout's marker: Atomic64's prefix is part of the words, Ticket
 // Board / Acceleration Hash clear the occupancy bit and the secondary hash), then either resets the active word for the next cycle
-// or, when no item is left and the slab is not the bucket's first, unlinks it, zeroes it and
+// or, when no item is left, unlinks it (from the bucket head for the first slab), zeroes it and
 // returns it to the allocator (a free slab is all zeros). Nothing else runs meanwhile, and a
 // chain belongs to one team, so only the allocator bitmasks and counters need atomics.
 #include "hash/gc_common.glsl"
@@ -38,7 +38,7 @@ void sweep_bucket(uint bucket) {
     HashWords heads = HashWords(push.heads);
     uint slab_words = hash_slab_words();
     uint link = heads.w[bucket];
-    uint prev = HASH_NO_SLAB; // previous slab kept in the chain (the first slab is always kept)
+    uint prev = HASH_NO_SLAB; // previous slab kept in the chain (none: the bucket head links)
     uint freed_items = 0u;
     uint freed_slabs = 0u;
     // Read before this walk frees anything: the chain has at most that many slabs.
@@ -79,15 +79,20 @@ void sweep_bucket(uint bucket) {
                 slab.w[hash_hashes_offset() + w] &= keep_bytes;
             }
         }
-        if (kept == 0u && prev != HASH_NO_SLAB) {
-            // Wholly empty and not the first slab: unlink, zero, free.
+        if (kept == 0u) {
+            // Wholly empty: unlink (a bucket's first slab too, so GC gives back the slabs of
+            // buckets left empty; inserts start an empty bucket's chain again), zero, free.
             for (uint w = team_lane(); w < slab_words; w += TEAM) {
                 slab.w[w] = 0u;
             }
             if (team_leader()) {
                 // No barrier between unlink and free: nothing allocates during the sweep (and on
                 // lavapipe a memoryBarrierBuffer() in divergent code loses lanes).
-                HashWords(hash_slab_address(push.super_blocks, prev)).w[HASH_SLAB_NEXT] = next;
+                if (prev == HASH_NO_SLAB) {
+                    heads.w[bucket] = next;
+                } else {
+                    HashWords(hash_slab_address(push.super_blocks, prev)).w[HASH_SLAB_NEXT] = next;
+                }
                 hash_free_slab(push.super_blocks, push.status, slab_index);
             }
             freed_slabs += 1u;

@@ -1,0 +1,490 @@
+//! `voxdag bench edit`: the dissertation's Figure 4.8 for our scenes — per-kernel GPU times of
+//! the edit pipeline, whole-edit wall time, temporary SVO bytes and DAG bytes before / after, for
+//! each table layout, and the CPU reference editor (all cores) on the same generated replays in
+//! the same run, with the GPU / CPU ratio per replay. Plus the bytes target: after N random
+//! edits and GC, the hash DAG's item bytes against a from-scratch build of the kept roots.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use clap::Args;
+use serde::Serialize;
+use voxdag::dag::Svdag;
+use voxdag::edit::cpu::{CpuEditor, HashDag};
+use voxdag::edit::gpu::{GpuDagError, GpuHashDag, GpuHashDagConfig};
+use voxdag::edit::tool::{CopyParams, Shape, Tool};
+use voxdag::gpu::{GpuContext, GpuOptions, Profiler};
+use voxdag::scene::{self, morton, ImportOptions};
+
+use super::{scene_path, write_outputs};
+use crate::edit::{buckets_for, tool_name, TableArg};
+
+/// Arguments of `voxdag bench edit`.
+#[derive(Args)]
+pub struct BenchEditArgs {
+    /// Scenes: names in the shared data set (bunny, sponza-crytek, ...) or scene files.
+    #[arg(long, value_delimiter = ',', default_value = "bunny,sponza-crytek")]
+    scenes: Vec<String>,
+    /// Grid resolution (the dissertation's is 8192; tool radii scale with it).
+    #[arg(long, default_value_t = 1024)]
+    resolution: u32,
+    /// GPU table layouts.
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "atomic64,ticket_board,accel32,accel8"
+    )]
+    tables: Vec<TableArg>,
+    /// Random edits of the bytes target (first scene, first table layout); 0 skips it.
+    #[arg(long, default_value_t = 1000)]
+    random_edits: usize,
+    /// Undo depth of the bytes target (its kept history).
+    #[arg(long, default_value_t = 8)]
+    random_undo_depth: usize,
+    /// Folder of the shared data set.
+    #[arg(long, default_value = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/data"))]
+    data: PathBuf,
+    /// JSON output file.
+    #[arg(long, default_value = "out/bench-edit.json")]
+    json: PathBuf,
+    /// Markdown output file.
+    #[arg(long, default_value = "out/bench-edit.md")]
+    markdown: PathBuf,
+}
+
+impl BenchEditArgs {
+    pub(super) fn outputs(&self) -> Vec<&std::path::Path> {
+        vec![self.json.as_path(), self.markdown.as_path()]
+    }
+}
+
+/// Kernel groups of Figure 4.8, in column order.
+const GROUPS: [&str; 6] = [
+    "traversal+SVO",
+    "SVO dedup",
+    "merge search",
+    "merge insert",
+    "parent update",
+    "rest",
+];
+
+/// The Figure 4.8 group of a profiled pass.
+fn group_of(pass: &str) -> &'static str {
+    match pass {
+        "edit traverse" | "edit leaves" => GROUPS[0],
+        p if p.starts_with("dedup") => GROUPS[1],
+        "hash search" => GROUPS[2],
+        "hash insert" | "edit mark" => GROUPS[3],
+        "edit build items" | "edit resolve" => GROUPS[4],
+        _ => GROUPS[5],
+    }
+}
+
+/// One engine on one replay.
+#[derive(Serialize)]
+struct ReplayRow {
+    scene: String,
+    resolution: u32,
+    replay: String,
+    /// `cpu` or the GPU table layout.
+    engine: String,
+    edits: usize,
+    /// `ok`, or `n/a: <why>` (a tool not on the GPU yet).
+    status: String,
+    edit_ms_total: f64,
+    edit_ms_max: f64,
+    /// GPU ms per kernel group (Figure 4.8), summed over the replay.
+    kernels_ms: BTreeMap<&'static str, f64>,
+    /// Temporary SVO bytes (inner nodes 32 B, leaves 8 B), largest edit of the replay.
+    temp_svo_bytes_max: u64,
+    /// Item bytes reachable from the live roots before the replay and after it (after GC).
+    dag_bytes_before: u64,
+    dag_bytes_after: u64,
+    /// This engine's total edit time over the CPU reference's on the same replay.
+    vs_cpu: Option<f64>,
+}
+
+/// The bytes target.
+#[derive(Serialize)]
+struct BytesRow {
+    scene: String,
+    resolution: u32,
+    table: String,
+    edits: usize,
+    undo_depth: usize,
+    kept_roots: usize,
+    gc_freed_items: u64,
+    /// Item bytes of the hash DAG after GC.
+    dag_bytes: u64,
+    /// Item bytes of a fresh hash DAG holding the same kept roots, built from scratch.
+    from_scratch_bytes: u64,
+    ratio: f64,
+    edit_s: f64,
+}
+
+#[derive(Serialize)]
+struct Report {
+    resolution: u32,
+    cpu_threads: usize,
+    device: String,
+    replays: Vec<ReplayRow>,
+    bytes: Option<BytesRow>,
+}
+
+/// A generated replay.
+struct Replay {
+    name: &'static str,
+    tools: Vec<Tool>,
+}
+
+/// `count` occupied voxels spread over the scene (evenly through the Morton order).
+fn surface_points(codes: &[u64], count: usize) -> Vec<[f32; 3]> {
+    (0..count)
+        .map(|i| {
+            let c = codes[(i * 7919 + i * codes.len() / count) % codes.len()];
+            morton::decode(c).map(|v| v as f32 + 0.5)
+        })
+        .collect()
+}
+
+/// The replays: spheres (radius 64..1024 at 8192, scaled) added and removed, a copy stroke,
+/// paint strokes.
+fn replays(codes: &[u64], resolution: u32) -> Vec<Replay> {
+    let scale = resolution as f32 / 8192.0;
+    let p = surface_points(codes, 64);
+    let mut spheres = Vec::new();
+    for (i, r) in [64.0f32, 128.0, 256.0, 512.0, 1024.0].iter().enumerate() {
+        let radius = (r * scale).max(2.0);
+        spheres.push(Tool::Add {
+            shape: Shape::Sphere,
+            center: p[2 * i],
+            radius,
+            material: 0,
+        });
+        spheres.push(Tool::Remove {
+            shape: Shape::Sphere,
+            center: p[2 * i + 1],
+            radius,
+        });
+    }
+    let r = (64.0 * scale).max(4.0);
+    let copy = (0..8)
+        .map(|k| {
+            let t = k as f32 * r;
+            Tool::Copy(CopyParams {
+                source: p[20],
+                dest: [p[21][0] + t, p[21][1], p[21][2]],
+                center: p[20],
+                radius: r,
+                transform: None,
+            })
+        })
+        .collect();
+    let paint = (0..16)
+        .map(|k| {
+            let t = k as f32 / 15.0;
+            Tool::Paint {
+                center: [0, 1, 2].map(|a| p[30][a] + t * (p[31][a] - p[30][a])),
+                radius: (32.0 * scale).max(2.0),
+                material: 1 + (k % 15) as u8,
+            }
+        })
+        .collect();
+    vec![
+        Replay {
+            name: "spheres",
+            tools: spheres,
+        },
+        Replay {
+            name: "copy",
+            tools: copy,
+        },
+        Replay {
+            name: "paint",
+            tools: paint,
+        },
+    ]
+}
+
+/// Item bytes per table of GC statistics.
+fn live_bytes(per_table: &[u64]) -> u64 {
+    per_table
+        .iter()
+        .enumerate()
+        .map(|(t, &n)| n * 4 * (t as u64 + 2))
+        .sum()
+}
+
+fn run_cpu(scene: &str, svdag: &Svdag, replay: &Replay) -> Result<ReplayRow> {
+    let mut dag = HashDag::new(svdag.resolution, false)?;
+    let root = dag.insert_svdag(svdag, None)?;
+    let before = dag.item_bytes();
+    let mut editor = CpuEditor::new(dag, root, 64);
+    let mut times = Vec::new();
+    for tool in &replay.tools {
+        let start = Instant::now();
+        editor.edit(tool)?;
+        times.push(start.elapsed().as_secs_f64() * 1e3);
+    }
+    editor.gc()?;
+    Ok(ReplayRow {
+        scene: scene.into(),
+        resolution: svdag.resolution,
+        replay: replay.name.into(),
+        engine: "cpu".into(),
+        edits: times.len(),
+        status: "ok".into(),
+        edit_ms_total: times.iter().sum(),
+        edit_ms_max: times.iter().cloned().fold(0.0, f64::max),
+        kernels_ms: BTreeMap::new(),
+        temp_svo_bytes_max: 0,
+        dag_bytes_before: before,
+        dag_bytes_after: editor.dag().item_bytes(),
+        vs_cpu: Some(1.0),
+    })
+}
+
+fn run_gpu(
+    ctx: &Arc<GpuContext>,
+    scene: &str,
+    svdag: &Svdag,
+    table: TableArg,
+    replay: &Replay,
+) -> Result<ReplayRow> {
+    let config = GpuHashDagConfig::new(table.variant(), buckets_for(svdag));
+    let mut hd = GpuHashDag::load(ctx, &config, svdag, None)?;
+    let before = live_bytes(&hd.gc(None)?.live_per_table);
+    let mut profiler = Profiler::new(ctx)?;
+    let mut row = ReplayRow {
+        scene: scene.into(),
+        resolution: svdag.resolution,
+        replay: replay.name.into(),
+        engine: table.variant().name().into(),
+        edits: 0,
+        status: "ok".into(),
+        edit_ms_total: 0.0,
+        edit_ms_max: 0.0,
+        kernels_ms: GROUPS.iter().map(|g| (*g, 0.0)).collect(),
+        temp_svo_bytes_max: 0,
+        dag_bytes_before: before,
+        dag_bytes_after: 0,
+        vs_cpu: None,
+    };
+    for tool in &replay.tools {
+        let from = profiler.passes().len();
+        let start = Instant::now();
+        let report = match hd.edit(tool, Some(&mut profiler)) {
+            Ok(r) => r,
+            Err(GpuDagError::Invalid(why)) if why.contains("not on the GPU") => {
+                row.status = format!("n/a: {} not on the GPU yet", tool_name(tool));
+                return Ok(row);
+            }
+            Err(e) => return Err(e.into()),
+        };
+        let ms = start.elapsed().as_secs_f64() * 1e3;
+        row.edits += 1;
+        row.edit_ms_total += ms;
+        row.edit_ms_max = row.edit_ms_max.max(ms);
+        for p in &profiler.passes()[from..] {
+            *row.kernels_ms.entry(group_of(&p.name)).or_insert(0.0) += p.gpu_ms;
+        }
+        let temp: u64 = report
+            .temporary_nodes
+            .iter()
+            .enumerate()
+            .map(|(l, &n)| n as u64 * if l == 0 { 8 } else { 32 })
+            .sum();
+        row.temp_svo_bytes_max = row.temp_svo_bytes_max.max(temp);
+    }
+    row.dag_bytes_after = live_bytes(&hd.gc(None)?.live_per_table);
+    Ok(row)
+}
+
+/// N random sphere / cube adds and removes near the surface, GC, then the hash DAG's item bytes
+/// against a fresh hash DAG built from the kept roots' voxels.
+fn bytes_target(
+    ctx: &Arc<GpuContext>,
+    scene: &str,
+    svdag: &Svdag,
+    codes: &[u64],
+    table: TableArg,
+    args: &BenchEditArgs,
+) -> Result<BytesRow> {
+    let config = GpuHashDagConfig::new(table.variant(), buckets_for(svdag))
+        .with_undo_depth(args.random_undo_depth);
+    let mut hd = GpuHashDag::load(ctx, &config, svdag, None)?;
+    let points = surface_points(codes, args.random_edits.max(1));
+    let scale = svdag.resolution as f32 / 8192.0;
+    let mut rng = 0x5eed_u64;
+    let mut next = || {
+        rng = rng
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (rng >> 33) as u32
+    };
+    let start = Instant::now();
+    for p in &points[..args.random_edits] {
+        let shape = if next() % 2 == 0 {
+            Shape::Sphere
+        } else {
+            Shape::Cube
+        };
+        let radius = ((8 + next() % 121) as f32 * scale).max(1.5);
+        let tool = if next() % 3 == 0 {
+            Tool::Remove {
+                shape,
+                center: *p,
+                radius,
+            }
+        } else {
+            Tool::Add {
+                shape,
+                center: *p,
+                radius,
+                material: 0,
+            }
+        };
+        hd.edit(&tool, None)?;
+    }
+    let edit_s = start.elapsed().as_secs_f64();
+    let gc = hd.gc(None)?;
+    let image = hd.download()?;
+    let mut fresh = HashDag::new(svdag.resolution, false)?;
+    for &root in hd.roots() {
+        fresh.insert_svdag(&image.to_svdag(root)?, None)?;
+    }
+    let dag_bytes = live_bytes(&gc.live_per_table);
+    let from_scratch_bytes = fresh.item_bytes();
+    Ok(BytesRow {
+        scene: scene.into(),
+        resolution: svdag.resolution,
+        table: table.variant().name().into(),
+        edits: args.random_edits,
+        undo_depth: args.random_undo_depth,
+        kept_roots: hd.roots().len(),
+        gc_freed_items: gc.freed,
+        dag_bytes,
+        from_scratch_bytes,
+        ratio: dag_bytes as f64 / from_scratch_bytes.max(1) as f64,
+        edit_s,
+    })
+}
+
+/// `voxdag bench edit`.
+pub fn bench_edit(args: &BenchEditArgs) -> Result<()> {
+    let ctx = GpuContext::new(&GpuOptions::default())?;
+    let mut report = Report {
+        resolution: args.resolution,
+        cpu_threads: rayon::current_num_threads(),
+        device: ctx.info().name.clone(),
+        replays: Vec::new(),
+        bytes: None,
+    };
+    for (i, name) in args.scenes.iter().enumerate() {
+        let path = scene_path(&args.data, name)?;
+        eprintln!("bench edit: {name} at {}^3", args.resolution);
+        let options = ImportOptions {
+            resolution: Some(args.resolution),
+            ..Default::default()
+        };
+        let voxels = scene::import(&path, &options, &indicatif::ProgressBar::hidden())
+            .with_context(|| format!("importing {}", path.display()))?;
+        let codes = voxels.codes.clone();
+        let mut svdag = Svdag::from_voxels(&voxels)?;
+        drop(voxels);
+        svdag.colors.clear();
+        for replay in replays(&codes, svdag.resolution) {
+            let cpu = run_cpu(name, &svdag, &replay)?;
+            let cpu_ms = cpu.edit_ms_total;
+            report.replays.push(cpu);
+            for &table in &args.tables {
+                eprintln!("  {} on {}", replay.name, table.variant().name());
+                let mut row = run_gpu(&ctx, name, &svdag, table, &replay)?;
+                if row.status == "ok" {
+                    row.vs_cpu = Some(row.edit_ms_total / cpu_ms.max(1e-9));
+                }
+                report.replays.push(row);
+            }
+        }
+        if i == 0 && args.random_edits > 0 {
+            if let Some(&table) = args.tables.first() {
+                eprintln!("  bytes target: {} random edits", args.random_edits);
+                report.bytes = Some(bytes_target(&ctx, name, &svdag, &codes, table, args)?);
+            }
+        }
+    }
+    let md = markdown(&report);
+    print!("{md}");
+    write_outputs(&args.json, &report, &args.markdown, &md)
+}
+
+fn markdown(report: &Report) -> String {
+    let mut md = format!(
+        "GPU: {}; CPU reference editor on {} threads; resolution {}^3.\n\n| scene | replay | engine | edits | edit ms total | max | {} | temp SVO max KiB | DAG KiB before | after | / CPU |\n|---|---|---|---|---|---|{}---|---|---|---|\n",
+        report.device,
+        report.cpu_threads,
+        report.resolution,
+        GROUPS.join(" ms | ") + " ms",
+        "---|".repeat(GROUPS.len()),
+    );
+    for r in &report.replays {
+        if r.status != "ok" {
+            md += &format!(
+                "| {} | {} | {} | {} | {} |{}\n",
+                r.scene,
+                r.replay,
+                r.engine,
+                r.edits,
+                r.status,
+                " |".repeat(GROUPS.len() + 5)
+            );
+            continue;
+        }
+        let kernels: Vec<String> = GROUPS
+            .iter()
+            .map(|g| {
+                r.kernels_ms
+                    .get(g)
+                    .map_or("-".into(), |ms| format!("{ms:.1}"))
+            })
+            .collect();
+        md += &format!(
+            "| {} | {} | {} | {} | {:.1} | {:.1} | {} | {} | {} | {} | {} |\n",
+            r.scene,
+            r.replay,
+            r.engine,
+            r.edits,
+            r.edit_ms_total,
+            r.edit_ms_max,
+            kernels.join(" | "),
+            if r.engine == "cpu" {
+                "-".into()
+            } else {
+                format!("{:.0}", r.temp_svo_bytes_max as f64 / 1024.0)
+            },
+            r.dag_bytes_before / 1024,
+            r.dag_bytes_after / 1024,
+            r.vs_cpu.map_or("-".into(), |x| format!("{x:.2}x"))
+        );
+    }
+    if let Some(b) = &report.bytes {
+        md += &format!(
+            "\nBytes target ({}, {} tables): {} random edits in {:.1} s, undo depth {} ({} kept roots), GC freed {} items: hash DAG {} KiB vs from-scratch {} KiB = {:.3}x (target <= 1.1x).\n",
+            b.scene,
+            b.table,
+            b.edits,
+            b.edit_s,
+            b.undo_depth,
+            b.kept_roots,
+            b.gc_freed_items,
+            b.dag_bytes / 1024,
+            b.from_scratch_bytes / 1024,
+            b.ratio
+        );
+    }
+    md
+}
