@@ -1,8 +1,8 @@
 //! `voxdag editor` in a real window on a private Xvfb server with lavapipe, validation on: a
-//! click over the object adds voxels and Ctrl+Z takes them back (the status file), a replay saved
-//! by the editor equals `voxdag edit` of the same replay byte for byte and its screenshot equals
-//! the headless render, resize and minimise are survived. Fails (never skips) without
-//! Xvfb/xdotool: run tools/setup.sh.
+//! click over the object adds voxels and Ctrl+Z takes them back (the status file), a replay
+//! saved by the editor equals `voxdag edit` (GPU and `--cpu`) of the same replay byte for byte
+//! and its screenshot equals the headless render, resize and minimise are survived. Fails (never
+//! skips) without Xvfb/xdotool: run tools/setup.sh.
 
 mod common;
 
@@ -193,14 +193,23 @@ fn replay_save_equals_voxdag_edit_and_the_headless_render() {
         .arg("-o")
         .arg(&reference);
     run(cmd);
-    let (a, b) = (
-        std::fs::read(&saved).unwrap(),
-        std::fs::read(&reference).unwrap(),
-    );
-    assert!(
-        a == b,
-        "the editor's save differs from `voxdag edit`'s output"
-    );
+    // And the GPU `voxdag edit` (the same hash DAG pipeline, without a window).
+    let gpu_reference = dir.path().join("edit-gpu.vdag");
+    let mut cmd = voxdag(None);
+    cmd.arg("edit")
+        .arg(&vdag)
+        .arg("--replay")
+        .arg(&replay)
+        .arg("-o")
+        .arg(&gpu_reference);
+    run(cmd);
+    let ours = std::fs::read(&saved).unwrap();
+    for (name, path) in [("--cpu", &reference), ("GPU", &gpu_reference)] {
+        assert!(
+            ours == std::fs::read(path).unwrap(),
+            "the editor's save differs from the {name} `voxdag edit` output"
+        );
+    }
     let headless = dir.path().join("headless.png");
     let mut cmd = voxdag(None);
     cmd.arg("render")
