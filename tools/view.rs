@@ -1,38 +1,31 @@
 //! `voxdag view`: a window that renders a scene every frame with the primary-ray renderer, an
 //! orbit/fly camera and an egui overlay (fps, GPU pass times, render scale). See docs/viewer.md.
 
-use std::collections::HashSet;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use anyhow::{anyhow, bail, Context, Result};
-use glam::Vec3;
-use raw_window_handle::{HasDisplayHandle, HasWindowHandle};
+use anyhow::{anyhow, bail, Result};
 use serde::Serialize;
 use voxdag::dag::Svdag;
 use voxdag::gpu::{
-    GpuContext, GpuOptions, Image, OverlayFrame, PassTiming, PhaseClock, PhaseTime, Presenter,
-    PresenterOptions, PresenterStats, Profiler, Surface,
+    GpuContext, Image, OverlayFrame, PassTiming, PhaseClock, PhaseTime, PresenterOptions,
+    PresenterStats, Profiler,
 };
 use voxdag::render::cpu::ColorSource;
 use voxdag::render::gpu::{GpuRenderer, GpuScene, RenderFrame};
 use voxdag::render::{Camera, RenderOutput, RenderSettings};
 use winit::application::ApplicationHandler;
-use winit::dpi::{PhysicalPosition, PhysicalSize};
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
 use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{KeyCode, PhysicalKey};
-use winit::window::{Window, WindowId};
+use winit::window::WindowId;
 
 use crate::commands::{check_output, load_svdag_stored, write_json};
+use crate::window::{require_display, CameraInput, GpuWindow, MIN_SCALE};
 use crate::ViewArgs;
 
 /// GPU time per frame the dynamic render scale aims for while the camera moves.
-const MOTION_TARGET_MS: f64 = 40.0;
-/// The camera counts as moving this long after the last input.
-const MOTION_HOLD: Duration = Duration::from_millis(300);
-/// Smallest render scale (slider and dynamic scale).
-const MIN_SCALE: f32 = 0.1;
+pub const MOTION_TARGET_MS: f64 = 40.0;
 /// Frames left out of the frame-rate statistics (pipeline warm-up, first swapchain).
 const WARMUP_FRAMES: usize = 5;
 /// The timed phases of one frame-loop iteration, in order (`--stats-json` `cpu_phases`). The
@@ -81,13 +74,7 @@ pub fn view(args: &ViewArgs) -> Result<()> {
     for path in [&args.screenshot, &args.stats_json].into_iter().flatten() {
         check_output(path)?;
     }
-    let display = std::env::var("DISPLAY").unwrap_or_default();
-    if display.is_empty() {
-        bail!(
-            "cannot open a window: no display (DISPLAY is not set); `voxdag view` needs an X \
-             server (on a headless machine: xvfb-run voxdag view ...)"
-        );
-    }
+    let display = require_display("view")?;
     let (dag, stored) = load_svdag_stored(&args.file)?;
     let event_loop = EventLoop::new()
         .map_err(|e| anyhow!("cannot open a window on display {display:?}: {e}"))?;
@@ -245,112 +232,13 @@ struct SlotResources {
     profiler: Profiler,
 }
 
-/// Orbit and fly camera state driven by input.
-struct CameraInput {
-    camera: Camera,
-    home: Camera,
-    /// Scene extent in voxels: scales fly speed and the zoom limit.
-    scene_size: f32,
-    orbit_drag: bool,
-    look_drag: bool,
-    cursor: Option<PhysicalPosition<f64>>,
-    keys: HashSet<KeyCode>,
-    fast: bool,
-    last_input: Option<Instant>,
-}
-
-impl CameraInput {
-    fn touch(&mut self) {
-        self.last_input = Some(Instant::now());
-    }
-
-    fn moving(&self) -> bool {
-        const FLY: [KeyCode; 6] = [
-            KeyCode::KeyW,
-            KeyCode::KeyA,
-            KeyCode::KeyS,
-            KeyCode::KeyD,
-            KeyCode::KeyQ,
-            KeyCode::KeyE,
-        ];
-        FLY.iter().any(|k| self.keys.contains(k))
-            || self.last_input.is_some_and(|t| t.elapsed() < MOTION_HOLD)
-    }
-
-    /// Drag by (dx, dy) pixels: orbit around the target, or turn the view around the eye.
-    fn drag(&mut self, dx: f32, dy: f32) {
-        let (eye, target) = (Vec3::from(self.camera.eye), Vec3::from(self.camera.target));
-        let k = 0.005;
-        if self.orbit_drag {
-            let offset = rotate(eye - target, -dx * k, dy * k);
-            self.camera.eye = (target + offset).to_array();
-        } else if self.look_drag {
-            let dir = rotate(target - eye, -dx * k, -dy * k);
-            self.camera.target = (eye + dir).to_array();
-        }
-        self.touch();
-    }
-
-    /// Wheel: move the eye towards (positive) or away from the target.
-    fn zoom(&mut self, lines: f32) {
-        let (eye, target) = (Vec3::from(self.camera.eye), Vec3::from(self.camera.target));
-        let offset = (eye - target) * 0.9f32.powf(lines);
-        if offset.length() > 1.0 {
-            self.camera.eye = (target + offset).to_array();
-        }
-        self.touch();
-    }
-
-    /// Fly with WASD (forward/left/back/right) and Q/E (down/up) for `dt` seconds.
-    fn fly(&mut self, dt: f32) {
-        let axis = |plus: KeyCode, minus: KeyCode| {
-            self.keys.contains(&plus) as i32 as f32 - self.keys.contains(&minus) as i32 as f32
-        };
-        let (f, r, u) = (
-            axis(KeyCode::KeyW, KeyCode::KeyS),
-            axis(KeyCode::KeyD, KeyCode::KeyA),
-            axis(KeyCode::KeyE, KeyCode::KeyQ),
-        );
-        if f == 0.0 && r == 0.0 && u == 0.0 {
-            return;
-        }
-        let (eye, target) = (Vec3::from(self.camera.eye), Vec3::from(self.camera.target));
-        let forward = (target - eye).normalize_or_zero();
-        let right = forward.cross(Vec3::Y).normalize_or_zero();
-        let speed = self.scene_size * 0.4 * if self.fast { 4.0 } else { 1.0 };
-        let step = (forward * f + right * r + Vec3::Y * u) * speed * dt;
-        self.camera.eye = (eye + step).to_array();
-        self.camera.target = (target + step).to_array();
-        self.touch();
-    }
-}
-
-/// Rotates `v` by `yaw` around +y and raises its elevation by `pitch` (clamped short of the
-/// poles), keeping its length.
-fn rotate(v: Vec3, yaw: f32, pitch: f32) -> Vec3 {
-    let r = v.length();
-    if r == 0.0 {
-        return v;
-    }
-    let azimuth = v.x.atan2(v.z) + yaw;
-    let elevation = ((v.y / r).clamp(-1.0, 1.0).asin() + pitch).clamp(-1.55, 1.55);
-    r * Vec3::new(
-        elevation.cos() * azimuth.sin(),
-        elevation.sin(),
-        elevation.cos() * azimuth.cos(),
-    )
-}
-
 /// The open window and everything drawn into it. Fields drop in order: the presenter (waits for
 /// the GPU, destroys the swapchain and surface) before the resources, the window last.
 struct Running {
-    presenter: Presenter,
+    win: GpuWindow,
     slots: Vec<SlotResources>,
     scene: GpuScene,
     renderer: GpuRenderer,
-    ctx: Arc<GpuContext>,
-    egui_state: egui_winit::State,
-    egui: egui::Context,
     input: CameraInput,
     user_scale: f32,
     dynamic_scale: bool,
@@ -376,7 +264,6 @@ struct Running {
     closing: bool,
     /// Exit once this many frames are presented (set by a close request).
     exit_after: Option<usize>,
-    window: Arc<Window>,
 }
 
 impl ApplicationHandler for App<'_> {
@@ -426,7 +313,7 @@ impl ApplicationHandler for App<'_> {
 
     fn about_to_wait(&mut self, _: &ActiveEventLoop) {
         if let Some(running) = &self.running {
-            running.window.request_redraw();
+            running.win.window.request_redraw();
         }
     }
 }
@@ -435,35 +322,19 @@ impl App<'_> {
     /// Opens the window, the GPU context with presentation, the presenter and the scene.
     fn open(&mut self, event_loop: &ActiveEventLoop) -> Result<Running> {
         let args = self.args;
-        let (width, height) = args.size;
-        let window = Arc::new(
-            event_loop
-                .create_window(
-                    Window::default_attributes()
-                        .with_title(format!("voxdag view {}", args.file.display()))
-                        .with_inner_size(PhysicalSize::new(width, height)),
-                )
-                .context("creating the window")?,
-        );
-        let display = window.display_handle().context("display handle")?.as_raw();
-        let handle = window.window_handle().context("window handle")?.as_raw();
-        let ctx = GpuContext::new(&GpuOptions {
-            display: Some(display),
-            ..GpuOptions::default()
-        })?;
-        self.context = Some(Arc::clone(&ctx));
-        // SAFETY: the window is kept alive by `Running`, which drops the presenter (and with it
-        // the surface) before the window.
-        let surface = unsafe { Surface::new(&ctx, display, handle)? };
-        let size = window.inner_size();
-        let presenter = Presenter::new(
-            surface,
-            [size.width, size.height],
+        let win = GpuWindow::open(
+            event_loop,
+            format!("voxdag view {}", args.file.display()),
+            args.size,
             PresenterOptions {
                 vsync: !args.no_vsync,
                 frames_in_flight: args.frames_in_flight as usize,
             },
         )?;
+        let ctx = Arc::clone(&win.ctx);
+        self.context = Some(Arc::clone(&ctx));
+        let size = win.window.inner_size();
+        let presenter = &win.presenter;
         let renderer = GpuRenderer::new(&ctx)?;
         let colors = match &self.stored {
             Some(s) => ColorSource::Chunked(&s.chunks),
@@ -487,34 +358,12 @@ impl App<'_> {
             Some((min, max)) => (0..3).map(|a| (max[a] - min[a]) as f32).fold(1.0, f32::max),
             None => self.dag.resolution as f32,
         };
-        let egui = egui::Context::default();
-        let egui_state = egui_winit::State::new(
-            egui.clone(),
-            egui::ViewportId::ROOT,
-            &window,
-            Some(window.scale_factor() as f32),
-            None,
-            None,
-        );
         Ok(Running {
-            presenter,
+            win,
             slots,
             scene,
             renderer,
-            ctx,
-            egui_state,
-            egui,
-            input: CameraInput {
-                camera: home,
-                home,
-                scene_size,
-                orbit_drag: false,
-                look_drag: false,
-                cursor: None,
-                keys: HashSet::new(),
-                fast: false,
-                last_input: None,
-            },
+            input: CameraInput::new(home, scene_size),
             user_scale: if args.screenshot.is_some() {
                 1.0
             } else {
@@ -537,7 +386,6 @@ impl App<'_> {
             frames: 0,
             closing: false,
             exit_after: None,
-            window,
         })
     }
 }
@@ -547,12 +395,13 @@ impl Running {
     /// default camera whatever the pointer does).
     fn handle(&mut self, event: &WindowEvent, scripted: bool) {
         let consumed = self
+            .win
             .egui_state
-            .on_window_event(&self.window, event)
+            .on_window_event(&self.win.window, event)
             .consumed;
         match event {
             WindowEvent::CloseRequested => self.closing = true,
-            WindowEvent::Resized(size) => self.presenter.resize([size.width, size.height]),
+            WindowEvent::Resized(size) => self.win.presenter.resize([size.width, size.height]),
             _ if consumed || scripted => {}
             WindowEvent::KeyboardInput { event, .. } => {
                 let PhysicalKey::Code(code) = event.physical_key else {
@@ -561,10 +410,7 @@ impl Running {
                 let pressed = event.state == ElementState::Pressed;
                 match code {
                     KeyCode::Escape if pressed => self.closing = true,
-                    KeyCode::Home if pressed => {
-                        self.input.camera = self.input.home;
-                        self.input.touch();
-                    }
+                    KeyCode::Home if pressed => self.input.go_home(),
                     _ if pressed => {
                         self.input.keys.insert(code);
                     }
@@ -582,15 +428,7 @@ impl Running {
                     _ => {}
                 }
             }
-            WindowEvent::CursorMoved { position, .. } => {
-                if let Some(last) = self.input.cursor {
-                    if self.input.orbit_drag || self.input.look_drag {
-                        let (dx, dy) = (position.x - last.x, position.y - last.y);
-                        self.input.drag(dx as f32, dy as f32);
-                    }
-                }
-                self.input.cursor = Some(*position);
-            }
+            WindowEvent::CursorMoved { position, .. } => self.input.cursor_moved(*position),
             WindowEvent::MouseWheel { delta, .. } => {
                 let lines = match delta {
                     MouseScrollDelta::LineDelta(_, y) => *y,
@@ -620,14 +458,14 @@ impl Running {
     /// One frame: wait for a slot, camera, overlay, record the render and present it.
     fn redraw(&mut self, args: &ViewArgs) -> Result<()> {
         let frame_start = PhaseClock::start();
-        let presenter_before = presenter_times(self.presenter.stats());
+        let presenter_before = presenter_times(self.win.presenter.stats());
         let mut phases = [PhaseTime::default(); PHASES.len()];
         let mut clock = frame_start;
         let mut lap = |phase: usize| phases[phase] += clock.lap();
         let dt = self
             .last_frame
             .map_or(0.0, |t| t.elapsed().as_secs_f32().min(0.1));
-        let Some(frame) = self.presenter.begin_frame()? else {
+        let Some(frame) = self.win.presenter.begin_frame()? else {
             return Ok(());
         };
         // Slot wait + acquire, split below from the presenter's times.
@@ -648,7 +486,7 @@ impl Running {
         let slot = &mut self.slots[frame.index];
         if slot.target.width() != extent[0] || slot.target.height() != extent[1] {
             // Resized: the slot's old target belongs to a finished frame.
-            slot.target = self.ctx.create_storage_image(
+            slot.target = self.win.ctx.create_storage_image(
                 &format!("view target {}", frame.index),
                 extent[0],
                 extent[1],
@@ -668,19 +506,23 @@ impl Running {
         lap(3);
 
         let passes_before = self.egui_passes;
-        let raw_input = self.egui_state.take_egui_input(&self.window);
-        let egui = self.egui.clone();
+        let raw_input = self.win.egui_state.take_egui_input(&self.win.window);
+        let egui = self.win.egui.clone();
         let output = egui.run_ui(raw_input, |ui| self.overlay_ui(ui, extent));
-        self.egui_state
-            .handle_platform_output(&self.window, output.platform_output);
+        self.win
+            .egui_state
+            .handle_platform_output(&self.win.window, output.platform_output);
         lap(4);
-        let primitives = self.egui.tessellate(output.shapes, output.pixels_per_point);
+        let primitives = self
+            .win
+            .egui
+            .tessellate(output.shapes, output.pixels_per_point);
         lap(5);
 
         let last = args.frames.is_some_and(|n| self.frames + 1 >= n as usize);
         let screenshot = last && args.screenshot.is_some();
         let slot = &mut self.slots[frame.index];
-        let mut cmd = self.ctx.begin_commands("view frame")?;
+        let mut cmd = self.win.ctx.begin_commands("view frame")?;
         self.renderer.record(
             &mut cmd,
             &self.scene,
@@ -691,7 +533,7 @@ impl Running {
             Some(&mut slot.profiler),
         )?;
         lap(6);
-        self.presenter.end_frame(
+        self.win.presenter.end_frame(
             cmd,
             &slot.target,
             internal,
@@ -713,7 +555,7 @@ impl Running {
         let total = clock - frame_start;
         let now = clock.instant();
         // end_frame and begin_frame's parts, from the presenter's counters.
-        let presenter_after = presenter_times(self.presenter.stats());
+        let presenter_after = presenter_times(self.win.presenter.stats());
         for (phase, i) in [(0, 0), (1, 1), (7, 2), (8, 3), (9, 4), (10, 5)] {
             phases[phase] = presenter_after[i] - presenter_before[i];
         }
@@ -750,6 +592,7 @@ impl Running {
         if screenshot {
             let path = args.screenshot.as_ref().expect("checked above");
             let (width, height, rgba) = self
+                .win
                 .presenter
                 .take_screenshot()?
                 .ok_or_else(|| anyhow!("the screenshot frame recorded no copy"))?;
@@ -814,8 +657,8 @@ impl Running {
                 ui.checkbox(&mut self.dynamic_scale, "lower scale while moving");
                 ui.label(format!(
                     "{}, {} frames in flight",
-                    self.presenter.stats().present_mode,
-                    self.presenter.frames_in_flight()
+                    self.win.presenter.stats().present_mode,
+                    self.win.presenter.frames_in_flight()
                 ));
                 ui.separator();
                 ui.label("GPU passes (last frame)");
@@ -871,7 +714,7 @@ impl Running {
                 }
             })
             .collect();
-        let stats = self.presenter.stats();
+        let stats = self.win.presenter.stats();
         ViewReport {
             frames: self.frames,
             fps: if frame_ms_mean > 0.0 {
@@ -900,13 +743,13 @@ impl Running {
                 .iter()
                 .map(|(name, sum, count)| (name.clone(), sum / *count as f64))
                 .collect(),
-            extent: self.presenter.extent(),
+            extent: self.win.presenter.extent(),
             internal: self.internal,
             render_scale: self.scale,
             swapchain_creations: stats.swapchain_creations,
             extents: self.extents.clone(),
             present_mode: stats.present_mode.clone(),
-            frames_in_flight: self.presenter.frames_in_flight(),
+            frames_in_flight: self.win.presenter.frames_in_flight(),
             validation_messages: 0,
         }
     }

@@ -3,11 +3,13 @@
 mod bench;
 mod commands;
 mod edit;
+mod editor;
 mod hash_render;
 mod limited_alloc;
 mod ooc;
 mod pathtrace;
 mod view;
+mod window;
 
 use std::path::PathBuf;
 
@@ -53,6 +55,8 @@ enum Command {
     Demo(DemoArgs),
     /// Apply a HashDAG replay (edits, undo/redo) to a scene and save the result.
     Edit(edit::EditArgs),
+    /// A real-time voxel editor on the GPU hash DAG (sphere / cube tools, undo, egui panels).
+    Editor(editor::EditorArgs),
 }
 
 /// Arguments of `voxdag build`.
@@ -349,6 +353,7 @@ fn main() {
         Command::Demo(args) => commands::demo(&args, cli.quiet),
         Command::Ooc(cmd) => ooc::run(cmd, cli.quiet),
         Command::Edit(args) => edit::edit(&args),
+        Command::Editor(args) => editor::editor(&args),
     };
     if let Err(err) = result {
         voxdag::atomic_file::remove_temp_files();

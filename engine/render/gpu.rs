@@ -389,6 +389,31 @@ impl GpuRenderer {
         self.record_full(cmd, scene, frame, settings, target, hits, None, profiler)
     }
 
+    /// [`GpuRenderer::record`] that also writes one [`FirstHit`] per pixel (row-major, the
+    /// `settings` size) into `first_hits`: the editor reads the hit under the cursor from it.
+    #[allow(clippy::too_many_arguments)]
+    pub fn record_with_first_hits<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        scene: &GpuScene,
+        frame: &mut RenderFrame,
+        settings: &RenderSettings,
+        target: &'a Image,
+        first_hits: &Buffer,
+        profiler: Option<&mut Profiler>,
+    ) -> Result<(), GpuError> {
+        self.record_full(
+            cmd,
+            scene,
+            frame,
+            settings,
+            target,
+            None,
+            Some(first_hits),
+            profiler,
+        )
+    }
+
     /// [`GpuRenderer::record`] that also writes one [`FirstHit`] per pixel into `first_hits`.
     #[allow(clippy::too_many_arguments)]
     fn record_full<'a>(

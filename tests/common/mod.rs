@@ -2,6 +2,8 @@
 //! image comparison with actual/difference PNGs on failure.
 #![allow(dead_code)] // each test binary uses a different subset
 
+pub mod xvfb;
+
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;

@@ -1,0 +1,255 @@
+//! `voxdag editor` in a real window on a private Xvfb server with lavapipe, validation on: a
+//! click over the object adds voxels and Ctrl+Z takes them back (the status file), a replay
+//! saved by the editor equals `voxdag edit` (GPU and `--cpu`) of the same replay byte for byte
+//! and its screenshot equals the headless render, resize and minimise are survived. Fails (never
+//! skips) without Xvfb/xdotool: run tools/setup.sh.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use common::xvfb::{find_window, wait_exit, xdotool, Xvfb};
+use common::{compare, repo};
+
+/// The CLI with validation on, pinned to no display unless given one.
+fn voxdag(display: Option<&str>) -> Command {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_voxdag"));
+    cmd.env("VOXDAG_VALIDATION", "1")
+        .env_remove("WAYLAND_DISPLAY");
+    match display {
+        Some(d) => cmd.env("DISPLAY", d),
+        None => cmd.env_remove("DISPLAY"),
+    };
+    cmd
+}
+
+fn run(mut cmd: Command) -> Output {
+    let out = cmd.output().expect("running voxdag");
+    assert!(
+        out.status.success(),
+        "{cmd:?} failed ({}):\n{}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// The bundled avocado at 128^3.
+fn scene(dir: &Path) -> PathBuf {
+    let path = dir.join("avocado.vdag");
+    let mut cmd = voxdag(None);
+    cmd.args(["build", "--quiet", "--resolution", "128", "-o"])
+        .arg(&path)
+        .arg(repo().join("assets/avocado/Avocado.gltf"));
+    run(cmd);
+    path
+}
+
+/// The status file once it exists and parses (the editor replaces it atomically).
+fn status(path: &Path) -> Option<serde_json::Value> {
+    serde_json::from_slice(&std::fs::read(path).ok()?).ok()
+}
+
+/// Waits (up to 120 s: lavapipe with validation on a loaded machine) until `ok` holds for the
+/// status file; returns that status.
+fn wait_status(
+    path: &Path,
+    editor: &mut Child,
+    what: &str,
+    ok: impl Fn(&serde_json::Value) -> bool,
+) -> serde_json::Value {
+    let start = Instant::now();
+    loop {
+        if let Some(s) = status(path) {
+            if ok(&s) {
+                return s;
+            }
+        }
+        if let Some(code) = editor.try_wait().unwrap() {
+            let mut stderr = String::new();
+            if let Some(mut e) = editor.stderr.take() {
+                let _ = std::io::Read::read_to_string(&mut e, &mut stderr);
+            }
+            panic!("the editor exited ({code}) while waiting for {what}: {stderr}");
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(120),
+            "no status with {what} after 120 s; last: {:?}",
+            status(path)
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// Starts the editor on `vdag` in an 800x600 window (internal scale 1/2) with a status file.
+fn start_editor(x: &Xvfb, vdag: &Path, status: &Path) -> (Child, String) {
+    let mut cmd = voxdag(Some(&x.display));
+    cmd.arg("editor")
+        .arg(vdag)
+        .args([
+            "--size",
+            "800x600",
+            "--render-scale",
+            "0.5",
+            "--no-vsync",
+            "--tool",
+            "sphere-add",
+            "--radius",
+            "8",
+            "--status-file",
+        ])
+        .arg(status)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    let mut editor = cmd.spawn().expect("starting voxdag editor");
+    let id = find_window(&x.display, "voxdag editor", &mut editor);
+    (editor, id)
+}
+
+/// Closes the editor with Esc and checks it exits cleanly (no validation messages).
+fn close(x: &Xvfb, id: &str, editor: Child) {
+    xdotool(&x.display, &["windowfocus", "--sync", id]);
+    xdotool(&x.display, &["key", "Escape"]);
+    let out = wait_exit(editor);
+    assert!(
+        out.status.success(),
+        "editor failed ({}):\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn click_adds_voxels_and_ctrl_z_takes_them_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let vdag = scene(dir.path());
+    let x = Xvfb::start();
+    let path = dir.path().join("status.json");
+    let (mut editor, id) = start_editor(&x, &vdag, &path);
+    let first = wait_status(&path, &mut editor, "a voxel count", |s| {
+        s["voxels"].as_u64().is_some()
+    });
+    let original = first["voxels"].as_u64().unwrap();
+    assert_eq!(first["undo_depth"], 0);
+    // The middle of the window is over the avocado: the hover hit appears.
+    xdotool(&x.display, &["mousemove", "--window", &id, "400", "300"]);
+    wait_status(&path, &mut editor, "a hovered voxel", |s| {
+        s["hover"].is_array()
+    });
+    xdotool(&x.display, &["click", "1"]);
+    let added = wait_status(&path, &mut editor, "more voxels", |s| {
+        s["voxels"].as_u64().unwrap_or(0) > original
+    });
+    assert_eq!(added["undo_depth"], 1, "{added}");
+    assert_eq!(added["last_edit"]["radius"], 8.0, "{added}");
+    xdotool(&x.display, &["windowfocus", "--sync", &id]);
+    xdotool(&x.display, &["key", "ctrl+z"]);
+    let undone = wait_status(&path, &mut editor, "the undo", |s| s["undo_depth"] == 0);
+    assert_eq!(undone["voxels"].as_u64(), Some(original), "{undone}");
+    assert_eq!(undone["redo_depth"], 1, "{undone}");
+    close(&x, &id, editor);
+}
+
+/// Edits near the avocado's middle: they change neither its bounds nor the default camera.
+const REPLAY: &str = "EditSphere,64,60,64,10,true\n\
+EndFrame\n\
+EditCube,60,64,70,6,false\n\
+EndFrame\n\
+EditSphere,70,66,60,5,false\n\
+Undo\n\
+Redo\n\
+EditCube,62,58,62,4,true\n\
+Undo\n";
+
+#[test]
+fn replay_save_equals_voxdag_edit_and_the_headless_render() {
+    let dir = tempfile::tempdir().unwrap();
+    let vdag = scene(dir.path());
+    let replay = dir.path().join("session.csv");
+    std::fs::write(&replay, REPLAY).unwrap();
+    let x = Xvfb::start();
+    let (saved, shot) = (dir.path().join("editor.vdag"), dir.path().join("shot.png"));
+    let mut cmd = voxdag(Some(&x.display));
+    cmd.arg("editor")
+        .arg(&vdag)
+        .args(["--size", "200x150", "--replay"])
+        .arg(&replay)
+        .arg("--exit-after-replay")
+        .arg("--save")
+        .arg(&saved)
+        .arg("--screenshot")
+        .arg(&shot);
+    run(cmd);
+    let reference = dir.path().join("edit.vdag");
+    let mut cmd = voxdag(None);
+    cmd.arg("edit")
+        .arg(&vdag)
+        .arg("--replay")
+        .arg(&replay)
+        .arg("--cpu")
+        .arg("-o")
+        .arg(&reference);
+    run(cmd);
+    // And the GPU `voxdag edit` (the same hash DAG pipeline, without a window).
+    let gpu_reference = dir.path().join("edit-gpu.vdag");
+    let mut cmd = voxdag(None);
+    cmd.arg("edit")
+        .arg(&vdag)
+        .arg("--replay")
+        .arg(&replay)
+        .arg("-o")
+        .arg(&gpu_reference);
+    run(cmd);
+    let ours = std::fs::read(&saved).unwrap();
+    for (name, path) in [("--cpu", &reference), ("GPU", &gpu_reference)] {
+        assert!(
+            ours == std::fs::read(path).unwrap(),
+            "the editor's save differs from the {name} `voxdag edit` output"
+        );
+    }
+    let headless = dir.path().join("headless.png");
+    let mut cmd = voxdag(None);
+    cmd.arg("render")
+        .arg(&saved)
+        .args(["--size", "200x150", "--out"])
+        .arg(&headless);
+    run(cmd);
+    let read = |p: &Path| image::open(p).unwrap().to_rgba8();
+    let (a, b) = (read(&shot), read(&headless));
+    assert_eq!(a.dimensions(), b.dimensions());
+    // Golden tolerance (tests/render_gpu.rs): at most 0.5% of pixels off by more than 8/255.
+    let diff = compare(b.as_raw(), a.as_raw(), 8);
+    let allowed = (0.005 * (a.width() * a.height()) as f64) as usize;
+    assert!(
+        diff.differing <= allowed,
+        "the screenshot differs from the headless render in {} pixels (allowed {allowed})",
+        diff.differing
+    );
+}
+
+#[test]
+fn survives_resize_and_minimise() {
+    let dir = tempfile::tempdir().unwrap();
+    let vdag = scene(dir.path());
+    let x = Xvfb::start();
+    let path = dir.path().join("status.json");
+    let (mut editor, id) = start_editor(&x, &vdag, &path);
+    let first = wait_status(&path, &mut editor, "a first frame", |s| s["frame"] != 0);
+    let frame = |s: &serde_json::Value| s["frame"].as_u64().unwrap();
+    xdotool(&x.display, &["windowsize", &id, "520", "400"]);
+    let resized = wait_status(&path, &mut editor, "the new size", |s| {
+        s["extent"] == serde_json::json!([520, 400])
+    });
+    assert!(frame(&resized) > frame(&first));
+    xdotool(&x.display, &["windowminimize", "--sync", &id]);
+    std::thread::sleep(Duration::from_millis(1500));
+    xdotool(&x.display, &["windowmap", "--sync", &id]);
+    let after = frame(&status(&path).unwrap());
+    wait_status(&path, &mut editor, "frames after the minimise", |s| {
+        frame(s) > after + 1
+    });
+    close(&x, &id, editor);
+}

@@ -1,0 +1,1268 @@
+//! `voxdag editor`: a real-time voxel editor. The scene lives in a [`GpuHashDag`] (nine slab hash
+//! tables on the GPU) that the renderer traverses in place (`GpuRenderer::bind_hash_dag`); sphere
+//! and cube tools edit it under the cursor, with undo / redo, egui panels and headless hooks
+//! (status file, replays, save, screenshot) for the tests. See docs/editor.md.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::{anyhow, bail, Context, Result};
+use clap::{Args, ValueEnum};
+use glam::Vec3;
+use rustc_hash::FxHashMap;
+use serde::Serialize;
+use voxdag::dag::Svdag;
+use voxdag::edit::gpu::{GpuHashDag, GpuHashDagConfig, HashDagImage};
+use voxdag::edit::item::{Child, InnerNode, Leaf, NodePtr, Root};
+use voxdag::edit::replay::{Replay, Step};
+use voxdag::edit::tool::{Shape, Tool};
+use voxdag::gpu::{
+    Buffer, GpuContext, Image, MemLocation, OverlayFrame, PassTiming, PresenterOptions, Profiler,
+};
+use voxdag::hash::HashVariant;
+use voxdag::render::gpu::{GpuRenderer, GpuScene, RenderFrame};
+use voxdag::render::hash_scene::buckets_for;
+use voxdag::render::{Camera, FirstHit, RenderOutput, RenderSettings};
+use voxdag::scene::{self, ImportOptions};
+use winit::application::ApplicationHandler;
+use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
+use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
+use winit::keyboard::{KeyCode, ModifiersState, PhysicalKey};
+use winit::window::WindowId;
+
+use crate::commands::{check_output, load_svdag, progress_bar, write_json};
+use crate::view::MOTION_TARGET_MS;
+use crate::window::{require_display, CameraInput, GpuWindow, MIN_SCALE};
+
+/// Slab layout of the hash tables (the variant with the fastest edits in docs/editing-gpu.md).
+const TABLE_VARIANT: HashVariant = HashVariant::TicketBoard;
+/// Largest tool radius in voxels (slider and wheel).
+const MAX_RADIUS: f32 = 256.0;
+/// Colours of the 16 materials shown in the palette (editable in the Tools panel).
+const DEFAULT_PALETTE: [[u8; 3]; 16] = [
+    [200, 200, 200],
+    [230, 80, 70],
+    [240, 160, 60],
+    [240, 220, 80],
+    [120, 200, 90],
+    [60, 160, 110],
+    [70, 190, 200],
+    [70, 120, 220],
+    [120, 90, 210],
+    [190, 100, 200],
+    [230, 130, 170],
+    [150, 110, 80],
+    [90, 90, 90],
+    [40, 40, 40],
+    [250, 250, 250],
+    [170, 200, 240],
+];
+
+/// The add / remove tools of the editor.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ToolKind {
+    /// Add a ball of voxels.
+    SphereAdd,
+    /// Remove a ball of voxels.
+    SphereRemove,
+    /// Add an axis-aligned cube of voxels.
+    CubeAdd,
+    /// Remove an axis-aligned cube of voxels.
+    CubeRemove,
+}
+
+impl ToolKind {
+    const ALL: [ToolKind; 4] = [
+        ToolKind::SphereAdd,
+        ToolKind::SphereRemove,
+        ToolKind::CubeAdd,
+        ToolKind::CubeRemove,
+    ];
+
+    fn label(self) -> &'static str {
+        match self {
+            ToolKind::SphereAdd => "sphere add",
+            ToolKind::SphereRemove => "sphere remove",
+            ToolKind::CubeAdd => "cube add",
+            ToolKind::CubeRemove => "cube remove",
+        }
+    }
+
+    fn adds(self) -> bool {
+        matches!(self, ToolKind::SphereAdd | ToolKind::CubeAdd)
+    }
+
+    /// The tool at `center`.
+    fn tool(self, center: [f32; 3], radius: f32, material: u8) -> Tool {
+        let shape = match self {
+            ToolKind::SphereAdd | ToolKind::SphereRemove => Shape::Sphere,
+            ToolKind::CubeAdd | ToolKind::CubeRemove => Shape::Cube,
+        };
+        if self.adds() {
+            Tool::Add {
+                shape,
+                center,
+                radius,
+                material,
+            }
+        } else {
+            Tool::Remove {
+                shape,
+                center,
+                radius,
+            }
+        }
+    }
+}
+
+/// Arguments of `voxdag editor`.
+#[derive(Args)]
+pub struct EditorArgs {
+    /// The scene: a .vdag file, or a mesh / .vox file voxelized at --resolution.
+    scene: PathBuf,
+    /// Grid resolution for a mesh (power of two).
+    #[arg(long)]
+    resolution: Option<u32>,
+    /// Window size WIDTHxHEIGHT.
+    #[arg(long, default_value = "1280x720", value_parser = crate::commands::parse_size)]
+    size: (u32, u32),
+    /// Internal resolution as a fraction of the window (0.1..=1).
+    #[arg(long, default_value_t = 1.0)]
+    render_scale: f32,
+    /// Present without waiting for vertical blank.
+    #[arg(long)]
+    no_vsync: bool,
+    /// Frames the CPU may record ahead of the GPU.
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(1..=4))]
+    frames_in_flight: u32,
+    /// The tool selected at start.
+    #[arg(long, value_enum, default_value_t = ToolKind::SphereAdd)]
+    tool: ToolKind,
+    /// Tool radius in voxels at start.
+    #[arg(long, default_value_t = 8.0)]
+    radius: f32,
+    /// Material (0..16) of added voxels at start.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..16))]
+    material: u8,
+    /// Undo steps kept.
+    #[arg(long, default_value_t = 64)]
+    undo_depth: usize,
+    /// Rewrite this JSON file atomically every frame (frame, voxels, undo_depth, ...).
+    #[arg(long)]
+    status_file: Option<PathBuf>,
+    /// Play this HashDAG replay (CSV), one edit per frame.
+    #[arg(long)]
+    replay: Option<PathBuf>,
+    /// Depth the replay was recorded at (default: the scene's).
+    #[arg(long)]
+    replay_depth: Option<u32>,
+    /// Exit once the replay is done (after --save and --screenshot).
+    #[arg(long, requires = "replay")]
+    exit_after_replay: bool,
+    /// Where Ctrl+S and the Save button write the scene (.vdag, svdag32); also written after a
+    /// replay with --exit-after-replay.
+    #[arg(long)]
+    save: Option<PathBuf>,
+    /// Save the first frame after the replay (render scale 1, no overlay) as a PNG.
+    #[arg(long, requires = "exit_after_replay")]
+    screenshot: Option<PathBuf>,
+}
+
+/// `voxdag editor`.
+pub fn editor(args: &EditorArgs) -> Result<()> {
+    if !(MIN_SCALE..=1.0).contains(&args.render_scale) {
+        bail!(
+            "--render-scale {} out of range ({MIN_SCALE}..=1)",
+            args.render_scale
+        );
+    }
+    if !(args.radius > 0.0 && args.radius <= MAX_RADIUS) {
+        bail!("--radius {} out of range (0, {MAX_RADIUS}]", args.radius);
+    }
+    for path in [&args.status_file, &args.save, &args.screenshot]
+        .into_iter()
+        .flatten()
+    {
+        check_output(path)?;
+    }
+    let display = require_display("editor")?;
+    let dag = load_scene(&args.scene, args.resolution)?;
+    let steps = match &args.replay {
+        Some(path) => {
+            let replay = Replay::load(path)?;
+            let depth = args.replay_depth.unwrap_or(dag.resolution.trailing_zeros());
+            replay.steps(dag.resolution, depth, args.material)?
+        }
+        None => Vec::new(),
+    };
+    let event_loop = EventLoop::new()
+        .map_err(|e| anyhow!("cannot open a window on display {display:?}: {e}"))?;
+    event_loop.set_control_flow(ControlFlow::Poll);
+    let mut app = App {
+        args,
+        initial: Some(dag),
+        steps,
+        running: None,
+        context: None,
+        error: None,
+    };
+    event_loop
+        .run_app(&mut app)
+        .map_err(|e| anyhow!("window event loop: {e}"))?;
+    let App {
+        running,
+        context,
+        error,
+        ..
+    } = app;
+    drop(running);
+    if let Some(e) = error {
+        return Err(e);
+    }
+    let context = context.ok_or_else(|| anyhow!("the window never opened"))?;
+    let messages = context.validation_errors();
+    drop(context);
+    if messages > 0 {
+        bail!("{messages} Vulkan validation message(s) (see the log above)");
+    }
+    Ok(())
+}
+
+/// Loads a `.vdag` file, or voxelizes a mesh / `.vox` file at `resolution`; colours are
+/// dropped (the GPU hash DAG holds geometry).
+fn load_scene(path: &Path, resolution: Option<u32>) -> Result<Svdag> {
+    let is_vdag = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("vdag"));
+    let mut dag = if is_vdag {
+        if resolution.is_some() {
+            bail!("--resolution is for meshes; {} is a .vdag", path.display());
+        }
+        load_svdag(path)?
+    } else {
+        let options = ImportOptions {
+            resolution,
+            vox_scale: 1,
+            texture_override: None,
+        };
+        let voxels = scene::import_in(path, &options, None, &progress_bar(true))?;
+        Svdag::from_voxels(&voxels)?
+    };
+    dag.colors.clear();
+    Ok(dag)
+}
+
+/// The winit application.
+struct App<'a> {
+    args: &'a EditorArgs,
+    /// The scene until the window opens.
+    initial: Option<Svdag>,
+    steps: Vec<(usize, Step)>,
+    running: Option<Running>,
+    context: Option<Arc<GpuContext>>,
+    error: Option<anyhow::Error>,
+}
+
+impl ApplicationHandler for App<'_> {
+    fn resumed(&mut self, event_loop: &ActiveEventLoop) {
+        if self.running.is_some() || self.error.is_some() {
+            return;
+        }
+        match self.open(event_loop) {
+            Ok(running) => self.running = Some(running),
+            Err(e) => {
+                self.error = Some(e);
+                event_loop.exit();
+            }
+        }
+    }
+
+    fn window_event(&mut self, event_loop: &ActiveEventLoop, _: WindowId, event: WindowEvent) {
+        let Some(running) = self.running.as_mut() else {
+            return;
+        };
+        let result = match event {
+            WindowEvent::RedrawRequested => running.redraw(self.args),
+            event => {
+                running.handle(&event);
+                Ok(())
+            }
+        };
+        if let Err(e) = result {
+            self.error = Some(e);
+        }
+        if self.error.is_some() || running.exit {
+            event_loop.exit();
+        }
+    }
+
+    fn about_to_wait(&mut self, _: &ActiveEventLoop) {
+        if let Some(running) = &self.running {
+            running.win.window.request_redraw();
+        }
+    }
+}
+
+impl App<'_> {
+    /// Opens the window, loads the scene into the GPU hash DAG and binds it for rendering.
+    fn open(&mut self, event_loop: &ActiveEventLoop) -> Result<Running> {
+        let args = self.args;
+        let win = GpuWindow::open(
+            event_loop,
+            format!("voxdag editor {}", args.scene.display()),
+            args.size,
+            PresenterOptions {
+                vsync: !args.no_vsync,
+                frames_in_flight: args.frames_in_flight as usize,
+            },
+        )?;
+        let ctx = Arc::clone(&win.ctx);
+        self.context = Some(Arc::clone(&ctx));
+        let renderer = GpuRenderer::new(&ctx)?;
+        let svdag = self.initial.take().expect("opened once");
+        let doc = Document::load(&ctx, &renderer, &svdag, args.scene.clone(), args.undo_depth)?;
+        let mut slots = Vec::new();
+        for _ in 0..win.presenter.frames_in_flight() {
+            slots.push(Slot {
+                target: None,
+                first_hits: None,
+                frame: renderer.create_frame()?,
+                profiler: Profiler::new(&ctx)?,
+                view: None,
+            });
+        }
+        let home = Camera::frame(&svdag);
+        let input = CameraInput::new(home, scene_size(&svdag));
+        let replaying = !self.steps.is_empty() || args.replay.is_some();
+        Ok(Running {
+            win,
+            slots,
+            doc,
+            renderer,
+            edit_profiler: Profiler::new(&ctx)?,
+            ctx,
+            input,
+            modifiers: ModifiersState::empty(),
+            tool: args.tool,
+            radius: args.radius,
+            material: args.material,
+            palette: DEFAULT_PALETTE,
+            painting: false,
+            click: None,
+            hover: None,
+            user_scale: if args.screenshot.is_some() {
+                1.0
+            } else {
+                args.render_scale
+            },
+            dynamic_scale: args.screenshot.is_none() && !replaying,
+            ms_per_pixel: None,
+            internal: [0, 0],
+            scale: 1.0,
+            last_passes: Vec::new(),
+            last_edit: None,
+            edit_input: None,
+            last_frame: None,
+            frame_ms: 0.0,
+            frames: 0,
+            steps: std::mem::take(&mut self.steps).into_iter(),
+            replay_done: !replaying,
+            message: None,
+            save_path: args
+                .save
+                .clone()
+                .unwrap_or_else(|| args.scene.with_extension("edited.vdag"))
+                .display()
+                .to_string(),
+            open_path: args.scene.display().to_string(),
+            exit: false,
+            clicks: 0,
+            ui_clicks: 0,
+        })
+    }
+}
+
+/// The largest side of the occupied box, in voxels (fly speed).
+fn scene_size(dag: &Svdag) -> f32 {
+    match dag.occupied_bounds() {
+        Some((min, max)) => (0..3).map(|a| (max[a] - min[a]) as f32).fold(1.0, f32::max),
+        None => dag.resolution as f32,
+    }
+}
+
+/// The scene being edited: the hash DAG, the renderer's binding of it and what the panels
+/// show of it. The binding is declared first so it drops before the tables it reads.
+struct Document {
+    scene: GpuScene,
+    dag: GpuHashDag,
+    path: PathBuf,
+    /// Undo and redo steps available.
+    undo: usize,
+    redo: usize,
+    /// Edits since the last save.
+    unsaved: usize,
+    /// Voxels and nodes per level of each root counted so far (roots are immutable).
+    counts: FxHashMap<Root, RootCounts>,
+    /// Voxels counted under each node (shared between roots).
+    node_voxels: FxHashMap<NodePtr, u64>,
+}
+
+/// Voxels and unique nodes per level under a root.
+#[derive(Clone, Debug)]
+struct RootCounts {
+    voxels: u64,
+    levels: Vec<u64>,
+}
+
+impl Document {
+    /// Loads `svdag` into a new hash DAG and binds it for `renderer`.
+    fn load(
+        ctx: &Arc<GpuContext>,
+        renderer: &GpuRenderer,
+        svdag: &Svdag,
+        path: PathBuf,
+        undo_depth: usize,
+    ) -> Result<Document> {
+        let config = GpuHashDagConfig::new(TABLE_VARIANT, buckets_for(svdag.words.len()))
+            .with_undo_depth(undo_depth);
+        let dag = GpuHashDag::load(ctx, &config, svdag, None)
+            .with_context(|| format!("loading {} into the GPU hash DAG", path.display()))?;
+        let scene = renderer.bind_hash_dag(&dag, None)?;
+        Ok(Document {
+            scene,
+            dag,
+            path,
+            undo: 0,
+            redo: 0,
+            unsaved: 0,
+            counts: FxHashMap::default(),
+            node_voxels: FxHashMap::default(),
+        })
+    }
+
+    /// Voxels and nodes per level of the current root (downloads the tables the first time a
+    /// root is seen).
+    fn counts(&mut self) -> Result<RootCounts> {
+        let root = self.dag.root();
+        if let Some(c) = self.counts.get(&root) {
+            return Ok(c.clone());
+        }
+        let image = self.dag.download()?;
+        let child = match root {
+            Root::Empty => Child::Empty,
+            Root::Full(m) => Child::Full(m),
+            Root::Node(p) => Child::Node(p),
+        };
+        let voxels = count_voxels(&image, child, image.root_level, &mut self.node_voxels)?;
+        let counts = RootCounts {
+            voxels,
+            levels: image.level_counts(root)?,
+        };
+        self.counts.insert(root, counts.clone());
+        Ok(counts)
+    }
+
+    /// The current root as an svdag32 file at `path` (atomic write).
+    fn save(&mut self, path: &Path) -> Result<()> {
+        let image = self.dag.download()?;
+        image.to_svdag(self.dag.root())?.save(path)?;
+        self.unsaved = 0;
+        Ok(())
+    }
+}
+
+/// Solid voxels under `child` at `level`, memoised per stored node.
+fn count_voxels(
+    image: &HashDagImage,
+    child: Child,
+    level: u32,
+    memo: &mut FxHashMap<NodePtr, u64>,
+) -> Result<u64> {
+    Ok(match child {
+        Child::Empty => 0,
+        Child::Full(_) => 64u64 << (3 * level),
+        Child::Node(ptr) => {
+            if let Some(&n) = memo.get(&ptr) {
+                return Ok(n);
+            }
+            let words = image.item(ptr)?;
+            let n = if level == 0 {
+                Leaf::decode(&words, image.with_materials)?
+                    .mask
+                    .count_ones() as u64
+            } else {
+                let node = InnerNode::decode(&words)?;
+                let mut sum = 0;
+                for c in node.children {
+                    sum += count_voxels(image, c, level - 1, memo)?;
+                }
+                sum
+            };
+            memo.insert(ptr, n);
+            n
+        }
+    })
+}
+
+/// Per frame-in-flight resources. `target` and `first_hits` follow the window size.
+struct Slot {
+    target: Option<Image>,
+    /// One [`FirstHit`] per pixel of the frame (host-visible): the hit under the cursor.
+    first_hits: Option<Buffer>,
+    frame: RenderFrame,
+    profiler: Profiler,
+    /// The internal size and window size of the frame last recorded with this slot.
+    view: Option<([u32; 2], [u32; 2])>,
+}
+
+/// The last edit: what the Profiler panel and the status file show.
+#[derive(Clone, Debug, Serialize)]
+struct LastEdit {
+    /// Tool name.
+    tool: String,
+    /// Centre and radius.
+    center: [f32; 3],
+    radius: f32,
+    /// CPU wall time of `GpuHashDag::edit` (ms).
+    ms: f64,
+    /// Input event to the end of presenting the first frame that shows it (ms).
+    latency_ms: Option<f64>,
+    /// GPU time per kernel (profiler passes).
+    kernels: Vec<(String, f64)>,
+}
+
+/// What `--status-file` holds (rewritten atomically every frame).
+#[derive(Serialize)]
+struct Status<'a> {
+    frame: usize,
+    voxels: Option<u64>,
+    undo_depth: usize,
+    redo_depth: usize,
+    unsaved_edits: usize,
+    tool: ToolKind,
+    radius: f32,
+    material: u8,
+    hover: Option<[u32; 3]>,
+    extent: [u32; 2],
+    internal: [u32; 2],
+    replay_done: bool,
+    last_edit: Option<&'a LastEdit>,
+    message: Option<&'a str>,
+    /// Left-button presses on the scene (not taken by a panel) so far.
+    clicks: usize,
+    /// Presses a panel took.
+    ui_clicks: usize,
+}
+
+/// The open editor. The window (presenter: waits for the GPU) drops first.
+struct Running {
+    win: GpuWindow,
+    slots: Vec<Slot>,
+    doc: Document,
+    renderer: GpuRenderer,
+    edit_profiler: Profiler,
+    ctx: Arc<GpuContext>,
+    input: CameraInput,
+    modifiers: ModifiersState,
+    tool: ToolKind,
+    radius: f32,
+    material: u8,
+    palette: [[u8; 3]; 16],
+    /// Left button held over the scene: one edit per frame.
+    painting: bool,
+    /// A press not yet turned into an edit, with its time (so a click shorter than a frame
+    /// still edits).
+    click: Option<Instant>,
+    /// The voxel under the cursor and its entry normal (last completed frame).
+    hover: Option<FirstHit>,
+    user_scale: f32,
+    dynamic_scale: bool,
+    ms_per_pixel: Option<f64>,
+    internal: [u32; 2],
+    scale: f32,
+    last_passes: Vec<PassTiming>,
+    last_edit: Option<LastEdit>,
+    /// Input time of an edit not yet shown in a presented frame.
+    edit_input: Option<Instant>,
+    last_frame: Option<Instant>,
+    frame_ms: f64,
+    frames: usize,
+    steps: std::vec::IntoIter<(usize, Step)>,
+    replay_done: bool,
+    /// The last error or notice (shown in the Scene panel and the status file).
+    message: Option<String>,
+    save_path: String,
+    open_path: String,
+    exit: bool,
+    /// Left-button presses on the scene and on the panels.
+    clicks: usize,
+    ui_clicks: usize,
+}
+
+impl Running {
+    /// Input: egui first, then shortcuts, tools and the camera.
+    fn handle(&mut self, event: &WindowEvent) {
+        let consumed = self
+            .win
+            .egui_state
+            .on_window_event(&self.win.window, event)
+            .consumed;
+        match event {
+            WindowEvent::CloseRequested => self.exit = true,
+            WindowEvent::Resized(size) => self.win.presenter.resize([size.width, size.height]),
+            WindowEvent::ModifiersChanged(m) => {
+                self.modifiers = m.state();
+                self.input.fast = self.modifiers.shift_key();
+            }
+            WindowEvent::Focused(false) => {
+                self.input.keys.clear();
+                self.painting = false;
+            }
+            WindowEvent::MouseInput {
+                state: ElementState::Released,
+                button,
+                ..
+            } => match button {
+                MouseButton::Left => {
+                    self.painting = false;
+                    self.input.orbit_drag = false;
+                }
+                MouseButton::Middle => self.input.orbit_drag = false,
+                MouseButton::Right => self.input.look_drag = false,
+                _ => {}
+            },
+            WindowEvent::CursorMoved { position, .. } => self.input.cursor_moved(*position),
+            WindowEvent::MouseInput {
+                button: MouseButton::Left,
+                ..
+            } if consumed => self.ui_clicks += 1,
+            _ if consumed => {}
+            WindowEvent::KeyboardInput { event, .. } => {
+                let PhysicalKey::Code(code) = event.physical_key else {
+                    return;
+                };
+                if event.state != ElementState::Pressed {
+                    self.input.keys.remove(&code);
+                    return;
+                }
+                let ctrl = self.modifiers.control_key();
+                let shift = self.modifiers.shift_key();
+                match code {
+                    KeyCode::Escape => self.exit = true,
+                    KeyCode::Home => self.input.go_home(),
+                    KeyCode::KeyZ if ctrl && shift => self.redo(),
+                    KeyCode::KeyZ | KeyCode::KeyY if ctrl => {
+                        if code == KeyCode::KeyZ {
+                            self.undo()
+                        } else {
+                            self.redo()
+                        }
+                    }
+                    KeyCode::KeyS if ctrl => self.save_ui(),
+                    KeyCode::Digit1 | KeyCode::Digit2 | KeyCode::Digit3 | KeyCode::Digit4 => {
+                        let i = match code {
+                            KeyCode::Digit1 => 0,
+                            KeyCode::Digit2 => 1,
+                            KeyCode::Digit3 => 2,
+                            _ => 3,
+                        };
+                        self.tool = ToolKind::ALL[i];
+                    }
+                    _ if !ctrl => {
+                        self.input.keys.insert(code);
+                    }
+                    _ => {}
+                }
+            }
+            WindowEvent::MouseInput {
+                state: ElementState::Pressed,
+                button,
+                ..
+            } => match button {
+                MouseButton::Left if self.modifiers.alt_key() => self.input.orbit_drag = true,
+                MouseButton::Left => {
+                    self.clicks += 1;
+                    self.painting = true;
+                    self.click = Some(Instant::now());
+                }
+                MouseButton::Middle => self.input.orbit_drag = true,
+                MouseButton::Right => self.input.look_drag = true,
+                _ => {}
+            },
+            WindowEvent::MouseWheel { delta, .. } => {
+                let lines = match delta {
+                    MouseScrollDelta::LineDelta(_, y) => *y,
+                    MouseScrollDelta::PixelDelta(p) => p.y as f32 / 40.0,
+                };
+                if self.modifiers.control_key() {
+                    self.radius = (self.radius * 1.1f32.powf(lines)).clamp(1.0, MAX_RADIUS);
+                } else {
+                    self.input.zoom(lines);
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn undo(&mut self) {
+        if self.doc.dag.undo() {
+            self.doc.undo -= 1;
+            self.doc.redo += 1;
+            self.doc.unsaved += 1;
+        }
+    }
+
+    fn redo(&mut self) {
+        if self.doc.dag.redo() {
+            self.doc.undo += 1;
+            self.doc.redo -= 1;
+            self.doc.unsaved += 1;
+        }
+    }
+
+    /// Saves to the path in the Scene panel; errors become the panel's message.
+    fn save_ui(&mut self) {
+        let path = PathBuf::from(&self.save_path);
+        self.message = Some(match self.doc.save(&path) {
+            Ok(()) => format!("saved {}", path.display()),
+            Err(e) => format!("save failed: {e:#}"),
+        });
+    }
+
+    /// Opens the file in the Scene panel; on any error the current scene stays.
+    fn open_ui(&mut self) {
+        let path = PathBuf::from(&self.open_path);
+        let result = load_scene(&path, None).and_then(|svdag| {
+            let doc = Document::load(
+                &self.ctx,
+                &self.renderer,
+                &svdag,
+                path.clone(),
+                self.doc.dag.undo_depth(),
+            )?;
+            Ok((doc, svdag))
+        });
+        match result {
+            Ok((doc, svdag)) => {
+                // Frames in flight still read the old tables.
+                if let Err(e) = self.ctx.wait_idle() {
+                    self.message = Some(format!("open failed: {e}"));
+                    return;
+                }
+                self.doc = doc;
+                self.input = CameraInput::new(Camera::frame(&svdag), scene_size(&svdag));
+                self.hover = None;
+                self.message = Some(format!("opened {}", path.display()));
+            }
+            Err(e) => self.message = Some(format!("cannot open {}: {e:#}", path.display())),
+        }
+    }
+
+    /// Applies `tool`; the result becomes the current root. Errors (pool full, bad tool) are
+    /// shown and leave the scene as it was.
+    fn apply(&mut self, tool: &Tool, input: Instant) -> Result<()> {
+        // GC (automatic, inside `edit`) may free nodes of roots that left the history while
+        // frames in flight still read them.
+        self.ctx.wait_idle()?;
+        self.edit_profiler.clear();
+        let start = Instant::now();
+        let result = self.doc.dag.edit(tool, Some(&mut self.edit_profiler));
+        let ms = start.elapsed().as_secs_f64() * 1e3;
+        if let Err(e) = result {
+            self.message = Some(format!("edit failed: {e}"));
+            return Ok(());
+        }
+        // The edit resolved its passes; sum them per kernel (one pass per level).
+        let mut kernels: Vec<(String, f64)> = Vec::new();
+        for p in self.edit_profiler.passes() {
+            match kernels.iter_mut().find(|k| k.0 == p.name) {
+                Some(k) => k.1 += p.gpu_ms,
+                None => kernels.push((p.name.clone(), p.gpu_ms)),
+            }
+        }
+        self.doc.undo = (self.doc.undo + 1).min(self.doc.dag.undo_depth());
+        self.doc.redo = 0;
+        self.doc.unsaved += 1;
+        let (name, center, radius) = match *tool {
+            Tool::Add { center, radius, .. } => ("add", center, radius),
+            Tool::Remove { center, radius, .. } => ("remove", center, radius),
+            Tool::Paint { center, radius, .. } => ("paint", center, radius),
+            Tool::Fill { center, radius, .. } => ("fill", center, radius),
+            Tool::Copy(c) => ("copy", c.dest, c.radius),
+        };
+        self.last_edit = Some(LastEdit {
+            tool: name.into(),
+            center,
+            radius,
+            ms,
+            latency_ms: None,
+            kernels,
+        });
+        self.edit_input = Some(input);
+        Ok(())
+    }
+}
+
+impl Running {
+    /// The render scale of this frame: the user's, or lower while the camera moves.
+    fn frame_scale(&self, extent: [u32; 2]) -> f32 {
+        if !self.dynamic_scale || !(self.input.moving() || self.painting) {
+            return self.user_scale;
+        }
+        let Some(ms_per_pixel) = self.ms_per_pixel else {
+            return self.user_scale;
+        };
+        let full = ms_per_pixel * extent[0] as f64 * extent[1] as f64;
+        let scale = (MOTION_TARGET_MS / full.max(1e-9)).sqrt() as f32;
+        scale.clamp(MIN_SCALE, self.user_scale)
+    }
+
+    /// The voxel under the cursor in the slot's last frame (its fence has signalled).
+    fn read_hover(&self, slot: &Slot) -> Result<Option<FirstHit>> {
+        let (Some(cursor), Some((internal, extent)), Some(hits)) =
+            (self.input.cursor, slot.view, &slot.first_hits)
+        else {
+            return Ok(None);
+        };
+        let x = (cursor.x / extent[0] as f64 * internal[0] as f64).floor();
+        let y = (cursor.y / extent[1] as f64 * internal[1] as f64).floor();
+        if x < 0.0 || y < 0.0 || x >= internal[0] as f64 || y >= internal[1] as f64 {
+            return Ok(None);
+        }
+        let index = y as u64 * internal[0] as u64 + x as u64;
+        let size = std::mem::size_of::<FirstHit>() as u64;
+        let hit: Vec<FirstHit> = self.ctx.read_buffer(hits, index * size, 1)?;
+        Ok(hit.into_iter().next().filter(|h| h.hit == 1))
+    }
+
+    /// The tool centre for the hovered voxel: the empty voxel in front of it when adding, the
+    /// voxel itself otherwise.
+    fn brush_center(&self) -> Option<[f32; 3]> {
+        let hit = self.hover?;
+        let offset = if self.tool.adds() { 1 } else { 0 };
+        Some([0, 1, 2].map(|a| (hit.voxel[a] as i64 + offset * hit.normal[a] as i64) as f32 + 0.5))
+    }
+
+    /// The replay's steps up to and including its next edit or end of frame.
+    fn replay_frame(&mut self) -> Result<()> {
+        let now = Instant::now();
+        while let Some((line, step)) = self.steps.next() {
+            match step {
+                Step::Edit(tool) => {
+                    self.ctx.wait_idle()?;
+                    self.doc
+                        .dag
+                        .edit(&tool, None)
+                        .with_context(|| format!("replay line {line}"))?;
+                    self.doc.undo = (self.doc.undo + 1).min(self.doc.dag.undo_depth());
+                    self.doc.redo = 0;
+                    self.doc.unsaved += 1;
+                    self.edit_input = Some(now);
+                    return Ok(());
+                }
+                Step::Undo => self.undo(),
+                Step::Redo => self.redo(),
+                Step::EndFrame => return Ok(()),
+            }
+        }
+        self.replay_done = true;
+        Ok(())
+    }
+
+    /// One frame: hover hit, edits, panels, render, present, status file.
+    fn redraw(&mut self, args: &EditorArgs) -> Result<()> {
+        let dt = self
+            .last_frame
+            .map_or(0.0, |t| t.elapsed().as_secs_f32().min(0.1));
+        let Some(frame) = self.win.presenter.begin_frame()? else {
+            return Ok(());
+        };
+        let passes = {
+            let profiler = &mut self.slots[frame.index].profiler;
+            let passes = profiler.resolve()?;
+            profiler.clear();
+            passes
+        };
+        if let Some(p) = passes.iter().find(|p| p.name == "primary rays") {
+            let pixels = (self.internal[0] as f64 * self.internal[1] as f64).max(1.0);
+            let sample = p.gpu_ms / pixels;
+            self.ms_per_pixel = Some(self.ms_per_pixel.map_or(sample, |o| 0.8 * o + 0.2 * sample));
+        }
+        if !passes.is_empty() {
+            self.last_passes = passes;
+        }
+        self.hover = self.read_hover(&self.slots[frame.index])?;
+
+        // Edits: the replay's, else the tool under the cursor (a click, then every frame while
+        // the button is held).
+        let finishing = !self.replay_done;
+        if !self.replay_done {
+            self.replay_frame()?;
+        } else if self.click.is_some() || self.painting {
+            let input = self.click.take().unwrap_or_else(Instant::now);
+            if let Some(center) = self.brush_center() {
+                let tool = self.tool.tool(center, self.radius, self.material);
+                self.apply(&tool, input)?;
+            }
+        }
+        let screenshot = finishing && self.replay_done && args.screenshot.is_some();
+        self.doc
+            .scene
+            .set_hash_root(&self.doc.dag, self.doc.dag.root())?;
+        let counts = match self.doc.counts() {
+            Ok(c) => Some(c),
+            Err(e) => {
+                self.message = Some(format!("counting voxels: {e:#}"));
+                None
+            }
+        };
+
+        let extent = frame.extent;
+        self.input.fly(dt);
+        let scale = if screenshot {
+            1.0
+        } else {
+            self.frame_scale(extent)
+        };
+        let internal = [
+            ((extent[0] as f32 * scale).round() as u32).clamp(1, extent[0]),
+            ((extent[1] as f32 * scale).round() as u32).clamp(1, extent[1]),
+        ];
+        self.scale = scale;
+        self.internal = internal;
+        let settings = RenderSettings::new(internal[0], internal[1], self.input.camera);
+
+        let raw_input = self.win.egui_state.take_egui_input(&self.win.window);
+        let egui = self.win.egui.clone();
+        let output = egui.run_ui(raw_input, |ui| self.panels(ui, extent, counts.as_ref()));
+        self.win
+            .egui_state
+            .handle_platform_output(&self.win.window, output.platform_output);
+        let primitives = egui.tessellate(output.shapes, output.pixels_per_point);
+
+        let slot = &mut self.slots[frame.index];
+        if slot
+            .target
+            .as_ref()
+            .is_none_or(|t| t.width() != extent[0] || t.height() != extent[1])
+        {
+            // Resized: the slot's old images belong to a finished frame.
+            slot.target = Some(self.ctx.create_storage_image(
+                &format!("editor target {}", frame.index),
+                extent[0],
+                extent[1],
+            )?);
+            let bytes =
+                extent[0] as u64 * extent[1] as u64 * std::mem::size_of::<FirstHit>() as u64;
+            slot.first_hits = Some(self.ctx.create_buffer(
+                &format!("editor first hits {}", frame.index),
+                bytes,
+                MemLocation::GpuToCpu,
+            )?);
+        }
+        let target = slot.target.as_ref().expect("allocated above");
+        let hits = slot.first_hits.as_ref().expect("allocated above");
+        let mut cmd = self.ctx.begin_commands("editor frame")?;
+        self.renderer.record_with_first_hits(
+            &mut cmd,
+            &self.doc.scene,
+            &mut slot.frame,
+            &settings,
+            target,
+            hits,
+            Some(&mut slot.profiler),
+        )?;
+        slot.view = Some((internal, extent));
+        self.win.presenter.end_frame(
+            cmd,
+            target,
+            internal,
+            Some(OverlayFrame {
+                primitives: &primitives,
+                textures_delta: output.textures_delta,
+                pixels_per_point: output.pixels_per_point,
+            }),
+            screenshot,
+            Some(&mut slot.profiler),
+        )?;
+        self.frames += 1;
+        let now = Instant::now();
+        if let Some(input) = self.edit_input.take() {
+            if let Some(edit) = &mut self.last_edit {
+                edit.latency_ms = Some((now - input).as_secs_f64() * 1e3);
+            }
+        }
+        if let Some(prev) = self.last_frame {
+            self.frame_ms = (now - prev).as_secs_f64() * 1e3;
+        }
+        self.last_frame = Some(now);
+
+        if screenshot {
+            let path = args.screenshot.as_ref().expect("checked above");
+            let (width, height, rgba) = self
+                .win
+                .presenter
+                .take_screenshot()?
+                .ok_or_else(|| anyhow!("the screenshot frame recorded no copy"))?;
+            let image = RenderOutput {
+                width,
+                height,
+                rgba,
+                hits: Vec::new(),
+            };
+            image.save_png(path)?;
+            println!("{}: {width}x{height} screenshot", path.display());
+        }
+        if let Some(path) = &args.status_file {
+            let status = Status {
+                frame: self.frames,
+                voxels: counts.as_ref().map(|c| c.voxels),
+                undo_depth: self.doc.undo,
+                redo_depth: self.doc.redo,
+                unsaved_edits: self.doc.unsaved,
+                tool: self.tool,
+                radius: self.radius,
+                material: self.material,
+                hover: self.hover.map(|h| h.voxel),
+                extent,
+                internal,
+                replay_done: self.replay_done,
+                last_edit: self.last_edit.as_ref(),
+                message: self.message.as_deref(),
+                clicks: self.clicks,
+                ui_clicks: self.ui_clicks,
+            };
+            write_json(path, &status)?;
+        }
+        if finishing && self.replay_done && args.exit_after_replay {
+            if let Some(path) = &args.save {
+                self.doc.save(path)?;
+                println!("{}: saved after the replay", path.display());
+            }
+            self.exit = true;
+        }
+        Ok(())
+    }
+
+    /// The egui panels: Tools, Scene, Profiler, Settings, and the brush outline.
+    fn panels(&mut self, ui: &mut egui::Ui, extent: [u32; 2], counts: Option<&RootCounts>) {
+        let ctx = ui.ctx().clone();
+        self.brush_outline(&ctx, extent);
+        egui::Window::new("Tools")
+            .default_pos([8.0, 8.0])
+            .resizable(false)
+            .show(&ctx, |ui| {
+                for (i, kind) in ToolKind::ALL.iter().enumerate() {
+                    ui.radio_value(
+                        &mut self.tool,
+                        *kind,
+                        format!("{} ({})", kind.label(), i + 1),
+                    );
+                }
+                ui.add(
+                    egui::Slider::new(&mut self.radius, 1.0..=MAX_RADIUS)
+                        .logarithmic(true)
+                        .text("radius (Ctrl+wheel)"),
+                );
+                ui.label("material (added voxels)");
+                egui::Grid::new("palette").show(ui, |ui| {
+                    for (m, colour) in self.palette.iter_mut().enumerate() {
+                        let selected = self.material as usize == m;
+                        let [r, g, b] = *colour;
+                        let button = egui::Button::new("  ")
+                            .fill(egui::Color32::from_rgb(r, g, b))
+                            .stroke(if selected {
+                                egui::Stroke::new(2.0, egui::Color32::WHITE)
+                            } else {
+                                egui::Stroke::NONE
+                            });
+                        if ui.add(button).clicked() {
+                            self.material = m as u8;
+                        }
+                        if m % 8 == 7 {
+                            ui.end_row();
+                        }
+                    }
+                });
+                let m = self.material as usize;
+                ui.horizontal(|ui| {
+                    ui.label(format!("material {m}"));
+                    ui.color_edit_button_srgb(&mut self.palette[m]);
+                });
+                ui.horizontal(|ui| {
+                    if ui
+                        .add_enabled(self.doc.undo > 0, egui::Button::new("undo"))
+                        .clicked()
+                    {
+                        self.undo();
+                    }
+                    if ui
+                        .add_enabled(self.doc.redo > 0, egui::Button::new("redo"))
+                        .clicked()
+                    {
+                        self.redo();
+                    }
+                    if ui.button("GC").clicked() {
+                        self.message = Some(match self.collect() {
+                            Ok(text) => text,
+                            Err(e) => format!("GC failed: {e:#}"),
+                        });
+                    }
+                });
+            });
+        egui::Window::new("Scene")
+            .default_pos([8.0, 330.0])
+            .default_open(false)
+            .show(&ctx, |ui| self.scene_panel(ui, counts));
+        egui::Window::new("Profiler")
+            .default_pos([(extent[0] as f32 - 260.0).max(8.0), 8.0])
+            .default_open(false)
+            .show(&ctx, |ui| self.profiler_panel(ui));
+        egui::Window::new("Settings")
+            .default_pos([(extent[0] as f32 - 260.0).max(8.0), 300.0])
+            .default_open(false)
+            .show(&ctx, |ui| {
+                ui.add(egui::Slider::new(&mut self.user_scale, MIN_SCALE..=1.0).text("render scale"));
+                ui.checkbox(&mut self.dynamic_scale, "lower scale while moving / editing");
+                ui.label(format!(
+                    "internal {}x{} of {}x{} (scale {:.2})",
+                    self.internal[0], self.internal[1], extent[0], extent[1], self.scale
+                ));
+                ui.label(format!(
+                    "present mode {} (vsync: restart without / with --no-vsync), {} frames in flight",
+                    self.win.presenter.stats().present_mode,
+                    self.win.presenter.frames_in_flight()
+                ));
+                ui.label(format!("hash table variant {TABLE_VARIANT:?}"));
+            });
+    }
+
+    fn scene_panel(&mut self, ui: &mut egui::Ui, counts: Option<&RootCounts>) {
+        let dag = &self.doc.dag;
+        ui.label(format!("file {}", self.doc.path.display()));
+        ui.label(format!("resolution {}^3", dag.resolution()));
+        if let Some(c) = counts {
+            ui.label(format!("voxels {}", c.voxels));
+            ui.label("nodes per level (0 = leaves)");
+            for (level, n) in c.levels.iter().enumerate() {
+                ui.label(format!("  {level}: {n}"));
+            }
+        }
+        ui.label(format!(
+            "history: {} undo, {} redo (depth {}), {} unsaved edits",
+            self.doc.undo,
+            self.doc.redo,
+            dag.undo_depth(),
+            self.doc.unsaved
+        ));
+        ui.label(format!("tables {} bytes on the GPU", dag.gpu_bytes()));
+        for words in 2..=10 {
+            if let Some(t) = dag.table(words) {
+                ui.label(format!("  {words}-word items: {} bytes", t.gpu_bytes()));
+            }
+        }
+        ui.separator();
+        ui.horizontal(|ui| {
+            ui.text_edit_singleline(&mut self.save_path);
+            if ui.button("save (Ctrl+S)").clicked() {
+                self.save_ui();
+            }
+        });
+        ui.horizontal(|ui| {
+            ui.text_edit_singleline(&mut self.open_path);
+            if ui.button("open").clicked() {
+                self.open_ui();
+            }
+        });
+        if let Some(m) = &self.message {
+            ui.colored_label(egui::Color32::YELLOW, m);
+        }
+    }
+
+    fn profiler_panel(&mut self, ui: &mut egui::Ui) {
+        let fps = if self.frame_ms > 0.0 {
+            1e3 / self.frame_ms
+        } else {
+            0.0
+        };
+        ui.label(format!("{fps:.1} fps, {:.2} ms/frame", self.frame_ms));
+        ui.label("GPU passes (last frame)");
+        for p in &self.last_passes {
+            ui.label(format!("  {}: {:.2} ms", p.name, p.gpu_ms));
+        }
+        ui.separator();
+        match &self.last_edit {
+            Some(e) => {
+                ui.label(format!(
+                    "last edit: {} r {:.1} at {:.0?}, {:.2} ms, latency {}",
+                    e.tool,
+                    e.radius,
+                    e.center,
+                    e.ms,
+                    e.latency_ms
+                        .map_or("-".to_string(), |l| format!("{l:.1} ms"))
+                ));
+                for (name, ms) in &e.kernels {
+                    ui.label(format!("  {name}: {ms:.3} ms"));
+                }
+            }
+            None => {
+                ui.label("no edit yet");
+            }
+        }
+    }
+
+    /// Runs the GPU GC over every live root.
+    fn collect(&mut self) -> Result<String> {
+        self.ctx.wait_idle()?;
+        let stats = self.doc.dag.gc(None)?;
+        Ok(format!(
+            "GC freed {} items ({} kept) in {:.1} ms",
+            stats.freed, stats.live, stats.ms
+        ))
+    }
+
+    /// The brush under the cursor: its outline projected on the screen (egui painter).
+    fn brush_outline(&self, ctx: &egui::Context, extent: [u32; 2]) {
+        let Some(center) = self.brush_center() else {
+            return;
+        };
+        let camera = &self.input.camera;
+        let (w, h) = (extent[0], extent[1]);
+        let Some(c) = camera.project(center, w, h) else {
+            return;
+        };
+        let up = Vec3::from(camera.basis().up);
+        let edge = (Vec3::from(center) + up * self.radius).to_array();
+        let Some(e) = camera.project(edge, w, h) else {
+            return;
+        };
+        let ppp = ctx.pixels_per_point();
+        let to_points = |p: [f32; 2]| egui::pos2(p[0] / ppp, p[1] / ppp);
+        let (c, e) = (to_points(c), to_points(e));
+        let painter = ctx.layer_painter(egui::LayerId::background());
+        let colour = if self.tool.adds() {
+            egui::Color32::from_rgb(80, 220, 120)
+        } else {
+            egui::Color32::from_rgb(240, 90, 80)
+        };
+        let stroke = egui::Stroke::new(1.5, colour);
+        let radius = c.distance(e).max(2.0);
+        match self.tool {
+            ToolKind::SphereAdd | ToolKind::SphereRemove => {
+                painter.circle_stroke(c, radius, stroke);
+            }
+            ToolKind::CubeAdd | ToolKind::CubeRemove => {
+                painter.rect_stroke(
+                    egui::Rect::from_center_size(c, egui::vec2(2.0 * radius, 2.0 * radius)),
+                    0.0,
+                    stroke,
+                    egui::StrokeKind::Middle,
+                );
+            }
+        }
+        painter.circle_filled(c, 2.0, colour);
+    }
+}
