@@ -192,6 +192,7 @@ fn load_encoded(dag: &Svdag, name: &str, cached: Option<&Path>) -> Result<Encode
             encoded: encoded.clone(),
             colors: dag.colors.clone(),
             stored_colors: None,
+            materials: None,
         }
         .save(c)?;
     }
