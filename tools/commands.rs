@@ -288,11 +288,14 @@ pub fn load_svdag_stored(path: &Path) -> Result<(Svdag, Option<StoredColors>)> {
     Ok((file.into_svdag(path)?, stored_colors))
 }
 
-/// `voxdag build`.
+/// `voxdag build`: the streaming build, or the in-memory one with `--in-memory`.
 pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
     check_output(&args.output)?;
     if let Some(report) = &args.report {
         check_output(report)?;
+    }
+    if !args.in_memory {
+        return crate::stream::build_streaming(args, quiet);
     }
     let (dag, report, digest) = build_scene_digest(args, quiet)?;
     let start = Instant::now();
@@ -917,6 +920,8 @@ pub fn demo(args: &DemoArgs, quiet: bool) -> Result<()> {
         tsvdag_mode: None,
         no_lut: false,
         no_huffman: false,
+        memory_budget: None,
+        in_memory: false,
     };
     build(&build_args, quiet)?;
     let render_args = RenderArgs {

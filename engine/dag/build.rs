@@ -82,7 +82,7 @@ fn validate_input(voxels: &Voxels) -> Result<(), DagError> {
 
 /// Appends a node's words to a level, returning its new id, or `TooLarge` when the level's
 /// words or ids no longer fit 32 bits.
-fn push_node(level: &mut LevelNodes, node: &[u32]) -> Result<u32, DagError> {
+pub(crate) fn push_node(level: &mut LevelNodes, node: &[u32]) -> Result<u32, DagError> {
     let offset = level.words.len();
     let id = level.offsets.len();
     if offset + node.len() > u32::MAX as usize || id >= u32::MAX as usize {

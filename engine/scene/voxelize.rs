@@ -684,6 +684,85 @@ pub fn voxelize(
             });
         }
     }
+    let mut out = Voxels {
+        resolution,
+        codes: Vec::new(),
+        colors: Vec::new(),
+    };
+    voxelize_tris(mesh, &tris, resolution, progress, |c, col| {
+        // The estimate can be short: grow fallibly, an error rather than an abort.
+        let grown = out.codes.len() as u64 + c.len() as u64;
+        let bytes = grown * if colors { 12 } else { 8 };
+        crate::safety::check_memory("the voxel arrays", bytes).map_err(|e| {
+            SceneError::TooLarge {
+                path: mesh.source.clone(),
+                reason: e.to_string(),
+            }
+        })?;
+        let reserved =
+            out.codes.try_reserve(c.len()).is_ok() && out.colors.try_reserve(col.len()).is_ok();
+        if !reserved {
+            return Err(SceneError::TooLarge {
+                path: mesh.source.clone(),
+                reason: format!("out of memory for {grown} voxels"),
+            });
+        }
+        out.codes.extend_from_slice(c);
+        out.colors.extend_from_slice(col);
+        Ok(())
+    })?;
+    out.codes.shrink_to_fit();
+    out.colors.shrink_to_fit();
+    Ok(out)
+}
+
+/// Voxelizes `mesh` at `resolution` without collecting the voxels: hands every brick's
+/// ascending Morton codes (and colours, empty when the mesh has none) to `sink`, bricks in
+/// Morton order, so the concatenation of what `sink` sees is [`voxelize`]'s output. Only
+/// one group of bricks (64 per thread) is held at a time. No memory guard: the caller bounds
+/// what it keeps (the streaming build, `docs/scaling.md`). Stops at the first error of `sink`.
+pub fn voxelize_stream<E: From<SceneError>>(
+    mesh: &Mesh,
+    resolution: u32,
+    progress: &ProgressBar,
+    sink: impl FnMut(&[u64], &[u32]) -> Result<(), E>,
+) -> Result<(), E> {
+    check_resolution(resolution, &mesh.source)?;
+    let tris = grid_triangles(mesh, resolution)?;
+    voxelize_tris(mesh, &tris, resolution, progress, sink)
+}
+
+/// Estimated surface voxels of `mesh` at `resolution` (the lower bound of the memory guard of
+/// [`voxelize`]: surface area / sqrt(2), degenerate triangles by their longest side).
+pub fn estimate_voxels(mesh: &Mesh, resolution: u32) -> Result<f64, SceneError> {
+    check_resolution(resolution, &mesh.source)?;
+    let tris = grid_triangles(mesh, resolution)?;
+    Ok(estimate_bytes(&tris, false).0)
+}
+
+/// Bytes the streaming voxelizer holds besides the mesh for `triangles` triangles: the grid
+/// triangles, the brick bins (at most 27 bricks per triangle assumed: a triangle smaller than
+/// a brick meets at most 3 per axis) and per thread a brick's scratch space and one group of
+/// bricks' output at `voxels_per_brick`.
+pub fn stream_working_set(triangles: usize, colors: bool, voxels_per_brick: f64) -> u64 {
+    let threads = rayon::current_num_threads().max(1) as u64;
+    let cells = 1u64 << (3 * BRICK_LOG);
+    let scratch = cells / 8 + if colors { cells * 12 } else { 0 };
+    let per_voxel = if colors { 12.0 } else { 8.0 };
+    let group = (64 * threads) as f64 * voxels_per_brick * per_voxel;
+    let tris = triangles as u64 * (std::mem::size_of::<GridTriangle>() as u64 + 27 * 8);
+    tris + threads * scratch + group as u64
+}
+
+/// The brick loop of [`voxelize`] and [`voxelize_stream`] on prepared grid triangles.
+fn voxelize_tris<E: From<SceneError>>(
+    mesh: &Mesh,
+    tris: &[GridTriangle],
+    resolution: u32,
+    progress: &ProgressBar,
+    mut sink: impl FnMut(&[u64], &[u32]) -> Result<(), E>,
+) -> Result<(), E> {
+    let colors = mesh.has_colors;
     let res_log = resolution.trailing_zeros();
     let brick_log = BRICK_LOG.min(res_log);
     // Bin triangles into bricks: key = brick Morton code << 32 | triangle index. A triangle
@@ -736,15 +815,10 @@ pub fn voxelize(
     progress.set_position(0);
     let ctx = Ctx {
         mesh,
-        tris: &tris,
+        tris,
         resolution,
         brick_log,
         colors,
-    };
-    let mut out = Voxels {
-        resolution,
-        codes: Vec::new(),
-        colors: Vec::new(),
     };
     let chunk = 64 * rayon::current_num_threads().max(1);
     for group in bricks.chunks(chunk) {
@@ -759,33 +833,12 @@ pub fn voxelize(
                 |s, &(b, from, to)| voxelize_brick(&ctx, s, b, &pairs[from..to]),
             )
             .collect();
-        for (c, col) in results {
-            // The estimate can be short: grow fallibly, an error rather than an abort.
-            let grown = out.codes.len() as u64 + c.len() as u64;
-            let bytes = grown * if colors { 12 } else { 8 };
-            crate::safety::check_memory("the voxel arrays", bytes).map_err(|e| {
-                SceneError::TooLarge {
-                    path: mesh.source.clone(),
-                    reason: e.to_string(),
-                }
-            })?;
-            let reserved =
-                out.codes.try_reserve(c.len()).is_ok() && out.colors.try_reserve(col.len()).is_ok();
-            if !reserved {
-                return Err(SceneError::TooLarge {
-                    path: mesh.source.clone(),
-                    reason: format!("out of memory for {grown} voxels"),
-                });
-            }
-            out.codes.extend_from_slice(&c);
-            out.colors.extend_from_slice(&col);
+        for (c, col) in &results {
+            sink(c, col)?;
         }
         progress.inc(group.len() as u64);
     }
-    drop(pairs);
-    out.codes.shrink_to_fit();
-    out.colors.shrink_to_fit();
-    Ok(out)
+    Ok(())
 }
 
 /// Reference voxelizer: tests every voxel of the grid against every triangle with
