@@ -117,11 +117,9 @@ pub fn build_streaming(args: &BuildArgs, quiet: bool) -> Result<()> {
         voxelize::check_resolution(resolution, &args.input)?;
         let mesh = scene::load_mesh_in(&args.input, &options, args.asset_root.as_deref())?;
         let colors = mesh.has_colors && codec.is_some();
-        let working = voxelize::stream_working_set(
-            mesh.triangle_count(),
-            mesh.has_colors,
-            VOXELS_PER_BRICK,
-        ) + if colors { COLOR_WORKING_SET } else { 0 };
+        let working =
+            voxelize::stream_working_set(mesh.triangle_count(), mesh.has_colors, VOXELS_PER_BRICK)
+                + if colors { COLOR_WORKING_SET } else { 0 };
         let voxels = if args.memory_budget.is_some() {
             voxelize::estimate_voxels(&mesh, resolution)?
         } else {

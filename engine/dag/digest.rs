@@ -128,7 +128,11 @@ pub(crate) fn leaf_hash(mask: u64) -> [u64; 2] {
 
 /// Hash lanes of an inner node at `level` with child mask `mask` and its children's lanes in
 /// octant order.
-pub(crate) fn inner_hash(level: u32, mask: u32, children: impl Iterator<Item = [u64; 2]>) -> [u64; 2] {
+pub(crate) fn inner_hash(
+    level: u32,
+    mask: u32,
+    children: impl Iterator<Item = [u64; 2]>,
+) -> [u64; 2] {
     let mut h = Hasher2::new(level as u64);
     h.absorb(mask as u64);
     for c in children {

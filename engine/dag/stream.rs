@@ -129,8 +129,6 @@ pub struct StreamBuilder {
     cells: u64,
     levels: Vec<LevelNodes>,
     tables: Vec<IdTable>,
-    /// Content-digest hash lanes of every stored node, per level (`docs/vdag-format.md`).
-    hashes: Vec<Vec<[u64; 2]>>,
     /// Open node per level (index 0 unused: the open leaf is `leaf_key`/`leaf_mask`).
     open: Vec<OpenNode>,
     leaf_key: u64,
@@ -164,7 +162,6 @@ impl StreamBuilder {
             cells: (resolution as u64).pow(3),
             levels: (0..levels).map(|_| LevelNodes::default()).collect(),
             tables: (0..levels).map(|_| IdTable::new()).collect(),
-            hashes: vec![Vec::new(); levels],
             open: vec![OpenNode::default(); levels],
             leaf_key: 0,
             leaf_mask: 0,
@@ -195,27 +192,33 @@ impl StreamBuilder {
         Ok(())
     }
 
-    /// Bytes the builder holds now (capacities of the node words, offsets, hashes and tables).
+    /// Bytes the builder holds now (capacities of the node words, offsets and tables).
     pub fn memory_bytes(&self) -> u64 {
         let levels: usize = self
             .levels
             .iter()
             .map(|l| 4 * (l.words.capacity() + l.offsets.capacity()))
             .sum();
-        let hashes: usize = self.hashes.iter().map(|h| 16 * h.capacity()).sum();
         let tables: usize = self.tables.iter().map(|t| 8 * t.slots.capacity()).sum();
-        (levels + hashes + tables) as u64
+        (levels + tables) as u64
     }
 
-    /// Peak bytes of [`StreamBuilder::finish`]: the level words and offsets plus the laid-out
-    /// copy of the words (tables and hashes are freed first).
+    /// Peak bytes of [`StreamBuilder::finish`] (an upper bound): the level words and offsets
+    /// (trimmed to their length), two levels' content hashes, then the laid-out copy of the
+    /// words (the tables are freed first).
     pub fn layout_bytes(&self) -> u64 {
         let levels: usize = self
             .levels
             .iter()
-            .map(|l| 4 * (l.words.capacity() + l.offsets.capacity()) + 4 * l.words.len())
+            .map(|l| 8 * l.words.len() + 4 * l.offsets.len())
             .sum();
-        levels as u64
+        let hashes = self
+            .levels
+            .windows(2)
+            .map(|w| 16 * (w[0].offsets.len() + w[1].offsets.len()))
+            .max()
+            .unwrap_or(0);
+        (levels + hashes) as u64
     }
 
     /// Voxels pushed so far.
@@ -268,20 +271,36 @@ impl StreamBuilder {
         }
     }
 
-    /// The id of `node` on `level`, storing it (and its content hash) when new.
+    /// The id of `node` on `level`, storing it when new.
     fn dedup(&mut self, level: u32, node: &[u32]) -> Result<u32, DagError> {
         let l = level as usize;
-        let (id, new) = self.tables[l].find_or_insert(&mut self.levels[l], node, level == 0)?;
-        if new {
-            let hash = if level == 0 {
-                leaf_hash(node[0] as u64 | (node[1] as u64) << 32)
-            } else {
-                let below = &self.hashes[l - 1];
-                inner_hash(level, node[0], node[1..].iter().map(|&c| below[c as usize]))
-            };
-            self.hashes[l].push(hash);
+        Ok(self.tables[l]
+            .find_or_insert(&mut self.levels[l], node, level == 0)?
+            .0)
+    }
+
+    /// Content-digest hash lanes of the root (`docs/vdag-format.md`), bottom-up over the
+    /// stored nodes with only two levels' hashes held at a time.
+    fn root_hash(&self, root: u32) -> [u64; 2] {
+        let mut below: Vec<[u64; 2]> = Vec::new();
+        for (l, level) in self.levels.iter().enumerate() {
+            let hashes = level
+                .offsets
+                .iter()
+                .map(|&at| {
+                    let at = at as usize;
+                    if l == 0 {
+                        leaf_hash(level.words[at] as u64 | (level.words[at + 1] as u64) << 32)
+                    } else {
+                        let mask = level.words[at];
+                        let children = &level.words[at + 1..at + 1 + mask.count_ones() as usize];
+                        inner_hash(l as u32, mask, children.iter().map(|&c| below[c as usize]))
+                    }
+                })
+                .collect();
+            below = hashes;
         }
-        Ok(id)
+        below[root as usize]
     }
 
     /// Closes the open path and lays the DAG out (as [`Svdag::from_voxels`] does).
@@ -295,8 +314,12 @@ impl StreamBuilder {
             }
         }
         self.tables = Vec::new();
+        for level in &mut self.levels {
+            level.words.shrink_to_fit();
+            level.offsets.shrink_to_fit();
+        }
         let dag_hash = match self.root {
-            Some(root) => self.hashes[self.root_level as usize][root as usize],
+            Some(root) => self.root_hash(root),
             None => {
                 // Empty scene: a root with no children.
                 let root = self.levels.last_mut().expect("at least one level");
@@ -305,7 +328,6 @@ impl StreamBuilder {
                 empty_hash()
             }
         };
-        self.hashes = Vec::new();
         let dag = Svdag::lay_out(self.resolution, self.levels, Vec::new())?;
         Ok(StreamedDag {
             dag,
@@ -606,6 +628,14 @@ pub fn save_streamed(
         .as_ref()
         .map(|c| 40 + 16 * c.chunk_starts.len() as u64 + 4 * c.words());
     super::file::write_atomic(path, |w| {
-        super::file::write_streamed(w, encoded, digest, color_count, chunked_len, &chunked, &content)
+        super::file::write_streamed(
+            w,
+            encoded,
+            digest,
+            color_count,
+            chunked_len,
+            &chunked,
+            &content,
+        )
     })
 }
