@@ -120,6 +120,8 @@ fn streaming_equals_in_memory_on_shared_meshes() {
 
 /// Runs `voxdag` with `args`; returns success, stderr and the child's peak RSS in bytes (from
 /// `wait4`, so other tests' children do not count).
+// The child is reaped by wait4 (which also reports its rusage), not Child::wait.
+#[allow(clippy::zombie_processes)]
 fn run_measured(args: &[&str]) -> (bool, String, u64) {
     let child = Command::new(env!("CARGO_BIN_EXE_voxdag"))
         .args(args)

@@ -45,7 +45,7 @@ fn node_words(level: &LevelNodes, id: u32, leaf: bool) -> &[u32] {
 fn hash_words(words: &[u32]) -> u64 {
     let mut h = words.len() as u64;
     for &w in words {
-        h = (h.rotate_left(5) ^ w as u64).wrapping_mul(0x51_7cc1_b727_220a_95);
+        h = (h.rotate_left(5) ^ w as u64).wrapping_mul(0x517c_c1b7_2722_0a95);
     }
     h = (h ^ (h >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     h = (h ^ (h >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
@@ -337,6 +337,9 @@ impl StreamBuilder {
     }
 }
 
+/// A chunk's encoded words and its colours' squared errors (empty for an exact codec).
+type EncodedChunk = (Vec<u32>, Vec<f64>);
+
 /// Colours per parallel encoding batch of [`ColorStream`] (complete chunks wait until this
 /// many colours are ready, then are encoded together).
 const BATCH_COLORS: usize = 1 << 22;
@@ -489,7 +492,7 @@ impl ColorStream {
         let codec = self.codec;
         let exact = codec.is_exact();
         let format = codec.format();
-        let encoded: Vec<Result<(Vec<u32>, Vec<f64>), DagError>> = self
+        let encoded: Vec<Result<EncodedChunk, DagError>> = self
             .ready
             .par_iter()
             .map(|colors| {
