@@ -297,11 +297,15 @@ pub fn expand_materials(file: &mut VdagFile) {
     }
 }
 
-/// `voxdag build`.
+/// `voxdag build`: the streaming build, or the in-memory one with `--in-memory`.
 pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
     check_output(&args.output)?;
     if let Some(report) = &args.report {
         check_output(report)?;
+    }
+    // `--materials` quantizes every colour at once (k-means), so it builds in memory.
+    if !args.in_memory && args.materials.is_none() {
+        return crate::stream::build_streaming(args, quiet);
     }
     let (dag, report, digest) = build_scene_digest(args, quiet)?;
     let start = Instant::now();
@@ -989,6 +993,8 @@ pub fn demo(args: &DemoArgs, quiet: bool) -> Result<()> {
         tsvdag_mode: None,
         no_lut: false,
         no_huffman: false,
+        memory_budget: None,
+        in_memory: false,
     };
     build(&build_args, quiet)?;
     let render_args = RenderArgs {

@@ -8,6 +8,7 @@ mod hash_render;
 mod limited_alloc;
 mod ooc;
 mod pathtrace;
+mod stream;
 mod view;
 mod window;
 
@@ -114,6 +115,15 @@ pub struct BuildArgs {
     /// tsvdag: no Huffman coding of transform ids (pins the mode; alone: `lut`).
     #[arg(long)]
     no_huffman: bool,
+    /// Peak memory the streaming build may use (suffixes K, M, G, T): refused at start when
+    /// the working set alone does not fit, stopped with an error if the DAG outgrows it
+    /// (model in docs/scaling.md). Default: no budget.
+    #[arg(long, value_parser = commands::parse_bytes, conflicts_with = "in_memory")]
+    memory_budget: Option<u64>,
+    /// Hold every voxel in memory and build the DAG afterwards (the pre-streaming path; the
+    /// output is byte-identical).
+    #[arg(long)]
+    in_memory: bool,
 }
 
 /// Pointer modes of the tsvdag encoding (`voxdag build --tsvdag-mode`).

@@ -317,17 +317,21 @@ pub fn rmse(reference: &[u32], decoded: &[u32]) -> f64 {
     let sum: f64 = reference
         .iter()
         .zip(decoded)
-        .map(|(&a, &b)| {
-            let (a, b) = (rgb(a), rgb(b));
-            (0..3)
-                .map(|k| {
-                    let d = (a[k] as f64 - b[k] as f64) / 255.0;
-                    d * d
-                })
-                .sum::<f64>()
-        })
+        .map(|(&a, &b)| squared_error(a, b))
         .sum();
     (sum / (3 * n) as f64).sqrt()
+}
+
+/// Sum over R, G, B of the squared difference in [0, 1] units: one colour's term of [`rmse`]
+/// (the streaming build sums these in the same order to get the same bits).
+pub fn squared_error(a: u32, b: u32) -> f64 {
+    let (a, b) = (rgb(a), rgb(b));
+    (0..3)
+        .map(|k| {
+            let d = (a[k] as f64 - b[k] as f64) / 255.0;
+            d * d
+        })
+        .sum::<f64>()
 }
 
 /// Largest per-channel difference between `reference` and `decoded`, in [0, 1].

@@ -82,7 +82,7 @@ fn validate_input(voxels: &Voxels) -> Result<(), DagError> {
 
 /// Appends a node's words to a level, returning its new id, or `TooLarge` when the level's
 /// words or ids no longer fit 32 bits.
-fn push_node(level: &mut LevelNodes, node: &[u32]) -> Result<u32, DagError> {
+pub(crate) fn push_node(level: &mut LevelNodes, node: &[u32]) -> Result<u32, DagError> {
     let offset = level.words.len();
     let id = level.offsets.len();
     if offset + node.len() > u32::MAX as usize || id >= u32::MAX as usize {
@@ -243,13 +243,17 @@ impl Svdag {
             return Err(DagError::TooLarge { words: total });
         }
         let mut words = Vec::with_capacity(total as usize);
+        let mut levels = levels;
         for l in (0..levels.len()).rev() {
-            let level = &levels[l];
+            // Each level is freed once copied (its parents, above it, are done), so the peak is
+            // the laid-out words plus the levels not yet copied.
+            let (below, rest) = levels.split_at_mut(l);
+            let level = std::mem::take(&mut rest[0]);
             if l == 0 {
                 words.extend_from_slice(&level.words);
                 continue;
             }
-            let below = &levels[l - 1];
+            let below = &below[l - 1];
             let below_start = level_starts[l - 1] as u32;
             for &offset in &level.offsets {
                 let offset = offset as usize;

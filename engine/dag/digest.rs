@@ -146,6 +146,79 @@ pub fn attributes_hash(colors: &[u32], materials: Option<&Materials>) -> u64 {
     }
 }
 
+/// Hash lanes of a leaf with `mask` (a node hash of the canonical DAG, computed bottom-up by
+/// the streaming builder).
+pub(crate) fn leaf_hash(mask: u64) -> [u64; 2] {
+    let mut h = Hasher2::new(0);
+    h.absorb(mask);
+    h.0
+}
+
+/// Hash lanes of an inner node at `level` with child mask `mask` and its children's lanes in
+/// octant order.
+pub(crate) fn inner_hash(
+    level: u32,
+    mask: u32,
+    children: impl Iterator<Item = [u64; 2]>,
+) -> [u64; 2] {
+    let mut h = Hasher2::new(level as u64);
+    h.absorb(mask as u64);
+    for c in children {
+        h.absorb(c[0]);
+        h.absorb(c[1]);
+    }
+    h.0
+}
+
+/// Hash lanes of the empty scene.
+pub(crate) fn empty_hash() -> [u64; 2] {
+    Hasher2::new(u64::MAX).0
+}
+
+/// [`colors_hash`] fed in pieces, for colours that are never all in memory at once; the count
+/// is hashed first, so it must be known up front.
+pub struct ColorsHasher {
+    h: Hasher2,
+    /// A colour waiting for its pair partner.
+    odd: Option<u32>,
+}
+
+impl ColorsHasher {
+    /// A hasher for `count` colours.
+    pub fn new(count: u64) -> ColorsHasher {
+        ColorsHasher {
+            h: Hasher2::new(count),
+            odd: None,
+        }
+    }
+
+    /// Absorbs the next colours.
+    pub fn absorb(&mut self, colors: &[u32]) {
+        let mut rest = colors;
+        if let Some(first) = self.odd.take() {
+            let Some((&c, tail)) = rest.split_first() else {
+                self.odd = Some(first);
+                return;
+            };
+            self.h.absorb(first as u64 | (c as u64) << 32);
+            rest = tail;
+        }
+        let pairs = rest.chunks_exact(2);
+        self.odd = pairs.remainder().first().copied();
+        for pair in pairs {
+            self.h.absorb(pair[0] as u64 | (pair[1] as u64) << 32);
+        }
+    }
+
+    /// The hash ([`colors_hash`] of the concatenation).
+    pub fn finish(mut self) -> u64 {
+        if let Some(c) = self.odd.take() {
+            self.h.absorb(c as u64);
+        }
+        self.h.0[0] ^ self.h.0[1].rotate_left(17)
+    }
+}
+
 impl ContentDigest {
     /// The digest of `encoded` with `colors` (the decoded colours a reader sees), in O(stored
     /// nodes) for every encoding: each distinct node handle (a tsvdag handle includes its
@@ -214,5 +287,13 @@ mod tests {
         assert_ne!(d.dag, e.dag);
         assert_ne!(colors_hash(&[1, 2]), colors_hash(&[1, 3]));
         assert_ne!(colors_hash(&[]), colors_hash(&[0]));
+        let colors: Vec<u32> = (0..11).map(|i| i * 0x0101_0101).collect();
+        for split in [0, 1, 2, 5, 11] {
+            let mut h = ColorsHasher::new(11);
+            h.absorb(&colors[..split]);
+            h.absorb(&[]);
+            h.absorb(&colors[split..]);
+            assert_eq!(h.finish(), colors_hash(&colors), "split at {split}");
+        }
     }
 }

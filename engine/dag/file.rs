@@ -360,6 +360,16 @@ impl<W: Write> CrcWriter<W> {
     }
 }
 
+impl<W: Write> Write for CrcWriter<W> {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        self.put(buf)?;
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> io::Result<()> {
+        self.inner.flush()
+    }
+}
+
 /// Rounds up to a multiple of 8.
 fn align8(x: u64) -> u64 {
     x.div_ceil(8) * 8
@@ -371,6 +381,9 @@ enum Data<'a> {
     U64(&'a [u64]),
     Bytes(&'a [u8]),
     Owned(Vec<u8>),
+    /// Written by a callback when its turn comes (exactly `.0` bytes): the streaming build's
+    /// spilled colours and the digest computed while they are copied.
+    Stream(u64, &'a dyn Fn(&mut dyn Write) -> io::Result<()>),
 }
 
 impl Data<'_> {
@@ -380,6 +393,7 @@ impl Data<'_> {
             Data::U64(v) => v.len() as u64 * 8,
             Data::Bytes(v) => v.len() as u64,
             Data::Owned(v) => v.len() as u64,
+            Data::Stream(len, _) => *len,
         }
     }
 }
@@ -448,11 +462,78 @@ fn write_file(w: &mut impl Write, h: &HeaderFields, sections: &[(u32, Data)]) ->
             }
             Data::Bytes(v) => out.put(v)?,
             Data::Owned(v) => out.put(v)?,
+            Data::Stream(len, write) => {
+                let start = out.written;
+                write(&mut out)?;
+                if out.written - start != *len {
+                    return Err(io::Error::other(format!(
+                        "section wrote {} bytes, {len} announced",
+                        out.written - start
+                    )));
+                }
+            }
         }
     }
     let crc = out.crc.clone().finalize();
     out.inner.write_all(&crc.to_le_bytes())?;
     Ok(())
+}
+
+/// Writes the file of a streaming build (`dag::stream::save_streamed`): the sections of
+/// [`VdagFile::write_to`] for `encoded` with `color_count` chunked colours whose section
+/// (`chunked_len` bytes, `None` without colours) and content digest are written by callbacks.
+pub(crate) fn write_streamed(
+    w: &mut impl Write,
+    encoded: &EncodedDag,
+    digest: &VoxelDigest,
+    color_count: u64,
+    chunked_len: Option<u64>,
+    chunked: &dyn Fn(&mut dyn Write) -> io::Result<()>,
+    content: &dyn Fn(&mut dyn Write) -> io::Result<()>,
+) -> io::Result<()> {
+    let digest = digest_bytes(digest);
+    let payload;
+    let (count, mut sections) = match encoded {
+        EncodedDag::Svdag32(dag) => (
+            dag.words.len() as u64,
+            vec![
+                (SECTION_LEVELS, Data::U64(&dag.level_starts)),
+                (SECTION_WORDS, Data::U32(&dag.words)),
+                (SECTION_COLORS, Data::U32(&[])),
+                (SECTION_DIGEST, Data::Bytes(&digest)),
+            ],
+        ),
+        other => {
+            payload = other.payload();
+            (
+                payload.len() as u64,
+                vec![
+                    (SECTION_COLORS, Data::U32(&[])),
+                    (SECTION_DIGEST, Data::Bytes(&digest)),
+                    (SECTION_PAYLOAD, Data::Bytes(&payload)),
+                ],
+            )
+        }
+    };
+    if let Some(len) = chunked_len {
+        sections.push((SECTION_CHUNKED_COLORS, Data::Stream(len, chunked)));
+    }
+    sections.push((
+        SECTION_CONTENT_DIGEST,
+        Data::Stream(CONTENT_DIGEST_LEN, content),
+    ));
+    let h = HeaderFields {
+        encoding: Encoding::from(encoded.kind()) as u32,
+        resolution: encoded.resolution(),
+        color_format: if chunked_len.is_some() {
+            ColorFormat::Chunked
+        } else {
+            ColorFormat::None
+        },
+        count,
+        color_count,
+    };
+    write_file(w, &h, &sections)
 }
 
 fn digest_bytes(d: &VoxelDigest) -> [u8; 16] {

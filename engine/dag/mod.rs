@@ -27,6 +27,7 @@ mod query;
 pub mod raycast;
 pub mod ssvdag;
 mod stats;
+pub mod stream;
 pub mod transform;
 pub mod translate;
 mod validate;

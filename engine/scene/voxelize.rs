@@ -684,6 +684,86 @@ pub fn voxelize(
             });
         }
     }
+    let mut out = Voxels {
+        resolution,
+        codes: Vec::new(),
+        colors: Vec::new(),
+    };
+    voxelize_tris(mesh, &tris, resolution, progress, |c, col| {
+        // The estimate can be short: grow fallibly, an error rather than an abort.
+        let grown = out.codes.len() as u64 + c.len() as u64;
+        let bytes = grown * if colors { 12 } else { 8 };
+        crate::safety::check_memory("the voxel arrays", bytes).map_err(|e| {
+            SceneError::TooLarge {
+                path: mesh.source.clone(),
+                reason: e.to_string(),
+            }
+        })?;
+        let reserved =
+            out.codes.try_reserve(c.len()).is_ok() && out.colors.try_reserve(col.len()).is_ok();
+        if !reserved {
+            return Err(SceneError::TooLarge {
+                path: mesh.source.clone(),
+                reason: format!("out of memory for {grown} voxels"),
+            });
+        }
+        out.codes.extend_from_slice(c);
+        out.colors.extend_from_slice(col);
+        Ok(())
+    })?;
+    out.codes.shrink_to_fit();
+    out.colors.shrink_to_fit();
+    Ok(out)
+}
+
+/// Voxelizes `mesh` at `resolution` without collecting the voxels: hands every brick's
+/// ascending Morton codes (and colours, empty when the mesh has none) to `sink`, bricks in
+/// Morton order, so the concatenation of what `sink` sees is [`voxelize`]'s output. Two
+/// groups of bricks (64 per thread) are held at a time: `sink` runs on one of the pool's
+/// threads while the next group is voxelized. No memory guard: the caller bounds
+/// what it keeps (the streaming build, `docs/scaling.md`). Stops at the first error of `sink`.
+pub fn voxelize_stream<E: From<SceneError> + Send>(
+    mesh: &Mesh,
+    resolution: u32,
+    progress: &ProgressBar,
+    sink: impl FnMut(&[u64], &[u32]) -> Result<(), E> + Send,
+) -> Result<(), E> {
+    check_resolution(resolution, &mesh.source)?;
+    let tris = grid_triangles(mesh, resolution)?;
+    voxelize_tris(mesh, &tris, resolution, progress, sink)
+}
+
+/// Estimated surface voxels of `mesh` at `resolution` (the lower bound of the memory guard of
+/// [`voxelize`]: surface area / sqrt(2), degenerate triangles by their longest side).
+pub fn estimate_voxels(mesh: &Mesh, resolution: u32) -> Result<f64, SceneError> {
+    check_resolution(resolution, &mesh.source)?;
+    let tris = grid_triangles(mesh, resolution)?;
+    Ok(estimate_bytes(&tris, false).0)
+}
+
+/// Bytes the streaming voxelizer holds besides the mesh for `triangles` triangles: the grid
+/// triangles, the brick bins (at most 27 bricks per triangle assumed: a triangle smaller than
+/// a brick meets at most 3 per axis) and per thread a brick's scratch space and one group of
+/// bricks' output at `voxels_per_brick` (two groups: one voxelized while the other is consumed).
+pub fn stream_working_set(triangles: usize, colors: bool, voxels_per_brick: f64) -> u64 {
+    let threads = rayon::current_num_threads().max(1) as u64;
+    let cells = 1u64 << (3 * BRICK_LOG);
+    let scratch = cells / 8 + if colors { cells * 12 } else { 0 };
+    let per_voxel = if colors { 12.0 } else { 8.0 };
+    let group = 2.0 * (64 * threads) as f64 * voxels_per_brick * per_voxel;
+    let tris = triangles as u64 * (std::mem::size_of::<GridTriangle>() as u64 + 27 * 8);
+    tris + threads * scratch + group as u64
+}
+
+/// The brick loop of [`voxelize`] and [`voxelize_stream`] on prepared grid triangles.
+fn voxelize_tris<E: From<SceneError> + Send>(
+    mesh: &Mesh,
+    tris: &[GridTriangle],
+    resolution: u32,
+    progress: &ProgressBar,
+    mut sink: impl FnMut(&[u64], &[u32]) -> Result<(), E> + Send,
+) -> Result<(), E> {
+    let colors = mesh.has_colors;
     let res_log = resolution.trailing_zeros();
     let brick_log = BRICK_LOG.min(res_log);
     // Bin triangles into bricks: key = brick Morton code << 32 | triangle index. A triangle
@@ -736,56 +816,49 @@ pub fn voxelize(
     progress.set_position(0);
     let ctx = Ctx {
         mesh,
-        tris: &tris,
+        tris,
         resolution,
         brick_log,
         colors,
     };
-    let mut out = Voxels {
-        resolution,
-        codes: Vec::new(),
-        colors: Vec::new(),
-    };
     let chunk = 64 * rayon::current_num_threads().max(1);
-    for group in bricks.chunks(chunk) {
-        let results: Vec<BrickOut> = group
-            .par_iter()
-            .map_init(
-                || Scratch {
-                    bits: Vec::new(),
-                    best_d2: Vec::new(),
-                    best_tri: Vec::new(),
-                },
-                |s, &(b, from, to)| voxelize_brick(&ctx, s, b, &pairs[from..to]),
-            )
-            .collect();
+    // Pipelined: the sink consumes one group (on one thread) while the next is voxelized.
+    let mut pending: Option<Vec<BrickOut>> = None;
+    let mut drain = |results: &[BrickOut]| -> Result<(), E> {
         for (c, col) in results {
-            // The estimate can be short: grow fallibly, an error rather than an abort.
-            let grown = out.codes.len() as u64 + c.len() as u64;
-            let bytes = grown * if colors { 12 } else { 8 };
-            crate::safety::check_memory("the voxel arrays", bytes).map_err(|e| {
-                SceneError::TooLarge {
-                    path: mesh.source.clone(),
-                    reason: e.to_string(),
-                }
-            })?;
-            let reserved =
-                out.codes.try_reserve(c.len()).is_ok() && out.colors.try_reserve(col.len()).is_ok();
-            if !reserved {
-                return Err(SceneError::TooLarge {
-                    path: mesh.source.clone(),
-                    reason: format!("out of memory for {grown} voxels"),
-                });
-            }
-            out.codes.extend_from_slice(&c);
-            out.colors.extend_from_slice(&col);
+            sink(c, col)?;
         }
+        Ok(())
+    };
+    for group in bricks.chunks(chunk) {
+        let compute = || -> Vec<BrickOut> {
+            group
+                .par_iter()
+                .map_init(
+                    || Scratch {
+                        bits: Vec::new(),
+                        best_d2: Vec::new(),
+                        best_tri: Vec::new(),
+                    },
+                    |s, &(b, from, to)| voxelize_brick(&ctx, s, b, &pairs[from..to]),
+                )
+                .collect()
+        };
+        let results = match pending.take() {
+            Some(previous) => {
+                let (results, drained) = rayon::join(compute, || drain(&previous));
+                drained?;
+                results
+            }
+            None => compute(),
+        };
+        pending = Some(results);
         progress.inc(group.len() as u64);
     }
-    drop(pairs);
-    out.codes.shrink_to_fit();
-    out.colors.shrink_to_fit();
-    Ok(out)
+    if let Some(previous) = pending {
+        drain(&previous)?;
+    }
+    Ok(())
 }
 
 /// Reference voxelizer: tests every voxel of the grid against every triangle with
