@@ -218,7 +218,8 @@ fn bad_inputs_fail_cleanly_without_output() {
         &["1048576"],
     );
     // 65536^3 is a valid resolution, but 64 stacked full-size planes there need ~2 TiB of voxels:
-    // refused up front, before any allocation.
+    // the in-memory build refuses up front, before any allocation (the streaming build, the
+    // default, would run it in bounded memory for hours).
     let mut planes = String::new();
     for i in 0..64 {
         let y = i as f32 / 63.0;
@@ -228,7 +229,7 @@ fn bad_inputs_fail_cleanly_without_output() {
     }
     let planes = write(dir.path(), "planes.obj", planes.as_bytes());
     assert_clean_error(
-        &voxdag(&["build", s(&planes), "-r", "65536", "-o", out, "-q"]),
+        &voxdag(&["build", s(&planes), "-r", "65536", "--in-memory", "-o", out, "-q"]),
         &["planes.obj", "memory"],
     );
     assert!(
