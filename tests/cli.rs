@@ -229,7 +229,16 @@ fn bad_inputs_fail_cleanly_without_output() {
     }
     let planes = write(dir.path(), "planes.obj", planes.as_bytes());
     assert_clean_error(
-        &voxdag(&["build", s(&planes), "-r", "65536", "--in-memory", "-o", out, "-q"]),
+        &voxdag(&[
+            "build",
+            s(&planes),
+            "-r",
+            "65536",
+            "--in-memory",
+            "-o",
+            out,
+            "-q",
+        ]),
         &["planes.obj", "memory"],
     );
     assert!(
