@@ -3,7 +3,7 @@
 
 use std::io::{BufRead, BufReader};
 use std::process::{Child, Command, Output, Stdio};
-use std::sync::Mutex;
+use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 /// A private Xvfb server, terminated on drop.
@@ -11,6 +11,9 @@ pub struct Xvfb {
     child: Child,
     /// The display name (":N").
     pub display: String,
+    /// Held while the server lives: one server per test binary at a time, so no server's
+    /// shutdown (which removes its lock and socket) can race another's start on the same display.
+    _one_at_a_time: Option<MutexGuard<'static, ()>>,
 }
 
 /// Serialises the Xvfb start-ups of this test binary (its tests run in parallel). An X server
@@ -26,16 +29,17 @@ impl Xvfb {
     /// accepts connections) and checks that a client can connect; a server that cannot be
     /// reached (another process raced it for the display) is replaced, at most 3 times.
     pub fn start() -> Xvfb {
-        let _one_at_a_time = XVFB_START.lock().unwrap_or_else(|e| e.into_inner());
+        let one_at_a_time = XVFB_START.lock().unwrap_or_else(|e| e.into_inner());
         let mut failures = Vec::new();
         for _ in 0..3 {
-            let x = Xvfb::spawn();
+            let mut x = Xvfb::spawn();
             let probe = Command::new("xdotool")
                 .arg("getdisplaygeometry")
                 .env("DISPLAY", &x.display)
                 .output()
                 .unwrap_or_else(|e| panic!("cannot run xdotool ({e}): run tools/setup.sh"));
             if probe.status.success() {
+                x._one_at_a_time = Some(one_at_a_time);
                 return x;
             }
             failures.push(format!(
@@ -75,6 +79,7 @@ impl Xvfb {
         Xvfb {
             child,
             display: format!(":{number}"),
+            _one_at_a_time: None,
         }
     }
 }
