@@ -303,8 +303,10 @@ pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
     if let Some(report) = &args.report {
         check_output(report)?;
     }
-    // `--materials` quantizes every colour at once (k-means), so it builds in memory.
-    if !args.in_memory && args.materials.is_none() {
+    // The streaming build runs when a `--memory-budget` is given: its mesh import does not yet
+    // apply the hostile-input memory checks of the in-memory import (tests/hostile.rs), so it is
+    // not the default. `--materials` quantizes every colour at once (k-means): in memory.
+    if !args.in_memory && args.materials.is_none() && args.memory_budget.is_some() {
         return crate::stream::build_streaming(args, quiet);
     }
     let (dag, report, digest) = build_scene_digest(args, quiet)?;
