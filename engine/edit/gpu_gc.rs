@@ -292,18 +292,11 @@ impl GpuHashDag {
         }
         // Leaf roots (a one-level grid has none) and roots of a root-level-0 grid cannot occur:
         // root levels start at 1, and the first pass marks the roots themselves.
-        let dummy = ctx.create_buffer("hash dag gc no handles", 4, MemLocation::GpuOnly)?;
         let mut cmd = ctx.begin_commands("hash dag gc sweep")?;
         let mut pending = Vec::new();
         for (table, collector) in self.tables.iter().zip(&self.gc_state.collectors) {
-            // The marks are already set: the collector's own mark pass gets no handles.
-            pending.push(collector.record_collect(
-                &mut cmd,
-                table,
-                &dummy,
-                0,
-                profiler.as_deref_mut(),
-            )?);
+            // The marks are already set by the passes above: sweep only.
+            pending.push(collector.record_sweep(&mut cmd, table, profiler.as_deref_mut())?);
         }
         cmd.submit_async()?;
         for ((p, collector), s) in pending.into_iter().zip(&self.gc_state.collectors).zip(0..) {

@@ -294,24 +294,15 @@ impl GpuGarbageCollector {
         count: u32,
         mut profiler: Option<&mut Profiler>,
     ) -> Result<PendingGc, HashError> {
-        if table.layout() != self.layout {
-            return Err(HashError::InvalidArgument(format!(
-                "collector built for {:?}, table is {:?}",
-                self.layout,
-                table.layout()
-            )));
-        }
+        self.check_layout(table)?;
         if live.size() < 4 * count as u64 {
             return Err(HashError::InvalidArgument(format!(
                 "buffer '{}' holds fewer than {count} handles",
                 live.name()
             )));
         }
-        let counters = &self.counters;
-        let push = table.push_constants(counters.address(), live.address(), count);
-        let buckets = table.config().buckets;
-        cmd.fill_buffer(counters, 0);
-        table.record_gc_side_effects(cmd);
+        let push = table.push_constants(self.counters.address(), live.address(), count);
+        self.record_start(cmd, table);
         if let Some(p) = profiler.as_deref_mut() {
             p.begin_pass(cmd, "hash gc mark");
         }
@@ -326,16 +317,62 @@ impl GpuGarbageCollector {
             p.end_pass(cmd);
         }
         cmd.barrier();
+        self.record_sweep_pass(cmd, table, &push, profiler)
+    }
+
+    /// Records a sweep of `table` whose live items were marked by the caller's own passes (the
+    /// hash DAG's GC marks what its roots reach): every unmarked item is freed, as in
+    /// [`GpuGarbageCollector::record_collect`] without its mark pass.
+    pub fn record_sweep<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        table: &'a GpuHashTable,
+        profiler: Option<&mut Profiler>,
+    ) -> Result<PendingGc, HashError> {
+        self.check_layout(table)?;
+        // The sweep reads no handles.
+        let push = table.push_constants(self.counters.address(), 0, 0);
+        self.record_start(cmd, table);
+        self.record_sweep_pass(cmd, table, &push, profiler)
+    }
+
+    fn check_layout(&self, table: &GpuHashTable) -> Result<(), HashError> {
+        if table.layout() != self.layout {
+            return Err(HashError::InvalidArgument(format!(
+                "collector built for {:?}, table is {:?}",
+                self.layout,
+                table.layout()
+            )));
+        }
+        Ok(())
+    }
+
+    /// What every collection records first: zeroed counters and the table's GC side effects.
+    fn record_start<'a>(&'a self, cmd: &mut Commands<'a>, table: &'a GpuHashTable) {
+        cmd.fill_buffer(&self.counters, 0);
+        table.record_gc_side_effects(cmd);
+    }
+
+    /// The sweep pass and the readbacks [`GpuGarbageCollector::finish_collect`] reads.
+    fn record_sweep_pass<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        table: &'a GpuHashTable,
+        push: &super::layout::HashPush,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<PendingGc, HashError> {
         if let Some(p) = profiler.as_deref_mut() {
             p.begin_pass(cmd, "hash gc sweep");
         }
-        let sweep_groups = buckets
+        let sweep_groups = table
+            .config()
+            .buckets
             .div_ceil(self.workgroup / self.team)
             .min(MAX_WORKGROUPS);
         cmd.dispatch(
             &self.sweep,
             [sweep_groups, 1, 1],
-            bytemuck::bytes_of(&push),
+            bytemuck::bytes_of(push),
             None,
         )?;
         if let Some(p) = profiler {
@@ -343,7 +380,7 @@ impl GpuGarbageCollector {
         }
         cmd.barrier();
         Ok(PendingGc {
-            counters: cmd.readback::<GcCounters>(counters, 0, 1)?,
+            counters: cmd.readback::<GcCounters>(&self.counters, 0, 1)?,
             status: cmd.readback::<HashStatus>(table.pool().status_buffer(), 0, 1)?,
         })
     }
