@@ -297,7 +297,7 @@ pub fn expand_materials(file: &mut VdagFile) {
     }
 }
 
-/// `voxdag build`: the streaming build, or the in-memory one with `--in-memory`.
+/// `voxdag build`: the streaming build with `--memory-budget`, else the in-memory one.
 pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
     check_output(&args.output)?;
     if let Some(report) = &args.report {
