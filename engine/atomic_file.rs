@@ -5,7 +5,7 @@ use std::ffi::{c_char, CString};
 use std::fs::{File, OpenOptions};
 use std::io::{self, BufWriter};
 use std::os::unix::ffi::OsStrExt;
-use std::os::unix::fs::PermissionsExt;
+use std::os::unix::fs::OpenOptionsExt;
 use std::path::{Path, PathBuf};
 use std::ptr::null_mut;
 use std::sync::atomic::{AtomicPtr, Ordering};
@@ -150,12 +150,25 @@ pub fn write_atomic(
     let mut prefix = std::ffi::OsString::from(".");
     prefix.push(name);
     prefix.push(".tmp-");
+    // The name is registered before the file exists: a signal that arrives while the file is
+    // being created still removes it (registering after creation left it behind).
+    let mut slot = None;
     let (file, tmp) = tempfile::Builder::new()
         .prefix(&prefix)
-        .permissions(std::fs::Permissions::from_mode(0o666))
-        .tempfile_in(&dir)?
+        .make_in(&dir, |candidate| {
+            let registered = register_temp(candidate);
+            let created = OpenOptions::new()
+                .write(true)
+                .create_new(true)
+                .mode(0o666)
+                .open(candidate);
+            match &created {
+                Ok(_) => slot = registered,
+                Err(_) => registered.into_iter().for_each(unregister_temp),
+            }
+            created
+        })?
         .into_parts();
-    let slot = register_temp(&tmp);
     let result = (|| -> io::Result<()> {
         let mut out = BufWriter::new(file);
         write(&mut out)?;
