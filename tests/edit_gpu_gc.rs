@@ -304,12 +304,10 @@ fn gc_of_a_fresh_load_frees_nothing_and_an_empty_history_frees_everything() {
     assert_clean(&ctx);
 }
 
-/// A pool of one super block with one bucket per possible item (every item takes its own
-/// slab): a long sequence of sphere removals in a noise band runs out of slabs without GC and
-/// runs to the end with automatic GC (and matches the CPU editor).
-#[test]
-fn auto_gc_lets_a_tiny_pool_run_a_long_edit_sequence() {
-    let ctx = common::gpu();
+/// A noise band 48 voxels thick in a 128^3 grid and 80 sphere removals inside it: in a pool of
+/// one super block with one bucket per possible item (every item takes its own slab), the
+/// sequence runs the pool out without GC.
+fn tiny_pool_scene() -> (Svdag, Vec<Tool>) {
     let resolution = 128;
     let mut rng = common::Rng(11);
     let coords: Vec<[u32; 3]> = (0..resolution)
@@ -328,11 +326,26 @@ fn auto_gc_lets_a_tiny_pool_run_a_long_edit_sequence() {
             radius: 14.5,
         })
         .collect();
-    let capped = |threshold| GpuHashDagConfig {
+    (dag, tools)
+}
+
+/// The pool of [`tiny_pool_scene`]: one super block at most, a bucket per item.
+fn tiny_pool(threshold: Option<f32>, undo_depth: usize) -> GpuHashDagConfig {
+    GpuHashDagConfig {
         max_super_blocks: 1,
         auto_gc_threshold: threshold,
-        ..GpuHashDagConfig::new(HashVariant::TicketBoard, 1 << 20).with_undo_depth(1)
-    };
+        ..GpuHashDagConfig::new(HashVariant::TicketBoard, 1 << 20).with_undo_depth(undo_depth)
+    }
+}
+
+/// A long sequence of sphere removals in a tiny pool ([`tiny_pool_scene`]) runs out of slabs
+/// without GC and runs to the end with automatic GC (and matches the CPU editor).
+#[test]
+fn auto_gc_lets_a_tiny_pool_run_a_long_edit_sequence() {
+    let ctx = common::gpu();
+    let (dag, tools) = tiny_pool_scene();
+    let resolution = dag.resolution;
+    let capped = |threshold| tiny_pool(threshold, 1);
     // Without GC the pool runs out.
     let mut hd = GpuHashDag::load(&ctx, &capped(None), &dag, None).unwrap();
     let failed = tools.iter().position(|t| match gpu_edit(&mut hd, t) {
@@ -362,6 +375,72 @@ fn auto_gc_lets_a_tiny_pool_run_a_long_edit_sequence() {
     hd.gc(None).unwrap();
     cpu.gc().unwrap();
     check_after_gc(&hd, &cpu, "tiny pool");
+    drop(hd);
+    assert_clean(&ctx);
+}
+
+/// Automatic GC with a threshold no pool passes before an edit (1.0): every collection comes
+/// from an edit that ran the tiny pool out ([`tiny_pool_scene`]); it frees the failed attempt's
+/// items and the dropped history, and the edit's second attempt succeeds, so the whole
+/// sequence runs and matches the CPU editor. With a history that keeps every root (nothing to
+/// free but the failed attempt's items), an edit fails after its retry with `Exhausted`, and
+/// the previous root stays current with its voxels.
+#[test]
+fn an_exhausted_edit_collects_garbage_and_retries() {
+    let ctx = common::gpu();
+    let (dag, tools) = tiny_pool_scene();
+    let resolution = dag.resolution;
+    let mut hd = GpuHashDag::load(&ctx, &tiny_pool(Some(1.0), 1), &dag, None).unwrap();
+    let mut cpu_dag = HashDag::new(resolution, false).unwrap();
+    let root = cpu_dag.insert_svdag(&dag, None).unwrap();
+    let mut cpu = CpuEditor::new(cpu_dag, root, 1);
+    let mut runs = Vec::new();
+    for (i, t) in tools.iter().enumerate() {
+        gpu_edit(&mut hd, t).unwrap_or_else(|e| panic!("edit {i}: {e}"));
+        cpu.edit(t).unwrap();
+        runs.extend(hd.take_auto_gc());
+    }
+    assert!(!runs.is_empty(), "no edit ran the pool out");
+    eprintln!("{} collections after exhausted edits", runs.len());
+    assert!(runs.iter().all(|r| r.automatic && r.freed > 0));
+    hd.gc(None).unwrap();
+    cpu.gc().unwrap();
+    check_after_gc(&hd, &cpu, "retried edits");
+    drop(hd);
+
+    // Every root kept: the retry cannot find room, the edit fails and changes nothing.
+    let mut hd = GpuHashDag::load(&ctx, &tiny_pool(Some(1.0), 1000), &dag, None).unwrap();
+    let mut cpu_dag = HashDag::new(resolution, false).unwrap();
+    let root = cpu_dag.insert_svdag(&dag, None).unwrap();
+    let mut cpu = CpuEditor::new(cpu_dag, root, 1000);
+    let mut failed = false;
+    for (i, t) in tools.iter().enumerate() {
+        let before = hd.root();
+        match gpu_edit(&mut hd, t) {
+            Ok(()) => {
+                cpu.edit(t).unwrap();
+            }
+            Err(GpuDagError::Hash(HashError::Exhausted { .. })) => {
+                assert_eq!(hd.root(), before, "edit {i}: root kept");
+                assert!(
+                    hd.take_auto_gc().iter().any(|r| r.automatic && r.freed > 0),
+                    "edit {i}: the failed attempt's items were collected"
+                );
+                failed = true;
+            }
+            Err(e) => panic!("edit {i}: {e}"),
+        }
+        let image = hd.download().unwrap();
+        assert_eq!(
+            image.voxels(hd.root()).unwrap(),
+            cpu.dag().voxels(cpu.root()).unwrap(),
+            "edit {i}: voxels"
+        );
+        if failed {
+            break;
+        }
+    }
+    assert!(failed, "the pool never ran out with every root kept");
     drop(hd);
     assert_clean(&ctx);
 }

@@ -19,7 +19,8 @@
 //! The undo depth ([`GpuHashDagConfig::undo_depth`]) bounds the history: an edit drops the redo
 //! branch and the oldest roots beyond the depth; the next GC frees what only they reached. GC
 //! runs on request ([`GpuHashDag::gc`]) and automatically before an edit once a table's pool
-//! use passes [`GpuHashDagConfig::auto_gc_threshold`].
+//! use passes [`GpuHashDagConfig::auto_gc_threshold`], and after an edit that ran a pool out
+//! (the edit then runs once more).
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -166,6 +167,17 @@ impl GpuHashDag {
         stats.automatic = true;
         self.gc_state.auto_runs.push(stats);
         Ok(true)
+    }
+
+    /// After an edit ran a pool out: a GC (logged as automatic, [`GpuHashDag::take_auto_gc`])
+    /// frees the failed attempt's unreachable items and whatever else only dropped roots
+    /// reached; returns whether it freed anything (then the edit is worth one more attempt).
+    pub(super) fn gc_after_exhaustion(&mut self) -> Result<bool, GpuDagError> {
+        let mut stats = self.gc(None)?;
+        stats.automatic = true;
+        let freed = stats.freed > 0;
+        self.gc_state.auto_runs.push(stats);
+        Ok(freed)
     }
 
     /// Garbage collection from every live root ([`GpuHashDag::roots`]): marks what they reach

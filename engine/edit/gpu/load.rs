@@ -18,8 +18,7 @@ use std::sync::Arc;
 use rustc_hash::FxHashMap;
 
 use super::{
-    root_from_value, GpuDagError, GpuHashDag, GpuHashDagConfig, HashDagImage, MergeLevel,
-    VALUE_EMPTY, VALUE_TEMP,
+    GpuDagError, GpuHashDag, GpuHashDagConfig, HashDagImage, MergeLevel, VALUE_EMPTY, VALUE_TEMP,
 };
 use crate::attr::Materials;
 use crate::dag::encode::{EncodedDag, VoxelDigest};
@@ -172,8 +171,7 @@ impl GpuHashDag {
         }
         let results = below.expect("the root level always has its record");
         // The root level has one record, the root.
-        let root = hd.ctx.read_buffer::<u32>(&results, 0, 1)?[0];
-        hd.roots = vec![root_from_value(root)?];
+        hd.roots = vec![hd.read_root(&results)?];
         if let Some(p) = profiler {
             p.resolve()?;
         }
