@@ -41,12 +41,15 @@ fn prepared(source: &SceneSource, name: &str, k: u32, resolutions: &[u32]) -> Pa
 
 /// Every combination of the three lists, in order.
 fn combos<A: Copy, B: Copy, C: Copy>(a: [A; 3], b: [B; 2], c: [C; 2]) -> Vec<(A, B, C)> {
-    a.iter()
-        .flat_map(|&x| {
-            b.iter()
-                .flat_map(move |&y| c.iter().map(move |&z| (x, y, z)))
-        })
-        .collect()
+    let mut out = Vec::new();
+    for x in a {
+        for y in b {
+            for z in c {
+                out.push((x, y, z));
+            }
+        }
+    }
+    out
 }
 
 fn bits(image: &voxdag::ooc::Image) -> Vec<[u32; 3]> {
