@@ -39,6 +39,19 @@ fn prepared(source: &SceneSource, name: &str, k: u32, resolutions: &[u32]) -> Pa
     dir
 }
 
+/// Every combination of the three lists, in order.
+fn combos<A: Copy, B: Copy, C: Copy>(a: [A; 3], b: [B; 2], c: [C; 2]) -> Vec<(A, B, C)> {
+    let mut out = Vec::new();
+    for x in a {
+        for y in b {
+            for z in c {
+                out.push((x, y, z));
+            }
+        }
+    }
+    out
+}
+
 fn bits(image: &voxdag::ooc::Image) -> Vec<[u32; 3]> {
     image.pixels.iter().map(|p| p.map(f32::to_bits)).collect()
 }
@@ -62,6 +75,21 @@ fn check_conservative(dir: &Path, resolution: u32) -> usize {
                 assert!(set.contains(i as u32, v), "point {i}: voxel {v:?} missing");
             });
             assert!(any, "point {i}: a triangle overlaps no voxel");
+            // The separating-axis test itself on every cell of the vertices' cell box (the
+            // voxelizer skips it for triangles inside one cell).
+            let gt = grid.triangle(&t);
+            let cells = t.map(|v| grid.cell(grid.to_grid(v)));
+            let lo = [0, 1, 2].map(|k| cells.iter().map(|c| c[k]).min().unwrap());
+            let hi = [0, 1, 2].map(|k| cells.iter().map(|c| c[k]).max().unwrap());
+            for z in lo[2]..=hi[2] {
+                for y in lo[1]..=hi[1] {
+                    for x in lo[0]..=hi[0] {
+                        if voxdag::scene::voxelize::tri_box_overlap(&gt, [x, y, z]) {
+                            assert!(set.contains(i as u32, [x, y, z]), "point {i}: overlap");
+                        }
+                    }
+                }
+            }
             let c = [0, 1, 2].map(|k| (t[0][k] + t[1][k] + t[2][k]) / 3.0);
             for v in [t[0], t[1], t[2], c] {
                 let cell = grid.cell(grid.to_grid(v));
@@ -99,10 +127,13 @@ fn out_of_core_equals_in_core_bit_for_bit() {
         "a flat image"
     );
     let largest = scene.points.iter().map(|p| p.bytes()).max().unwrap();
-    for budget_points in [2u64, 6, 1000] {
-        for with_proxies in [false, true] {
+    for (budget_points, with_proxies, lookahead) in
+        combos([2u64, 6, 1000], [false, true], [false, true])
+    {
+        {
             let opts = RenderOptions {
                 memory_budget: proxies.bytes() + budget_points * 3 * largest,
+                lookahead,
                 ..base.clone()
             };
             let set = with_proxies.then_some(&proxies);
@@ -111,8 +142,11 @@ fn out_of_core_equals_in_core_bit_for_bit() {
             assert_eq!(
                 bits(&image),
                 bits(&reference),
-                "budget {budget_points} points, proxies {with_proxies}"
+                "budget {budget_points} points, proxies {with_proxies}, lookahead {lookahead}"
             );
+            if !lookahead {
+                assert_eq!(stats.speculative_visits + stats.requeued_rays, 0);
+            }
             assert_eq!(stats.rays, ref_stats.rays);
             assert!(stats.peak_cache_bytes <= opts.memory_budget - stats.proxy_bytes);
             assert_eq!(stats.cache_hits + stats.cache_misses, stats.batching_events);
@@ -443,7 +477,8 @@ fn listing(dir: &Path) -> Vec<String> {
 #[test]
 fn failed_prepare_leaves_no_temporary_files() {
     let source = SceneSource::landscape(vec![avocado()], 20_000, 5).unwrap();
-    // Tiny buckets: the grouping goes through bucket files, as for a scene larger than memory.
+    // Tiny buckets: the grouping regenerates the triangles bucket by bucket, as for a scene
+    // larger than memory.
     let options = PrepareOptions {
         batch_triangles: 2000,
         proxy_resolutions: vec![16],
@@ -476,6 +511,46 @@ fn failed_prepare_leaves_no_temporary_files() {
         [format::GEOMETRY_FILE, format::INDEX_FILE, "proxies-16.bin"]
     );
     for d in [failed_geometry, failed_proxies, clean] {
+        std::fs::remove_dir_all(d).unwrap();
+    }
+}
+
+/// All triangles of a scene directory as bit patterns, sorted.
+fn triangle_multiset(dir: &Path) -> Vec<[[u32; 3]; 3]> {
+    let scene = OocScene::open(dir).unwrap();
+    let mut all = Vec::new();
+    for i in 0..scene.points.len() as u32 {
+        all.extend(
+            scene
+                .read_point(i)
+                .unwrap()
+                .iter()
+                .map(|t| t.map(|v| v.map(f32::to_bits))),
+        );
+    }
+    all.sort_unstable();
+    all
+}
+
+#[test]
+fn bucketed_grouping_keeps_every_triangle_once() {
+    // Terrain plus copies; tiny buckets cut the scene into many boxes that copies and terrain
+    // cells straddle: each bucket regenerates only what reaches its box.
+    let source = SceneSource::landscape(vec![avocado()], 60_000, 11).unwrap();
+    let whole = prepared(&source, "bucket-whole", 2000, &[16]);
+    let cut = scratch("bucket-cut");
+    let options = PrepareOptions {
+        batch_triangles: 2000,
+        proxy_resolutions: vec![16],
+        bucket_bytes: 1 << 13,
+    };
+    prepare(&source, &cut, &options, &ProgressBar::hidden()).unwrap();
+    let (a, b) = (triangle_multiset(&whole), triangle_multiset(&cut));
+    assert_eq!(a.len() as u64, source.triangle_count());
+    assert!(a == b, "the bucketed scene holds other triangles");
+    let points = |d: &Path| OocScene::open(d).unwrap().points.len();
+    assert!(points(&cut) > points(&whole), "the buckets cut points");
+    for d in [whole, cut] {
         std::fs::remove_dir_all(d).unwrap();
     }
 }

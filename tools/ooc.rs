@@ -70,12 +70,13 @@ pub struct GenerateArgs {
     layout: LayoutArgs,
 }
 
-/// Proxy culling on or off.
+/// A switch (`--proxies`: queue rays only at points whose proxy they touch, or at every point
+/// whose bounds they enter; `--lookahead`).
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
 pub enum OnOff {
-    /// Queue rays only at points whose proxy they touch.
+    /// On.
     On,
-    /// Queue rays at every point whose bounds they enter.
+    /// Off.
     Off,
 }
 
@@ -108,6 +109,10 @@ pub struct OocRenderArgs {
     /// Rays in flight.
     #[arg(long, default_value_t = 1 << 16)]
     rays_in_flight: usize,
+    /// Lookahead: a ray waiting for a point that is not resident first visits the resident
+    /// points after it; a chosen point's rays are traced again before it is loaded.
+    #[arg(long, value_enum, default_value = "on")]
+    lookahead: OnOff,
     /// Camera position x,y,z (default: in front of and above the scene).
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     eye: Option<[f32; 3]>,
@@ -284,6 +289,7 @@ fn render(args: &OocRenderArgs, quiet: bool) -> Result<()> {
         max_bounces: args.max_bounces,
         memory_budget: args.memory_budget,
         rays_in_flight: args.rays_in_flight,
+        lookahead: args.lookahead == OnOff::On,
         eye: args.eye,
         target: args.target,
         ..Default::default()

@@ -3,13 +3,15 @@
 //! directory with its proxies.
 //!
 //! Grouping: each triangle's centroid gets a 30-bit Morton code over the scene bounds. The
-//! triangles are first spread over `2^B` bucket files by the top `B` bits (so a scene far larger
-//! than memory is never held at once), then each bucket is sorted by code and split recursively
-//! at the highest differing code bit (as an LBVH would) until a range holds at most
+//! codes are cut into `2^B` buckets by their top `B` bits (so a scene far larger than memory is
+//! never held at once); each bucket's triangles are regenerated from the source when its turn
+//! comes (only the mesh copies and terrain cells whose bounds reach the bucket's box are
+//! produced, nothing is written to temporary files), sorted by code and split recursively at
+//! the highest differing code bit (as an LBVH would) until a range holds at most
 //! `batch_triangles` triangles: one batching point per range.
 
 use std::fs::File;
-use std::io::{BufReader, BufWriter, Read, Seek, SeekFrom, Write};
+use std::io::{BufWriter, Write};
 use std::path::Path;
 
 use indicatif::ProgressBar;
@@ -60,6 +62,19 @@ pub struct Instance {
 }
 
 impl Instance {
+    /// Bounds of the copy of a mesh with bounds `mb`: its transformed corners, widened by a
+    /// relative margin that covers the rounding of the transformed vertices.
+    fn bounds(&self, mb: &Aabb) -> Aabb {
+        let mut b = Aabb::EMPTY;
+        for c in 0..8 {
+            let p = [0, 1, 2].map(|k| if c >> k & 1 == 0 { mb.lo[k] } else { mb.hi[k] });
+            let q = self.apply(p);
+            b.grow(q.map(|v| v - v.abs() * 1e-6 - 1e-6));
+            b.grow(q.map(|v| v + v.abs() * 1e-6 + 1e-6));
+        }
+        b
+    }
+
     fn apply(&self, p: [f32; 3]) -> [f32; 3] {
         let m = &self.transform;
         [0, 1, 2].map(|r| {
@@ -129,13 +144,12 @@ impl Terrain {
         [x as f32, self.height_at(x, z) as f32, z as f32]
     }
 
-    /// The triangles of row `j` of cells.
-    fn row(&self, j: u32, out: &mut Vec<Tri>) {
-        for i in 0..self.cells {
-            let a = self.vertex(i, j);
-            let b = self.vertex(i + 1, j);
-            let c = self.vertex(i, j + 1);
-            let d = self.vertex(i + 1, j + 1);
+    /// The triangles of cells `i0..i1` of row `j`, in cell order (each vertex evaluated once).
+    fn row(&self, j: u32, i0: u32, i1: u32, out: &mut Vec<Tri>) {
+        let near: Vec<[f32; 3]> = (i0..=i1).map(|i| self.vertex(i, j)).collect();
+        let far: Vec<[f32; 3]> = (i0..=i1).map(|i| self.vertex(i, j + 1)).collect();
+        for k in 0..(i1 - i0) as usize {
+            let (a, b, c, d) = (near[k], near[k + 1], far[k], far[k + 1]);
             out.push([a, c, b]);
             out.push([b, c, d]);
         }
@@ -172,14 +186,7 @@ impl SceneSource {
         let mesh_bounds: Vec<Aabb> = self.meshes.iter().map(SourceMesh::bounds).collect();
         let mut b = Aabb::EMPTY;
         for inst in &self.instances {
-            let mb = &mesh_bounds[inst.mesh as usize];
-            for c in 0..8 {
-                let p = [0, 1, 2].map(|k| if c >> k & 1 == 0 { mb.lo[k] } else { mb.hi[k] });
-                // Rounding of the corner may fall inside; widen by a relative ulp margin.
-                let q = inst.apply(p);
-                b.grow(q.map(|v| v - v.abs() * 1e-6 - 1e-6));
-                b.grow(q.map(|v| v + v.abs() * 1e-6 + 1e-6));
-            }
+            b.union(&inst.bounds(&mesh_bounds[inst.mesh as usize]));
         }
         if let Some(t) = &self.terrain {
             let h = t.height as f32;
@@ -189,36 +196,61 @@ impl SceneSource {
         b
     }
 
-    /// Calls `f` with consecutive chunks of all triangles in a fixed order.
-    pub fn for_each_chunk(
-        &self,
-        mut f: impl FnMut(&[Tri]) -> Result<(), OocError>,
-    ) -> Result<(), OocError> {
-        let mut buf: Vec<Tri> = Vec::with_capacity(1 << 16);
+    /// The triangles whose centroid lies in `region`, in a fixed order (the terrain row by row, then the copies):
+    /// regenerated from the meshes and the terrain (only the copies and terrain cells whose
+    /// bounds reach the region), so a bucket of a scene larger than memory needs no file.
+    fn region_triangles(&self, q: &Quantizer, region: &Region) -> Vec<(u32, Tri)> {
+        let mut out: Vec<(u32, Tri)> = Vec::new();
         if let Some(t) = &self.terrain {
-            for j in 0..t.cells {
-                t.row(j, &mut buf);
-                if buf.len() >= 1 << 15 {
-                    f(&buf)?;
-                    buf.clear();
+            // Cells whose x/z span reaches the region's (one cell of slack for rounding).
+            let step = t.size / t.cells as f64;
+            let span = |k: usize| -> (u32, u32) {
+                let (a, b) = q.world_span(region, k);
+                let lo = ((a / step).floor() - 1.0).max(0.0);
+                let hi = ((b / step).ceil() + 1.0).min(t.cells as f64);
+                if hi <= lo {
+                    (0, 0)
+                } else {
+                    (lo as u32, hi as u32)
                 }
-            }
+            };
+            let ((i0, i1), (j0, j1)) = (span(0), span(2));
+            let rows: Vec<Vec<(u32, Tri)>> = (j0..j1)
+                .into_par_iter()
+                .map(|j| {
+                    let mut tris = Vec::new();
+                    if i1 > i0 {
+                        t.row(j, i0, i1, &mut tris);
+                    }
+                    tris.into_iter()
+                        .map(|tri| (q.code(&tri), tri))
+                        .filter(|(c, _)| region.holds(*c))
+                        .collect()
+                })
+                .collect();
+            out.extend(rows.into_iter().flatten());
         }
-        for inst in &self.instances {
-            let m = &self.meshes[inst.mesh as usize];
-            let pos: Vec<[f32; 3]> = m.positions.iter().map(|&p| inst.apply(p)).collect();
-            for tri in &m.triangles {
-                buf.push(tri.map(|i| pos[i as usize]));
-                if buf.len() >= 1 << 15 {
-                    f(&buf)?;
-                    buf.clear();
+        let mesh_bounds: Vec<Aabb> = self.meshes.iter().map(SourceMesh::bounds).collect();
+        let copies: Vec<Vec<(u32, Tri)>> = self
+            .instances
+            .par_iter()
+            .map(|inst| {
+                let b = inst.bounds(&mesh_bounds[inst.mesh as usize]);
+                if !region.overlaps(q.cell(b.lo), q.cell(b.hi)) {
+                    return Vec::new();
                 }
-            }
-        }
-        if !buf.is_empty() {
-            f(&buf)?;
-        }
-        Ok(())
+                let m = &self.meshes[inst.mesh as usize];
+                let pos: Vec<[f32; 3]> = m.positions.iter().map(|&p| inst.apply(p)).collect();
+                m.triangles
+                    .iter()
+                    .map(|tri| tri.map(|i| pos[i as usize]))
+                    .map(|tri| (q.code(&tri), tri))
+                    .filter(|(c, _)| region.holds(*c))
+                    .collect()
+            })
+            .collect();
+        out.extend(copies.into_iter().flatten());
+        out
     }
 
     /// A landscape: a terrain of about a tenth of `triangles`, the rest copies of `meshes`
@@ -315,13 +347,89 @@ pub struct PrepareSummary {
     pub proxies: Vec<(u32, u64, u64)>,
 }
 
-/// Morton code of a triangle's centroid over `bounds` (10 bits per axis).
-fn centroid_code(t: &Tri, lo: [f32; 3], inv: [f32; 3]) -> u32 {
-    let q = [0, 1, 2].map(|k| {
-        let c = (t[0][k] + t[1][k] + t[2][k]) / 3.0;
-        (((c - lo[k]) * inv[k]).max(0.0) as u32).min(1023)
-    });
-    morton::encode(q[0], q[1], q[2]) as u32
+/// The 1024^3 grid over the scene bounds in which triangle centroids get their Morton codes.
+struct Quantizer {
+    lo: [f32; 3],
+    inv: [f32; 3],
+}
+
+impl Quantizer {
+    fn new(bounds: &Aabb) -> Quantizer {
+        let inv = [0, 1, 2].map(|k| {
+            let e = bounds.hi[k] - bounds.lo[k];
+            if e > 0.0 {
+                1024.0 / e
+            } else {
+                0.0
+            }
+        });
+        Quantizer { lo: bounds.lo, inv }
+    }
+
+    /// Grid cell of a point (clamped; monotone in each coordinate).
+    fn cell(&self, p: [f32; 3]) -> [u32; 3] {
+        [0, 1, 2].map(|k| (((p[k] - self.lo[k]) * self.inv[k]).max(0.0) as u32).min(1023))
+    }
+
+    /// Morton code of a triangle's centroid (10 bits per axis).
+    fn code(&self, t: &Tri) -> u32 {
+        let c = [0, 1, 2].map(|k| (t[0][k] + t[1][k] + t[2][k]) / 3.0);
+        let q = self.cell(c);
+        morton::encode(q[0], q[1], q[2]) as u32
+    }
+
+    /// World span along axis `k` of the region's cells (unbounded at the grid's ends, where
+    /// cells are clamped).
+    fn world_span(&self, region: &Region, k: usize) -> (f64, f64) {
+        if self.inv[k] == 0.0 {
+            return (f64::NEG_INFINITY, f64::INFINITY);
+        }
+        let (a, b) = (region.lo[k], region.hi[k]);
+        let cell = 1.0 / self.inv[k] as f64;
+        let lo = if a == 0 {
+            f64::NEG_INFINITY
+        } else {
+            self.lo[k] as f64 + a as f64 * cell
+        };
+        let hi = if b == 1023 {
+            f64::INFINITY
+        } else {
+            self.lo[k] as f64 + (b + 1) as f64 * cell
+        };
+        (lo, hi)
+    }
+}
+
+/// The codes with a given top-bits prefix: a box of grid cells.
+struct Region {
+    prefix: u32,
+    bits: u32,
+    lo: [u32; 3],
+    hi: [u32; 3],
+}
+
+impl Region {
+    fn new(prefix: u32, bits: u32) -> Region {
+        let lo = morton::decode((prefix as u64) << (30 - bits));
+        // Bit 3i + k of a code is bit i of axis k: the prefix fixes the top bits of each axis.
+        let fixed = [0, 1, 2].map(|k| (30 - bits..30).filter(|b| b % 3 == k).count() as u32);
+        let hi = [0, 1, 2].map(|k| lo[k] + (1 << (10 - fixed[k])) - 1);
+        Region {
+            prefix,
+            bits,
+            lo,
+            hi,
+        }
+    }
+
+    fn holds(&self, code: u32) -> bool {
+        self.bits == 0 || code >> (30 - self.bits) == self.prefix
+    }
+
+    /// True when the cell box `[a, b]` meets the region.
+    fn overlaps(&self, a: [u32; 3], b: [u32; 3]) -> bool {
+        (0..3).all(|k| a[k] <= self.hi[k] && b[k] >= self.lo[k])
+    }
 }
 
 /// Splits the sorted `codes[lo..hi]` into ranges of at most `k` at the highest differing bit.
@@ -374,61 +482,13 @@ pub fn prepare(
         return Err(OocError::Invalid("the scene has no triangles".into()));
     }
     std::fs::create_dir_all(dir).map_err(|e| OocError::io(dir, e))?;
-    let bounds = source.bounds();
-    let lo = bounds.lo;
-    let inv = [0, 1, 2].map(|k| {
-        let e = bounds.hi[k] - bounds.lo[k];
-        if e > 0.0 {
-            1024.0 / e
-        } else {
-            0.0
-        }
-    });
-    // Buckets by the top code bits.
+    let q = Quantizer::new(&source.bounds());
+    // Buckets by the top code bits, each regenerated from the source when its turn comes.
     let mut bits = 0u32;
-    while bits < 9 && (total * TRI_BYTES) >> bits > options.bucket_bytes {
+    while bits < 12 && (total * TRI_BYTES) >> bits > options.bucket_bytes {
         bits += 1;
     }
-    let nb = 1usize << bits;
-    let mut in_memory: Vec<Tri> = Vec::new();
-    // Bucket files are anonymous (`O_TMPFILE`, or unlinked at once): they have no name to leave
-    // behind when preparation fails or the process is killed, and vanish when dropped.
-    let mut buckets: Vec<Option<File>> = Vec::new();
-    let bucket_error = |e: std::io::Error| OocError::io(dir, e);
     progress.set_length(2 * total);
-    progress.set_message("grouping");
-    if bits == 0 {
-        in_memory = crate::safety::try_vec("scene triangles", total)?;
-        source.for_each_chunk(|c| {
-            in_memory.extend_from_slice(c);
-            progress.inc(c.len() as u64);
-            Ok(())
-        })?;
-    } else {
-        let mut writers = (0..nb)
-            .map(|_| {
-                tempfile::tempfile_in(dir)
-                    .map(|f| BufWriter::with_capacity(1 << 16, f))
-                    .map_err(bucket_error)
-            })
-            .collect::<Result<Vec<_>, _>>()?;
-        let mut rec = Vec::with_capacity(36);
-        source.for_each_chunk(|c| {
-            for t in c {
-                let b = (centroid_code(t, lo, inv) >> (30 - bits)) as usize;
-                rec.clear();
-                tri_bytes(t, &mut rec);
-                writers[b].write_all(&rec).map_err(bucket_error)?;
-            }
-            progress.inc(c.len() as u64);
-            Ok(())
-        })?;
-        for w in writers {
-            buckets.push(Some(
-                w.into_inner().map_err(|e| bucket_error(e.into_error()))?,
-            ));
-        }
-    }
     progress.set_message("points");
     let geometry_path = dir.join(format::GEOMETRY_FILE);
     let mut offset = GEOMETRY_HEADER;
@@ -445,39 +505,13 @@ pub fn prepare(
         head.extend_from_slice(&format::FORMAT_VERSION.to_le_bytes());
         head.extend_from_slice(&0u32.to_le_bytes());
         geo.write_all(&head).map_err(geo_error)?;
-        // One round per bucket file, or one round over the triangles held in memory.
-        let rounds = if bits == 0 {
-            vec![None]
-        } else {
-            std::mem::take(&mut buckets)
-        };
-        for bucket in rounds {
-            let mut tris = if let Some(mut file) = bucket {
-                let len = file.seek(SeekFrom::End(0)).map_err(bucket_error)?;
-                file.seek(SeekFrom::Start(0)).map_err(bucket_error)?;
-                let mut tris = crate::safety::try_vec::<Tri>("bucket triangles", len / TRI_BYTES)?;
-                let mut bytes = crate::safety::try_vec::<u8>("bucket bytes", len)?;
-                BufReader::new(file)
-                    .read_to_end(&mut bytes)
-                    .map_err(bucket_error)?;
-                for c in bytes.chunks_exact(TRI_BYTES as usize) {
-                    let f = |j: usize| {
-                        f32::from_le_bytes(c[4 * j..4 * j + 4].try_into().expect("4 bytes"))
-                    };
-                    tris.push([[f(0), f(1), f(2)], [f(3), f(4), f(5)], [f(6), f(7), f(8)]]);
-                }
-                tris
-            } else {
-                std::mem::take(&mut in_memory)
-            };
-            if tris.is_empty() {
+        for prefix in 0..1u32 << bits {
+            let mut keyed = source.region_triangles(&q, &Region::new(prefix, bits));
+            progress.inc(keyed.len() as u64);
+            if keyed.is_empty() {
                 continue;
             }
-            let mut keyed: Vec<(u32, Tri)> = tris
-                .drain(..)
-                .map(|t| (centroid_code(&t, lo, inv), t))
-                .collect();
-            keyed.sort_by_key(|k| k.0); // stable: equal codes keep input order
+            keyed.par_sort_by_key(|k| k.0); // stable: equal codes keep input order
             let codes: Vec<u32> = keyed.iter().map(|k| k.0).collect();
             let tris: Vec<Tri> = keyed.into_iter().map(|k| k.1).collect();
             let mut ranges = Vec::new();
@@ -527,6 +561,13 @@ pub fn prepare(
                 progress.inc(entry.triangles as u64);
                 entries.push(entry);
             }
+        }
+        // The buckets partition the codes; a copy culled wrongly would show here.
+        let written: u64 = entries.iter().map(|e| e.triangles as u64).sum();
+        if written != total {
+            return Err(OocError::Invalid(format!(
+                "grouping produced {written} of {total} triangles"
+            )));
         }
         Ok(())
     };

@@ -75,16 +75,23 @@ impl Grid {
 
     /// Calls `f` with every cell the closed triangle overlaps.
     pub fn for_overlapped(&self, t: &Tri, mut f: impl FnMut([u32; 3])) {
-        let gt = self.triangle(t);
+        let g = [self.to_grid(t[0]), self.to_grid(t[1]), self.to_grid(t[2])];
         let mut lo = [u32::MAX; 3];
         let mut hi = [0u32; 3];
-        for v in gt.v {
+        for v in g {
             let c = self.cell(v);
             for k in 0..3 {
                 lo[k] = lo[k].min(c[k]);
                 hi[k] = hi[k].max(c[k]);
             }
         }
+        if lo == hi {
+            // The triangle lies in this one cell: no separating-axis test needed (most
+            // triangles of the scanned meshes are smaller than a proxy voxel).
+            f(lo);
+            return;
+        }
+        let gt = GridTriangle::new(g);
         for z in lo[2]..=hi[2] {
             for y in lo[1]..=hi[1] {
                 for x in lo[0]..=hi[0] {
@@ -99,9 +106,14 @@ impl Grid {
 
 /// Conservative voxelization of a point's triangles in its grid.
 pub fn voxelize_point(tris: &[Tri], grid: &Grid) -> Voxels {
-    let mut coords = Vec::new();
+    let mut coords: Vec<[u32; 3]> = Vec::new();
     for t in tris {
-        grid.for_overlapped(t, |c| coords.push(c));
+        // Neighbouring triangles (Morton order) often share a cell: skip repeats at once.
+        grid.for_overlapped(t, |c| {
+            if coords.last() != Some(&c) {
+                coords.push(c)
+            }
+        });
     }
     Voxels::from_coords(grid.resolution, coords)
 }

@@ -40,6 +40,10 @@ pub struct RenderOptions {
     pub memory_budget: u64,
     /// Rays in flight (out-of-core only).
     pub rays_in_flight: usize,
+    /// Out-of-core only: a ray whose next point is not resident first visits the resident
+    /// points after it, and a chosen point's rays are traced again before it is loaded
+    /// ([`Tracer::speculate`]); off: the batched traversal of Pharr et al. as published.
+    pub lookahead: bool,
     /// Camera position; default: in front of and above the scene.
     pub eye: Option<[f32; 3]>,
     /// Point looked at; default: the centre of the scene.
@@ -58,6 +62,7 @@ impl Default for RenderOptions {
             max_bounces: 3,
             memory_budget: 1 << 30,
             rays_in_flight: 1 << 16,
+            lookahead: true,
             eye: None,
             target: None,
             fov_degrees: 50.0,
@@ -92,6 +97,16 @@ pub struct RenderStats {
     /// Ray visits made at once, outside a batching event, because the ray's next point was
     /// resident in the cache.
     pub resident_visits: u64,
+    /// Ray visits of resident points ahead of the ray's order, made while its next point was not
+    /// resident (their closest hit may let the proxy of that point cull it).
+    pub speculative_visits: u64,
+    /// Rays taken out of a point's queue when it was chosen and traced again against the points
+    /// resident by then, before the point was loaded.
+    pub requeued_rays: u64,
+    /// Rays that left the chosen point's queue that way (the point was no longer needed).
+    pub requeue_culls: u64,
+    /// Distinct points read from disk (`cache_misses` minus this: reloads of evicted points).
+    pub points_loaded: u64,
     /// Batching events whose point was already in the cache.
     pub cache_hits: u64,
     /// Batching events that loaded their point from disk.
@@ -182,6 +197,17 @@ const NO_HIT: Best = Best {
     normal: [0.0; 3],
 };
 
+/// Points a ray may visit ahead of its order (see [`Tracer::speculate`]).
+const SPECULATIVE: usize = 6;
+
+/// The largest entry distance at which a point can still hold a hit that beats `best`: `best`
+/// widened by a relative margin far above the f32 rounding of the slab and triangle tests, so
+/// the closest hit found does not depend on the order in which the points are visited.
+#[inline]
+fn reach(best: f32) -> f32 {
+    best + best * 1e-4
+}
+
 /// One path's state between batching events.
 #[derive(Clone, Copy, Debug)]
 struct PathState {
@@ -191,8 +217,20 @@ struct PathState {
     ray: RayPre,
     throughput: f32,
     best: Best,
-    /// `(entry distance, point)` of the last point visited by the current ray.
+    /// `(entry distance, point)` of the last point visited in order by the current ray.
     last: Option<(f32, u32)>,
+    /// `(entry distance, point)` of the point the ray waits at.
+    wait: (f32, u32),
+    /// Points already visited ahead of order by the current ray (skipped when reached).
+    ahead: [u32; SPECULATIVE],
+    /// Entries used in `ahead`.
+    n_ahead: u8,
+}
+
+impl PathState {
+    fn visited_ahead(&self, id: u32) -> bool {
+        self.ahead[..self.n_ahead as usize].contains(&id)
+    }
 }
 
 /// Intersects a ray with a loaded point, keeping the smallest `(t, point, triangle)`.
@@ -206,7 +244,7 @@ fn intersect_point(p: &LoadedPoint, point: u32, ray: &RayPre, best: &mut Best) {
         sp -= 1;
         let node = &p.nodes[stack[sp] as usize];
         let (t0, t1) = ray.slab(&node.bounds);
-        if t0 > t1 || t0 > best.t {
+        if t0 > t1 || t0 > reach(best.t) {
             continue;
         }
         if node.count > 0 {
@@ -253,6 +291,8 @@ struct StepCount {
     batch_hits: u64,
     /// Visits of resident points outside a batching event.
     resident: u64,
+    /// Visits of resident points ahead of the ray's order.
+    ahead: u64,
 }
 
 /// Everything the per-ray steps read: camera, top-level BVH, optional proxies.
@@ -375,20 +415,23 @@ impl<'a> Tracer<'a> {
             throughput: 1.0,
             best: NO_HIT,
             last: None,
+            wait: (0.0, u32::MAX),
+            ahead: [u32::MAX; SPECULATIVE],
+            n_ahead: 0,
         }
     }
 
-    /// The next point the ray visits: the smallest `(entry, id)` after `last` among the points
-    /// whose bounds it enters no later than its closest hit, skipping points whose proxy it
-    /// misses on `[entry, min(exit, closest hit)]`.
-    fn next_point(&self, path: &PathState, count: &mut StepCount) -> Option<(f32, u32)> {
+    /// The points the ray may still visit in order, as `(entry, id, exit)` sorted by
+    /// `(entry, id)`: those after `last` whose bounds it enters within [`reach`] of its closest
+    /// hit, less those it visited ahead of order.
+    fn candidates(&self, path: &PathState) -> Vec<(f32, u32, f32)> {
         let ray = &path.ray;
-        let best_t = path.best.t;
+        let limit = reach(path.best.t);
         let nodes = &self.top.nodes;
-        if nodes.is_empty() {
-            return None;
-        }
         let mut found: Vec<(f32, u32, f32)> = Vec::new();
+        if nodes.is_empty() {
+            return found;
+        }
         let mut stack = vec![0u32];
         let after = |t: f32, id: u32| match path.last {
             None => true,
@@ -397,7 +440,7 @@ impl<'a> Tracer<'a> {
         while let Some(n) = stack.pop() {
             let node = &nodes[n as usize];
             let (t0, t1) = ray.slab(&node.bounds);
-            if t0 > t1 || t0 > best_t || path.last.is_some_and(|(lt, _)| t1 < lt) {
+            if t0 > t1 || t0 > limit || path.last.is_some_and(|(lt, _)| t1 < lt) {
                 continue;
             }
             if node.count == 0 {
@@ -407,23 +450,68 @@ impl<'a> Tracer<'a> {
             }
             for &id in &self.top.order[node.first as usize..(node.first + node.count) as usize] {
                 let (t0, t1) = ray.slab(&self.scene.points[id as usize].bounds);
-                if t0 <= t1 && t0 <= best_t && after(t0, id) {
+                if t0 <= t1 && t0 <= limit && after(t0, id) && !path.visited_ahead(id) {
                     found.push((t0, id, t1));
                 }
             }
         }
         found.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        for (t0, id, t1) in found {
-            if let Some((set, grids)) = &self.proxies {
-                let end = t1.min(best_t);
-                if !set.segment_hits(id, &grids[id as usize], ray.origin, ray.dir, t0, end) {
-                    count.culls += 1;
-                    continue;
-                }
+        found
+    }
+
+    /// True when the ray may hit point `id` on `[t0, min(t1, closest hit)]`: always without
+    /// proxies, else when the segment touches the point's proxy.
+    fn may_hit(&self, path: &PathState, (t0, id, t1): (f32, u32, f32)) -> bool {
+        match &self.proxies {
+            None => true,
+            Some((set, grids)) => {
+                let end = t1.min(path.best.t);
+                set.segment_hits(
+                    id,
+                    &grids[id as usize],
+                    path.ray.origin,
+                    path.ray.dir,
+                    t0,
+                    end,
+                )
             }
-            return Some((t0, id));
         }
-        None
+    }
+
+    /// Visits, ahead of order, the resident points among `later` (the candidates after the
+    /// ray's next point, which is not resident) that the ray may still hit, so that their
+    /// closest hit shortens the segment tested against the proxies of the points before them.
+    /// Returns whether any was visited. The closest hit does not depend on the visit order
+    /// (smallest `(t, point, triangle)`, entries compared with [`reach`]), and a visited point
+    /// is not visited again, so the image is unchanged.
+    fn speculate<'p>(
+        &self,
+        path: &mut PathState,
+        later: &[(f32, u32, f32)],
+        resident: &dyn Fn(u32) -> Option<&'p LoadedPoint>,
+        count: &mut StepCount,
+    ) -> bool {
+        let mut visited = false;
+        for &c in later {
+            if path.n_ahead as usize == SPECULATIVE || c.0 > reach(path.best.t) {
+                break;
+            }
+            let Some(p) = resident(c.1) else {
+                continue;
+            };
+            if !self.may_hit(path, c) {
+                continue;
+            }
+            let ray = path.ray;
+            intersect_point(p, c.1, &ray, &mut path.best);
+            path.ahead[path.n_ahead as usize] = c.1;
+            path.n_ahead += 1;
+            count.visits += 1;
+            count.ahead += 1;
+            count.hits += u64::from(path.best.point == c.1);
+            visited = true;
+        }
+        visited
     }
 
     /// Radiance of the environment in direction `d` (unit): a sky gradient.
@@ -432,11 +520,33 @@ impl<'a> Tracer<'a> {
         [1.0 - 0.5 * t, 1.0 - 0.3 * t, 1.0]
     }
 
-    /// Runs the path until its ray must wait at a point or the path ends.
-    fn advance(&self, mut path: PathState, count: &mut StepCount) -> Advance {
+    /// Runs the path until its ray must wait at a point (`path.wait`) or the path ends. With
+    /// `resident`, a next point that is not resident first lets the ray visit the resident
+    /// points after it ([`Tracer::speculate`]), which may cull it.
+    fn advance<'p>(
+        &self,
+        mut path: PathState,
+        resident: Option<&dyn Fn(u32) -> Option<&'p LoadedPoint>>,
+        count: &mut StepCount,
+    ) -> Advance {
         loop {
-            if let Some((t, id)) = self.next_point(&path, count) {
-                path.last = Some((t, id));
+            let found = self.candidates(&path);
+            let mut next = None;
+            for (i, &c) in found.iter().enumerate() {
+                if self.may_hit(&path, c) {
+                    next = Some(i);
+                    break;
+                }
+                count.culls += 1;
+            }
+            if let Some(i) = next {
+                let (t, id, _) = found[i];
+                if let Some(res) = resident {
+                    if res(id).is_none() && self.speculate(&mut path, &found[i + 1..], res, count) {
+                        continue;
+                    }
+                }
+                path.wait = (t, id);
                 return Advance::Queued(path, id);
             }
             let d = path.ray.dir;
@@ -472,6 +582,9 @@ impl<'a> Tracer<'a> {
                 throughput: path.throughput * ALBEDO,
                 best: NO_HIT,
                 last: None,
+                wait: (0.0, u32::MAX),
+                ahead: [u32::MAX; SPECULATIVE],
+                n_ahead: 0,
             };
         }
     }
@@ -526,8 +639,9 @@ pub fn render_in_core(
             };
             let mut path = tracer.camera_path(slot);
             loop {
-                match tracer.advance(path, &mut count) {
+                match tracer.advance(path, None, &mut count) {
                     Advance::Queued(mut p, id) => {
+                        p.last = Some(p.wait);
                         intersect_point(&loaded[id as usize], id, &p.ray, &mut p.best);
                         path = p;
                     }
@@ -570,6 +684,8 @@ struct Cache {
     used: u64,
     clock: u64,
     entries: FxHashMap<u32, (LoadedPoint, u64)>,
+    /// Points read at least once.
+    loaded: rustc_hash::FxHashSet<u32>,
 }
 
 /// Renders with batched ray traversal: per-point ray queues, the fullest queue first, points
@@ -608,11 +724,17 @@ pub fn render_out_of_core(
     stats.rays += in_flight as u64;
     let mut next = in_flight;
     let mut queues: Vec<Vec<u32>> = vec![Vec::new(); scene.points.len()];
+    // Per point: `cache_misses` when its queue was last traced again (see below).
+    let mut checked_at: Vec<u64> = vec![u64::MAX; scene.points.len()];
+    let (mut requeued, mut requeue_total, mut requeue_kept) = (None::<u32>, 0u64, 0u64);
+    // True while `pending` holds the rays taken out of the queue of `requeued`.
+    let mut requeue_round = false;
     let mut cache = Cache {
         budget: opts.memory_budget - proxy_bytes,
         used: 0,
         clock: 0,
         entries: FxHashMap::default(),
+        loaded: Default::default(),
     };
     // Rays to advance, with the point each must first be intersected with (the batch's point).
     let mut pending: Vec<(u32, PathState, Option<u32>)> = rays
@@ -626,7 +748,8 @@ pub fn render_out_of_core(
         // camera rays. A ray whose next point is resident is intersected with it at once (its
         // own surface for a bounce ray, most often): the order of its visits is unchanged.
         while !pending.is_empty() {
-            let resident = &cache.entries;
+            let entries = &cache.entries;
+            let resident = |id: u32| entries.get(&id).map(|e| &e.0);
             let outs: Vec<(u32, Advance, StepCount, Vec<u32>)> = pending
                 .par_iter()
                 .map(|&(r, mut path, first)| {
@@ -635,7 +758,8 @@ pub fn render_out_of_core(
                     let mut visit = first;
                     loop {
                         if let Some(id) = visit {
-                            let (p, _) = &resident[&id];
+                            let (p, _) = &entries[&id];
+                            path.last = Some(path.wait);
                             let ray = path.ray;
                             intersect_point(p, id, &ray, &mut path.best);
                             count.visits += 1;
@@ -648,8 +772,19 @@ pub fn render_out_of_core(
                             }
                             used.push(id);
                         }
-                        match tracer.advance(path, &mut count) {
-                            Advance::Queued(p, id) if resident.contains_key(&id) => {
+                        let before = path.n_ahead;
+                        let adv = if opts.lookahead {
+                            tracer.advance(path, Some(&resident), &mut count)
+                        } else {
+                            tracer.advance(path, None, &mut count)
+                        };
+                        if let Advance::Queued(p, _) = &adv {
+                            // Points visited ahead (of the ray's last bounce, if it bounced).
+                            let from = if p.bounce == path.bounce { before } else { 0 };
+                            used.extend_from_slice(&p.ahead[from as usize..p.n_ahead as usize]);
+                        }
+                        match adv {
+                            Advance::Queued(p, id) if entries.contains_key(&id) => {
                                 path = p;
                                 visit = Some(id);
                             }
@@ -670,9 +805,13 @@ pub fn render_out_of_core(
                 stats.ray_visits += count.visits;
                 stats.ray_visits_hit += count.hits;
                 stats.resident_visits += count.resident;
+                stats.speculative_visits += count.ahead;
                 touched.extend(used);
                 match adv {
                     Advance::Queued(path, id) => {
+                        if requeue_round && requeued == Some(id) {
+                            requeue_kept += 1;
+                        }
                         rays[r as usize] = path;
                         queues[id as usize].push(r);
                     }
@@ -689,9 +828,13 @@ pub fn render_out_of_core(
                     }
                 }
             }
+            requeue_round = false;
             touched.sort_unstable();
             touched.dedup();
             cache.touch(&touched);
+        }
+        if requeued.take().is_some() {
+            stats.requeue_culls += requeue_total - requeue_kept;
         }
         // The point with the most queued rays (lowest id on ties). Queued rays wait only at
         // points that are not resident.
@@ -704,6 +847,19 @@ pub fn render_out_of_core(
             break;
         };
         let id = id as u32;
+        // Before loading it, its rays are traced again against the points resident now: points
+        // loaded since they were queued may hold hits that let the proxy cull this point.
+        if opts.lookahead && checked_at[id as usize] != stats.cache_misses {
+            checked_at[id as usize] = stats.cache_misses;
+            let queue = std::mem::take(&mut queues[id as usize]);
+            stats.requeued_rays += queue.len() as u64;
+            requeued = Some(id);
+            requeue_total = queue.len() as u64;
+            requeue_kept = 0;
+            requeue_round = true;
+            pending = queue.iter().map(|&r| (r, rays[r as usize], None)).collect();
+            continue;
+        }
         cache.get(scene, id, &mut stats)?;
         stats.batching_events += 1;
         let queue = std::mem::take(&mut queues[id as usize]);
@@ -731,6 +887,9 @@ impl Cache {
             return Ok(());
         }
         stats.cache_misses += 1;
+        if self.loaded.insert(id) {
+            stats.points_loaded += 1;
+        }
         let entry = &scene.points[id as usize];
         let tris = scene.read_point(id)?;
         stats.disk_bytes_read += entry.bytes();
