@@ -297,16 +297,14 @@ pub fn expand_materials(file: &mut VdagFile) {
     }
 }
 
-/// `voxdag build`: the streaming build with `--memory-budget`, else the in-memory one.
+/// `voxdag build`: the streaming build, or the in-memory one with `--in-memory`.
 pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
     check_output(&args.output)?;
     if let Some(report) = &args.report {
         check_output(report)?;
     }
-    // The streaming build runs when a `--memory-budget` is given: its mesh import does not yet
-    // apply the hostile-input memory checks of the in-memory import (tests/hostile.rs), so it is
-    // not the default. `--materials` quantizes every colour at once (k-means): in memory.
-    if !args.in_memory && args.materials.is_none() && args.memory_budget.is_some() {
+    // `--materials` quantizes every colour at once (k-means), so it builds in memory.
+    if !args.in_memory && args.materials.is_none() {
         return crate::stream::build_streaming(args, quiet);
     }
     let (dag, report, digest) = build_scene_digest(args, quiet)?;

@@ -117,8 +117,7 @@ pub struct BuildArgs {
     no_huffman: bool,
     /// Peak memory the streaming build may use (suffixes K, M, G, T): refused at start when
     /// the working set alone does not fit, stopped with an error if the DAG outgrows it
-    /// (model in docs/scaling.md). Giving a budget selects the streaming build; default: no
-    /// budget, the in-memory build.
+    /// (model in docs/scaling.md). Default: no budget.
     #[arg(long, value_parser = commands::parse_bytes, conflicts_with = "in_memory")]
     memory_budget: Option<u64>,
     /// Hold every voxel in memory and build the DAG afterwards (the pre-streaming path; the
