@@ -303,6 +303,9 @@ pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
     if let Some(report) = &args.report {
         check_output(report)?;
     }
+    if let Some(part) = args.part {
+        return crate::partition::build_part(args, part, quiet);
+    }
     // `--materials` quantizes every colour at once (k-means), so it builds in memory.
     if !args.in_memory && args.materials.is_none() {
         return crate::stream::build_streaming(args, quiet);
@@ -995,6 +998,7 @@ pub fn demo(args: &DemoArgs, quiet: bool) -> Result<()> {
         no_huffman: false,
         memory_budget: None,
         in_memory: false,
+        part: None,
     };
     build(&build_args, quiet)?;
     let render_args = RenderArgs {

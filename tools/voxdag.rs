@@ -7,6 +7,7 @@ mod editor;
 mod hash_render;
 mod limited_alloc;
 mod ooc;
+mod partition;
 mod pathtrace;
 mod stream;
 mod view;
@@ -54,6 +55,8 @@ enum Command {
     Ooc(ooc::OocCommand),
     /// Build, render and describe the bundled default scene (assets/avocado) into an output folder.
     Demo(DemoArgs),
+    /// Merge the part files of a partitioned build (`build --part i/K`) into one .vdag.
+    Merge(partition::MergeArgs),
     /// Apply a HashDAG replay (edits, undo/redo) to a scene and save the result.
     Edit(edit::EditArgs),
     /// A real-time voxel editor on the GPU hash DAG (sphere / cube tools, undo, egui panels).
@@ -124,6 +127,11 @@ pub struct BuildArgs {
     /// output is byte-identical).
     #[arg(long)]
     in_memory: bool,
+    /// Build only part i of K (`i/K`) of a partitioned build: the output is a part file
+    /// (.vdagp) for `voxdag merge` (docs/scaling.md).
+    #[arg(long, value_name = "i/K", value_parser = partition::parse_part,
+          conflicts_with_all = ["in_memory", "materials", "memory_budget", "report"])]
+    part: Option<(u32, u32)>,
 }
 
 /// Pointer modes of the tsvdag encoding (`voxdag build --tsvdag-mode`).
@@ -362,6 +370,7 @@ fn main() {
         Command::Bench(cmd) => bench::run(cmd, cli.quiet),
         Command::Demo(args) => commands::demo(&args, cli.quiet),
         Command::Ooc(cmd) => ooc::run(cmd, cli.quiet),
+        Command::Merge(args) => partition::merge(&args),
         Command::Edit(args) => edit::edit(&args),
         Command::Editor(args) => editor::editor(&args),
     };
