@@ -140,8 +140,11 @@ pub struct StreamBuilder {
     /// level for a whole build, the split level for a part: `partition`).
     top: u32,
     /// Completed nodes of level `top` below the root: key and id, ascending keys.
-    pub(super) tops: Vec<(u64, u32)>,
+    tops: SubtreeRoots,
 }
+
+/// Subtree roots of a part: key and node id on the top level, ascending keys.
+pub(super) type SubtreeRoots = Vec<(u64, u32)>;
 
 /// What a finished [`StreamBuilder`] yields.
 pub struct StreamedDag {
@@ -341,7 +344,7 @@ impl StreamBuilder {
     /// Closes the open path and returns the levels up to the top level (its nodes' ids kept
     /// in `tops`, or the root when the top is the root level), not laid out: a part of a
     /// partitioned build.
-    pub(super) fn finish_levels(mut self) -> Result<(Vec<LevelNodes>, Vec<(u64, u32)>), DagError> {
+    pub(super) fn finish_levels(mut self) -> Result<(Vec<LevelNodes>, SubtreeRoots), DagError> {
         self.close_path()?;
         let mut tops = std::mem::take(&mut self.tops);
         if let Some(root) = self.root {
