@@ -351,13 +351,31 @@ fn unbounded_requests_fail_cleanly() {
     )
     .unwrap();
     let out = work.join("t.vdag");
+    // The in-memory build holds every voxel (59 M at 4096: 470 MiB).
     let o = run_with(
-        &["-q", "build", s(&obj), "-r", "4096", "-o", s(&out)],
+        &[
+            "-q",
+            "build",
+            s(&obj),
+            "-r",
+            "4096",
+            "--in-memory",
+            "-o",
+            s(&out),
+        ],
         Some(384 << 20),
         60,
     );
     expect(&o, 1, &["memory"]);
     assert!(names(&work).is_empty(), "{:?}", names(&work));
+    // The streaming build (the default) holds the DAG and a working set: it fits.
+    let o = run_with(
+        &["-q", "build", s(&obj), "-r", "1024", "-o", s(&out)],
+        Some(384 << 20),
+        60,
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(names(&work), ["t.vdag"]);
 }
 
 /// A solid grid of side `n` as an SVDAG (one node per level: 2^63 voxels for n = 2^21).

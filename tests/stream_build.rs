@@ -35,6 +35,15 @@ fn assert_same(dir: &Path, input: &Path, args: &[&str]) {
             input.display(),
             String::from_utf8_lossy(&result.stderr)
         );
+        // The summary line says which path ran: a default that fell back to the in-memory
+        // build would compare that build with itself.
+        let stdout = String::from_utf8_lossy(&result.stdout);
+        assert_eq!(
+            stdout.contains("streamed"),
+            mode == "stream",
+            "{mode} build of {} {args:?} took the other path: {stdout}",
+            input.display()
+        );
         outputs.push(std::fs::read(&out).expect("read output"));
     }
     assert!(
@@ -72,17 +81,13 @@ fn streaming_equals_in_memory_on_small_models() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// Every shared mesh at 512 with colours (where it has them); 1024 and 2048 too with
-/// `VOXDAG_STREAM_BIG=1` (minutes on 2 cores).
+/// Every shared mesh at 512, 1024 and 2048 with colours (where it has them).
 #[test]
 fn streaming_equals_in_memory_on_shared_meshes() {
     let Some(data) = shared_data() else {
         return;
     };
-    let mut resolutions = vec!["512"];
-    if std::env::var_os("VOXDAG_STREAM_BIG").is_some() {
-        resolutions.extend(["1024", "2048"]);
-    }
+    let resolutions = ["512", "1024", "2048"];
     let dir = scratch("shared");
     let meshes = data.join("meshes");
     let tex = data.join("textured");

@@ -297,16 +297,17 @@ pub fn expand_materials(file: &mut VdagFile) {
     }
 }
 
-/// `voxdag build`: the streaming build with `--memory-budget`, else the in-memory one.
+/// `voxdag build`: the streaming build, or the in-memory one with `--in-memory`.
 pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
     check_output(&args.output)?;
     if let Some(report) = &args.report {
         check_output(report)?;
     }
-    // The streaming build runs when a `--memory-budget` is given: its mesh import does not yet
-    // apply the hostile-input memory checks of the in-memory import (tests/hostile.rs), so it is
-    // not the default. `--materials` quantizes every colour at once (k-means): in memory.
-    if !args.in_memory && args.materials.is_none() && args.memory_budget.is_some() {
+    if let Some(part) = args.part {
+        return crate::partition::build_part(args, part, quiet);
+    }
+    // `--materials` quantizes every colour at once (k-means), so it builds in memory.
+    if !args.in_memory && args.materials.is_none() {
         return crate::stream::build_streaming(args, quiet);
     }
     let (dag, report, digest) = build_scene_digest(args, quiet)?;
@@ -997,6 +998,7 @@ pub fn demo(args: &DemoArgs, quiet: bool) -> Result<()> {
         no_huffman: false,
         memory_budget: None,
         in_memory: false,
+        part: None,
     };
     build(&build_args, quiet)?;
     let render_args = RenderArgs {

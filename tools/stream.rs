@@ -9,7 +9,7 @@ use anyhow::{bail, Context, Result};
 use voxdag::dag::encode::{DigestBuilder, EncodedDag};
 use voxdag::dag::stream::{save_streamed, ColorStream, StreamBuilder};
 use voxdag::safety::human_bytes;
-use voxdag::scene::{self, voxelize, ImportOptions, DEFAULT_MESH_RESOLUTION};
+use voxdag::scene::{self, voxelize, ImportOptions, Source};
 
 use crate::commands::{
     encode_dag, peak_rss_bytes, progress_bar, seconds, tsvdag_modes, write_json, BuildReport,
@@ -85,10 +85,6 @@ pub fn build_streaming(args: &BuildArgs, quiet: bool) -> Result<()> {
     };
     let bar = progress_bar(quiet);
     let start = Instant::now();
-    let is_vox = args
-        .input
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("vox"));
     let streaming = |resolution: u32, colors: bool, budget: Option<u64>| -> Result<Streaming> {
         Ok(Streaming {
             builder: StreamBuilder::new(resolution)?,
@@ -105,31 +101,31 @@ pub fn build_streaming(args: &BuildArgs, quiet: bool) -> Result<()> {
             budget,
         })
     };
-    let mut s = if is_vox {
-        // .vox models are bounded by their own import guard (docs/voxelization.md).
-        let voxels = scene::import_in(&args.input, &options, args.asset_root.as_deref(), &bar)?;
-        let budget = remaining_budget(args.memory_budget, COLOR_WORKING_SET, 0.0)?;
-        let mut s = streaming(voxels.resolution, voxels.has_colors(), budget)?;
-        s.feed(&voxels.codes, &voxels.colors)?;
-        s
-    } else {
-        let resolution = args.resolution.unwrap_or(DEFAULT_MESH_RESOLUTION);
-        voxelize::check_resolution(resolution, &args.input)?;
-        let mesh = scene::load_mesh_in(&args.input, &options, args.asset_root.as_deref())?;
-        let colors = mesh.has_colors && codec.is_some();
-        let working =
-            voxelize::stream_working_set(mesh.triangle_count(), mesh.has_colors, VOXELS_PER_BRICK)
-                + if colors { COLOR_WORKING_SET } else { 0 };
-        let voxels = if args.memory_budget.is_some() {
-            voxelize::estimate_voxels(&mesh, resolution)?
-        } else {
-            0.0
-        };
-        let budget = remaining_budget(args.memory_budget, working, voxels)?;
-        let mut s = streaming(resolution, colors, budget)?;
-        bar.set_message("streaming");
-        voxelize::voxelize_stream(&mesh, resolution, &bar, |codes, cols| s.feed(codes, cols))?;
-        s
+    let mut s = match scene::open_in(&args.input, &options, args.asset_root.as_deref())? {
+        Source::Voxels(voxels) => {
+            let budget = remaining_budget(args.memory_budget, COLOR_WORKING_SET, 0.0)?;
+            let mut s = streaming(voxels.resolution, voxels.has_colors(), budget)?;
+            s.feed(&voxels.codes, &voxels.colors)?;
+            s
+        }
+        Source::Mesh { mesh, resolution } => {
+            let colors = mesh.has_colors && codec.is_some();
+            let working = voxelize::stream_working_set(
+                mesh.triangle_count(),
+                mesh.has_colors,
+                VOXELS_PER_BRICK,
+            ) + if colors { COLOR_WORKING_SET } else { 0 };
+            let voxels = if args.memory_budget.is_some() {
+                voxelize::estimate_voxels(&mesh, resolution)?
+            } else {
+                0.0
+            };
+            let budget = remaining_budget(args.memory_budget, working, voxels)?;
+            let mut s = streaming(resolution, colors, budget)?;
+            bar.set_message("streaming");
+            voxelize::voxelize_stream(&mesh, resolution, &bar, |codes, cols| s.feed(codes, cols))?;
+            s
+        }
     };
     bar.finish_and_clear();
     let stream_time = start.elapsed();

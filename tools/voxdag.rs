@@ -7,6 +7,7 @@ mod editor;
 mod hash_render;
 mod limited_alloc;
 mod ooc;
+mod partition;
 mod pathtrace;
 mod stream;
 mod view;
@@ -54,6 +55,8 @@ enum Command {
     Ooc(ooc::OocCommand),
     /// Build, render and describe the bundled default scene (assets/avocado) into an output folder.
     Demo(DemoArgs),
+    /// Merge the part files of a partitioned build (`build --part i/K`) into one .vdag.
+    Merge(partition::MergeArgs),
     /// Apply a HashDAG replay (edits, undo/redo) to a scene and save the result.
     Edit(edit::EditArgs),
     /// A real-time voxel editor on the GPU hash DAG (sphere / cube tools, undo, egui panels).
@@ -117,14 +120,18 @@ pub struct BuildArgs {
     no_huffman: bool,
     /// Peak memory the streaming build may use (suffixes K, M, G, T): refused at start when
     /// the working set alone does not fit, stopped with an error if the DAG outgrows it
-    /// (model in docs/scaling.md). Giving a budget selects the streaming build; default: no
-    /// budget, the in-memory build.
+    /// (model in docs/scaling.md). Default: no budget.
     #[arg(long, value_parser = commands::parse_bytes, conflicts_with = "in_memory")]
     memory_budget: Option<u64>,
     /// Hold every voxel in memory and build the DAG afterwards (the pre-streaming path; the
     /// output is byte-identical).
     #[arg(long)]
     in_memory: bool,
+    /// Build only part i of K (`i/K`) of a partitioned build: the output is a part file
+    /// (.vdagp) for `voxdag merge` (docs/scaling.md).
+    #[arg(long, value_name = "i/K", value_parser = partition::parse_part,
+          conflicts_with_all = ["in_memory", "materials", "memory_budget", "report"])]
+    part: Option<(u32, u32)>,
 }
 
 /// Pointer modes of the tsvdag encoding (`voxdag build --tsvdag-mode`).
@@ -363,6 +370,7 @@ fn main() {
         Command::Bench(cmd) => bench::run(cmd, cli.quiet),
         Command::Demo(args) => commands::demo(&args, cli.quiet),
         Command::Ooc(cmd) => ooc::run(cmd, cli.quiet),
+        Command::Merge(args) => partition::merge(&args),
         Command::Edit(args) => edit::edit(&args),
         Command::Editor(args) => editor::editor(&args),
     };

@@ -23,6 +23,7 @@ pub mod encode;
 mod export;
 mod file;
 mod index;
+pub mod partition;
 mod query;
 pub mod raycast;
 pub mod ssvdag;
@@ -92,6 +93,9 @@ pub enum DagError {
         /// The underlying error.
         source: std::io::Error,
     },
+    /// The part files given to a merge are not exactly the parts of one partitioned build.
+    #[error("partitioned build: {0}")]
+    Parts(String),
     /// An allocation sized by the input would pass the memory limit.
     #[error(transparent)]
     Memory(#[from] crate::safety::MemoryError),

@@ -136,7 +136,15 @@ pub struct StreamBuilder {
     last: Option<u64>,
     voxels: u64,
     root: Option<u32>,
+    /// Level whose completed nodes are kept in `tops` instead of going to a parent (the root
+    /// level for a whole build, the split level for a part: `partition`).
+    top: u32,
+    /// Completed nodes of level `top` below the root: key and id, ascending keys.
+    tops: SubtreeRoots,
 }
+
+/// Subtree roots of a part: key and node id on the top level, ascending keys.
+pub(super) type SubtreeRoots = Vec<(u64, u32)>;
 
 /// What a finished [`StreamBuilder`] yields.
 pub struct StreamedDag {
@@ -151,6 +159,12 @@ pub struct StreamedDag {
 impl StreamBuilder {
     /// A builder for a grid of side `resolution` (a power of two in `8..=2^21`).
     pub fn new(resolution: u32) -> Result<StreamBuilder, DagError> {
+        Self::with_top(resolution, u32::MAX)
+    }
+
+    /// A builder whose completed nodes of level `top` (at most the root level) are kept as
+    /// subtree roots (`partition`): the levels above it are not built.
+    pub(super) fn with_top(resolution: u32, top: u32) -> Result<StreamBuilder, DagError> {
         if !resolution.is_power_of_two() || !(8..=MAX_RESOLUTION).contains(&resolution) {
             return Err(DagError::InvalidResolution(resolution));
         }
@@ -168,6 +182,8 @@ impl StreamBuilder {
             last: None,
             voxels: 0,
             root: None,
+            top: top.min(root_level),
+            tops: Vec::new(),
         })
     }
 
@@ -234,7 +250,21 @@ impl StreamBuilder {
     fn close_leaf(&mut self) -> Result<(), DagError> {
         let mask = std::mem::take(&mut self.leaf_mask);
         let id = self.dedup(0, &[mask as u32, (mask >> 32) as u32])?;
-        self.add_child(1, self.leaf_key, id)
+        self.completed(0, self.leaf_key, id)
+    }
+
+    /// Hands the completed node `id` (with `key`) of `level` to its parent, or keeps it when
+    /// `level` is the top level.
+    pub(super) fn completed(&mut self, level: u32, key: u64, id: u32) -> Result<(), DagError> {
+        if level == self.root_level {
+            self.root = Some(id);
+            Ok(())
+        } else if level == self.top {
+            self.tops.push((key, id));
+            Ok(())
+        } else {
+            self.add_child(level + 1, key, id)
+        }
     }
 
     /// Adds node `id` with key `child_key` (one level down) to the open node of `level`,
@@ -263,16 +293,11 @@ impl StreamBuilder {
     fn close(&mut self, level: u32) -> Result<(), DagError> {
         let open = std::mem::take(&mut self.open[level as usize]);
         let id = self.dedup(level, &open.node[..open.n])?;
-        if level == self.root_level {
-            self.root = Some(id);
-            Ok(())
-        } else {
-            self.add_child(level + 1, open.key, id)
-        }
+        self.completed(level, open.key, id)
     }
 
     /// The id of `node` on `level`, storing it when new.
-    fn dedup(&mut self, level: u32, node: &[u32]) -> Result<u32, DagError> {
+    pub(super) fn dedup(&mut self, level: u32, node: &[u32]) -> Result<u32, DagError> {
         let l = level as usize;
         Ok(self.tables[l]
             .find_or_insert(&mut self.levels[l], node, level == 0)?
@@ -303,16 +328,41 @@ impl StreamBuilder {
         below[root as usize]
     }
 
-    /// Closes the open path and lays the DAG out (as [`Svdag::from_voxels`] does).
-    pub fn finish(mut self) -> Result<StreamedDag, DagError> {
+    /// Closes the open nodes up to the top level.
+    fn close_path(&mut self) -> Result<(), DagError> {
         if self.leaf_mask != 0 {
             self.close_leaf()?;
         }
-        for level in 1..=self.root_level {
+        for level in 1..=self.top {
             if self.open[level as usize].n > 0 {
                 self.close(level)?;
             }
         }
+        Ok(())
+    }
+
+    /// Closes the open path and returns the levels up to the top level (its nodes' ids kept
+    /// in `tops`, or the root when the top is the root level), not laid out: a part of a
+    /// partitioned build.
+    pub(super) fn finish_levels(mut self) -> Result<(Vec<LevelNodes>, SubtreeRoots), DagError> {
+        self.close_path()?;
+        let mut tops = std::mem::take(&mut self.tops);
+        if let Some(root) = self.root {
+            tops.push((0, root));
+        }
+        self.levels.truncate(self.top as usize + 1);
+        Ok((self.levels, tops))
+    }
+
+    /// Voxels fed outside [`StreamBuilder::push`] (a merged part's).
+    pub(super) fn add_voxels(&mut self, voxels: u64) {
+        self.voxels += voxels;
+    }
+
+    /// Closes the open path and lays the DAG out (as [`Svdag::from_voxels`] does).
+    pub fn finish(mut self) -> Result<StreamedDag, DagError> {
+        self.top = self.root_level;
+        self.close_path()?;
         self.tables = Vec::new();
         for level in &mut self.levels {
             level.words.shrink_to_fit();
@@ -335,6 +385,14 @@ impl StreamBuilder {
             dag_hash,
         })
     }
+}
+
+/// The chunk depth a build uses: `chunk_depth`, by default the codec's, at most the leaves'
+/// parents.
+pub fn resolved_chunk_depth(codec: ColorCodec, chunk_depth: Option<u32>, resolution: u32) -> u32 {
+    chunk_depth
+        .unwrap_or_else(|| codec.default_chunk_depth(resolution))
+        .min(resolution.trailing_zeros() - 2)
 }
 
 /// A chunk's encoded words and its colours' squared errors (empty for an exact codec).
@@ -418,9 +476,7 @@ impl ColorStream {
         spill_dir: &Path,
     ) -> Result<ColorStream, DagError> {
         let log = resolution.trailing_zeros();
-        let depth = chunk_depth
-            .unwrap_or_else(|| codec.default_chunk_depth(resolution))
-            .min(log - 2);
+        let depth = resolved_chunk_depth(codec, chunk_depth, resolution);
         let file = tempfile::tempfile_in(spill_dir).map_err(spill_error(spill_dir))?;
         Ok(ColorStream {
             codec,
@@ -450,14 +506,26 @@ impl ColorStream {
         let mut from = 0;
         while from < codes.len() {
             let key = codes[from] >> self.shift;
-            if !self.open.is_empty() && key != self.key {
-                self.close_chunk()?;
-            }
-            self.key = key;
             let run = codes[from..].partition_point(|&c| c >> self.shift == key);
-            self.open.extend_from_slice(&colors[from..from + run]);
+            self.push_run(key, &colors[from..from + run])?;
             from += run;
         }
+        Ok(())
+    }
+
+    /// `code >> shift` of a voxel code: the key of its chunk.
+    pub fn chunk_shift(&self) -> u32 {
+        self.shift
+    }
+
+    /// Adds the colours of the next voxels, all in the chunk `key` (`code >> chunk_shift`;
+    /// keys ascending across calls).
+    pub fn push_run(&mut self, key: u64, colors: &[u32]) -> Result<(), DagError> {
+        if !self.open.is_empty() && key != self.key {
+            self.close_chunk()?;
+        }
+        self.key = key;
+        self.open.extend_from_slice(colors);
         Ok(())
     }
 

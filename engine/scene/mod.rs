@@ -137,13 +137,42 @@ pub fn import_in(
     asset_root: Option<&Path>,
     progress: &ProgressBar,
 ) -> Result<Voxels, SceneError> {
+    match open_in(path, opts, asset_root)? {
+        Source::Voxels(voxels) => Ok(voxels),
+        Source::Mesh { mesh, resolution } => voxelize(&mesh, resolution, progress),
+    }
+}
+
+/// A scene file opened for voxelization: what [`open_in`] yields.
+#[derive(Clone, Debug)]
+pub enum Source {
+    /// A .vox model, already voxels (bounded by its own import guard).
+    Voxels(Voxels),
+    /// A mesh, loaded with every input-sized allocation checked against the memory limit, and
+    /// the validated resolution to voxelize it at.
+    Mesh {
+        /// The mesh in model space.
+        mesh: Mesh,
+        /// Grid resolution (`opts.resolution`, default 1024).
+        resolution: u32,
+    },
+}
+
+/// Opens a scene file for [`import_in`] or a streaming voxelization
+/// ([`voxelize::voxelize_stream`]): the one import path of both, with the same checks
+/// (extension, resolution, asset roots, the memory limit on every input-sized allocation).
+pub fn open_in(
+    path: &Path,
+    opts: &ImportOptions,
+    asset_root: Option<&Path>,
+) -> Result<Source, SceneError> {
     match extension(path).as_str() {
-        "vox" => load_vox(path, opts),
+        "vox" => Ok(Source::Voxels(load_vox(path, opts)?)),
         "obj" | "gltf" | "glb" => {
             let resolution = opts.resolution.unwrap_or(DEFAULT_MESH_RESOLUTION);
             voxelize::check_resolution(resolution, path)?;
             let mesh = load_mesh_in(path, opts, asset_root)?;
-            voxelize(&mesh, resolution, progress)
+            Ok(Source::Mesh { mesh, resolution })
         }
         ext => Err(SceneError::Unsupported {
             path: path.to_path_buf(),

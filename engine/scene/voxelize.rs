@@ -689,7 +689,7 @@ pub fn voxelize(
         codes: Vec::new(),
         colors: Vec::new(),
     };
-    voxelize_tris(mesh, &tris, resolution, progress, |c, col| {
+    voxelize_tris(mesh, &tris, resolution, 0..u64::MAX, progress, |c, col| {
         // The estimate can be short: grow fallibly, an error rather than an abort.
         let grown = out.codes.len() as u64 + c.len() as u64;
         let bytes = grown * if colors { 12 } else { 8 };
@@ -728,9 +728,34 @@ pub fn voxelize_stream<E: From<SceneError> + Send>(
     progress: &ProgressBar,
     sink: impl FnMut(&[u64], &[u32]) -> Result<(), E> + Send,
 ) -> Result<(), E> {
+    voxelize_stream_range(mesh, resolution, 0..u64::MAX, progress, sink)
+}
+
+/// [`voxelize_stream`] of the voxels whose Morton codes lie in `range` only (a part of a
+/// partitioned build, `docs/scaling.md`): bricks outside it are not voxelized.
+pub fn voxelize_stream_range<E: From<SceneError> + Send>(
+    mesh: &Mesh,
+    resolution: u32,
+    range: std::ops::Range<u64>,
+    progress: &ProgressBar,
+    mut sink: impl FnMut(&[u64], &[u32]) -> Result<(), E> + Send,
+) -> Result<(), E> {
     check_resolution(resolution, &mesh.source)?;
     let tris = grid_triangles(mesh, resolution)?;
-    voxelize_tris(mesh, &tris, resolution, progress, sink)
+    let inside = range.clone();
+    voxelize_tris(mesh, &tris, resolution, range, progress, |codes, colors| {
+        let from = codes.partition_point(|&c| c < inside.start);
+        let to = codes.partition_point(|&c| c < inside.end);
+        if from == to {
+            return Ok(());
+        }
+        let colors = if colors.is_empty() {
+            colors
+        } else {
+            &colors[from..to]
+        };
+        sink(&codes[from..to], colors)
+    })
 }
 
 /// Estimated surface voxels of `mesh` at `resolution` (the lower bound of the memory guard of
@@ -760,6 +785,7 @@ fn voxelize_tris<E: From<SceneError> + Send>(
     mesh: &Mesh,
     tris: &[GridTriangle],
     resolution: u32,
+    range: std::ops::Range<u64>,
     progress: &ProgressBar,
     mut sink: impl FnMut(&[u64], &[u32]) -> Result<(), E> + Send,
 ) -> Result<(), E> {
@@ -807,7 +833,12 @@ fn voxelize_tris<E: From<SceneError> + Send>(
     let mut start = 0;
     for i in 1..=pairs.len() {
         if i == pairs.len() || pairs[i] >> 32 != pairs[start] >> 32 {
-            bricks.push((pairs[start] >> 32, start, i));
+            let brick = pairs[start] >> 32;
+            // Bricks are contiguous runs of Morton codes: skip those outside `range`.
+            let (lo, hi) = (brick << (3 * brick_log), (brick + 1) << (3 * brick_log));
+            if hi > range.start && lo < range.end {
+                bricks.push((brick, start, i));
+            }
             start = i;
         }
     }
