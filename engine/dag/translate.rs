@@ -743,8 +743,8 @@ impl KeyFilter {
         self.words[w] |= bits;
     }
 
-    /// False only if `hash` was never inserted.
-    #[inline]
+    /// False only if `hash` was never inserted (the search reads the words in a batch instead).
+    #[cfg(test)]
     fn may_contain(&self, hash: u64) -> bool {
         let (w, bits) = self.place(hash);
         self.words[w] & bits == bits
@@ -892,12 +892,13 @@ fn for_each_direction(
     }
 }
 
-/// The tight cells of direction `d` in a dense box of `dims`: non-empty regions whose slab
-/// through the cell is non-empty on every axis (the region's bounding box starts there), i.e.
-/// every distinct region once.
-fn collect_tight(dims: [usize; 3], d: usize, count: &[u16], out: &mut Vec<u32>) {
+/// The tight cells of direction `d` in the dense box `bx` (grid side `n`): non-empty regions
+/// whose slab through the cell is non-empty on every axis (the region's bounding box starts
+/// there), i.e. every distinct region once. A cell whose region has no gap on any axis (see
+/// [`gaps`]; read here from the neighbours behind the cut) carries [`FLUSH_CELL`].
+fn collect_tight(bx: &DenseBox, n: usize, d: usize, count: &[u16], out: &mut Vec<u32>) {
     out.clear();
-    let [dx, dy, dz] = dims;
+    let [dx, dy, dz] = bx.dims;
     let neg = [d & 1 == 1, (d >> 1) & 1 == 1, (d >> 2) & 1 == 1];
     // The neighbour toward the inside of the region along an axis of `len` cells, if any.
     let next = |v: usize, len: usize, negative: bool| -> Option<usize> {
@@ -907,13 +908,31 @@ fn collect_tight(dims: [usize; 3], d: usize, count: &[u16], out: &mut Vec<u32>) 
             Some(v + 1).filter(|&w| w < len)
         }
     };
+    // The neighbour behind the cut, or `Err(flush)` at the box's end: the gap is zero there
+    // exactly when the box touches the cube face.
+    let back = |v: usize, ax: usize| -> Result<usize, bool> {
+        if neg[ax] {
+            if v + 1 == bx.dims[ax] {
+                Err(bx.lo[ax] + bx.dims[ax] == n)
+            } else {
+                Ok(v + 1)
+            }
+        } else if v == 0 {
+            Err(bx.lo[ax] == 0)
+        } else {
+            Ok(v - 1)
+        }
+    };
     for z in 0..dz {
         let nz = next(z, dz, neg[2]);
+        let bz = back(z, 2);
         for y in 0..dy {
             let r = dx * (y + dy * z);
             let row = &count[r..r + dx];
             let ny = next(y, dy, neg[1]).map(|w| &count[dx * (w + dy * z)..][..dx]);
             let nzr = nz.map(|w| &count[dx * (y + dy * w)..][..dx]);
+            let by = back(y, 1).map(|w| &count[dx * (w + dy * z)..][..dx]);
+            let bzr = bz.map(|w| &count[dx * (y + dy * w)..][..dx]);
             for x in 0..dx {
                 let c = row[x];
                 if c == 0 {
@@ -926,7 +945,10 @@ fn collect_tight(dims: [usize; 3], d: usize, count: &[u16], out: &mut Vec<u32>) 
                 let yv = ny.map_or(0, |rr| rr[x]);
                 let zv = nzr.map_or(0, |rr| rr[x]);
                 if c > nx && c > yv && c > zv {
-                    out.push((r + x) as u32);
+                    let flush = back(x, 0).map_or_else(|f| f, |w| row[w] != c)
+                        && by.map_or_else(|f| f, |rr| rr[x] != c)
+                        && bzr.map_or_else(|f| f, |rr| rr[x] != c);
+                    out.push((r + x) as u32 | if flush { FLUSH_CELL } else { 0 });
                 }
             }
         }
@@ -1021,27 +1043,6 @@ fn gaps(bx: &DenseBox, n: usize, count: &[u16], i: usize, d: usize) -> [usize; 3
                 }
                 gap += 1;
             }
-        }
-    })
-}
-
-/// Whether [`gaps`] is zero on every axis (the cut cannot move back at all), without walking.
-fn zero_gaps(bx: &DenseBox, n: usize, count: &[u16], i: usize, d: usize) -> bool {
-    let [dx, dy, _] = bx.dims;
-    let local = [i % dx, (i / dx) % dy, i / (dx * dy)];
-    let strides = [1, dx, dx * dy];
-    let c = count[i];
-    (0..3).all(|ax| {
-        if (d >> ax) & 1 == 0 {
-            if local[ax] == 0 {
-                bx.lo[ax] == 0
-            } else {
-                count[i - strides[ax]] != c
-            }
-        } else if local[ax] + 1 == bx.dims[ax] {
-            bx.lo[ax] + bx.dims[ax] == n
-        } else {
-            count[i + strides[ax]] != c
         }
     })
 }
@@ -1237,18 +1238,36 @@ fn search_level(
                     ..
                 } = s;
                 for_each_direction(bx.dims, hashes, counts, |d, hash, count| {
-                    collect_tight(bx.dims, d, count, tight);
+                    collect_tight(&bx, n, d, count, tight);
                     n_lookups += tight.len() as u64;
                     // The cache-resident filters first (most regions have no key in the table);
-                    // a region with no gap can only match an entry with no offset. Bit 31 of a
-                    // kept cell marks a region with no gap.
-                    tight.retain_mut(|cell| {
-                        let i = *cell as usize;
-                        let flush = zero_gaps(&bx, n, count, i, d);
-                        *cell |= (flush as u32) << 31;
-                        let filter = if flush { &table.flush } else { &table.any };
-                        filter.may_contain(hash[i])
-                    });
+                    // a region with no gap can only match an entry with no offset. All filter
+                    // words are loaded before any is tested, so that the loads overlap.
+                    let filter = |cell: u32| {
+                        let h = hash[(cell & !FLUSH_CELL) as usize];
+                        if cell & FLUSH_CELL != 0 {
+                            table.flush.place(h)
+                        } else {
+                            table.any.place(h)
+                        }
+                    };
+                    first.clear();
+                    first.extend(tight.iter().map(|&cell| {
+                        let (w, _) = filter(cell);
+                        if cell & FLUSH_CELL != 0 {
+                            table.flush.words[w]
+                        } else {
+                            table.any.words[w]
+                        }
+                    }));
+                    let mut kept = 0;
+                    for j in 0..tight.len() {
+                        let cell = tight[j];
+                        let (_, bits) = filter(cell);
+                        tight[kept] = cell;
+                        kept += (first[j] & bits == bits) as usize;
+                    }
+                    tight.truncate(kept);
                     n_passed += tight.len() as u64;
                     // Independent loads first (they overlap in the memory system), then probes.
                     first.clear();
@@ -1472,11 +1491,40 @@ mod tests {
             let count: Vec<u16> = (0..cells)
                 .map(|i| region(bx.point(i).map(|v| v as isize), d))
                 .collect();
+            // Tight cells (the region's bounding box starts there) with their no-gap flag.
+            let mut tight = Vec::new();
+            collect_tight(&bx, n, d, &count, &mut tight);
+            let expected: Vec<u32> = (0..cells)
+                .filter(|&i| {
+                    let q = bx.point(i);
+                    count[i] > 0
+                        && (0..3).all(|ax| {
+                            voxels.iter().any(|v| {
+                                v[ax] == q[ax] && region(v.map(|c| c as isize), d) > 0 && {
+                                    let mut p = q.map(|c| c as isize);
+                                    p[ax] = v[ax] as isize;
+                                    (0..3).all(|k| {
+                                        let c = v[k] as isize;
+                                        if (d >> k) & 1 == 0 {
+                                            c >= p[k]
+                                        } else {
+                                            c <= p[k]
+                                        }
+                                    })
+                                }
+                            })
+                        })
+                })
+                .map(|i| {
+                    let flush = gaps(&bx, n, &count, i, d) == [0; 3];
+                    i as u32 | if flush { FLUSH_CELL } else { 0 }
+                })
+                .collect();
+            assert_eq!(tight, expected, "d {d}");
             for i in 0..cells {
                 let q = bx.point(i).map(|v| v as isize);
                 let c = count[i];
                 let gap = gaps(&bx, n, &count, i, d);
-                assert_eq!(zero_gaps(&bx, n, &count, i, d), gap == [0; 3]);
                 for ax in 0..3 {
                     let back = |k: isize| {
                         let mut p = q;
