@@ -539,8 +539,8 @@ struct ItemInfo {
     hi: [u8; 3],
 }
 
-/// One table entry: item `B` under permutation `perm_dir >> 3` of the set, keyed from its
-/// bounding-box corner toward direction `perm_dir & 7`, with the item's info inline so that a
+/// One table entry: item `B` under permutation `(perm_dir & !LAST) >> 3` of the set, keyed from
+/// its bounding-box corner toward direction `perm_dir & 7`, with the item's info inline so that a
 /// candidate costs no further random access.
 #[derive(Clone, Copy, Default)]
 struct Entry {
@@ -581,18 +581,31 @@ impl Entry {
 /// before insertion: small items share their shapes (every single-voxel item has the key 1 in
 /// all 48 entries), and storing them one slot each made long linear-probing clusters that every
 /// lookup landing nearby had to walk. Open addressing with linear probing over one `u64` per
-/// distinct key (high half: low 32 bits of the hash forced odd, so 0 marks an empty slot; low
-/// half: the group index); the slot is chosen by the high bits of the hash. Equal fingerprints
-/// of different hashes only cost a confirmation. Within a group, entries are sorted by their
-/// largest offset, so that a lookup stops at the first entry that no gap can accommodate.
+/// distinct key, chosen by the high bits of the hash: high half the tag (bit 0 set: occupied;
+/// bit 1: the group has an entry with all offsets zero; bits 2..32: the hash's low bits), low
+/// half the index of the group's first entry (its last has [`LAST`] set). Only the tag is
+/// compared: a lookup visits every group of its probe run with the same tag. Another key's group
+/// is harmless (its candidates fail the count, window and voxel checks), and visiting all of
+/// them never misses the right one (returning the first tag match lost a match on dragon 128).
+/// A hit therefore costs one slot and one run of entries, no key or group-start array. Within a
+/// group, entries are sorted by their largest offset, so that a lookup stops at the first entry
+/// that no gap can accommodate.
 struct Table {
     shift: u32,
     slots: Vec<u64>,
-    /// Group `g` is `entries[starts[g]..starts[g + 1]]`, its key `keys[g]`.
-    starts: Vec<u32>,
-    keys: Vec<u64>,
     entries: Vec<Entry>,
+    /// Keys of groups with an entry whose offsets are all zero: the only entries a region with
+    /// zero gaps on every axis can match (most regions).
+    flush: KeyFilter,
+    /// Every key.
+    any: KeyFilter,
 }
+
+/// Bit of `Entry::perm_dir` marking the last entry of a group.
+const LAST: u8 = 0x80;
+
+/// Tag bit of a slot whose group has an entry with all offsets zero.
+const FLUSH: u64 = 2;
 
 impl Table {
     /// The table of `(key, entry)` pairs (any order; sorted here so that the groups and the
@@ -601,34 +614,46 @@ impl Table {
         pairs.par_sort_unstable_by_key(|&(k, e)| (k, e.max_offset(), e.item, e.perm_dir));
         let distinct = pairs.windows(2).filter(|w| w[0].0 != w[1].0).count() + 1;
         let cap = (distinct * 2).next_power_of_two().max(64);
+        let flush_distinct = pairs
+            .iter()
+            .enumerate()
+            .filter(|&(i, &(k, e))| (i == 0 || pairs[i - 1].0 != k) && e.max_offset() == 0)
+            .count();
         let mut table = Table {
             shift: 64 - cap.trailing_zeros(),
-            slots: vec![0; cap],
-            starts: Vec::with_capacity(distinct + 1),
-            keys: Vec::with_capacity(distinct),
+            slots: huge_zeroed(cap),
             entries: Vec::with_capacity(pairs.len()),
+            flush: KeyFilter::new(flush_distinct),
+            any: KeyFilter::new(distinct),
         };
         let mask = cap - 1;
-        for (i, &(key, entry)) in pairs.iter().enumerate() {
+        for (i, &(key, mut entry)) in pairs.iter().enumerate() {
             if i == 0 || pairs[i - 1].0 != key {
-                let group = table.starts.len() as u64;
-                table.starts.push(table.entries.len() as u32);
-                table.keys.push(key);
+                // Entries are sorted by their largest offset within a group: the first tells.
+                let flush = entry.max_offset() == 0;
+                let tag = Self::tag(key) | if flush { FLUSH } else { 0 };
                 let mut s = (key >> table.shift) as usize;
                 while table.slots[s] != 0 {
                     s = (s + 1) & mask;
                 }
-                table.slots[s] = Self::fingerprint(key) << 32 | group;
+                table.slots[s] = tag << 32 | table.entries.len() as u64;
+                table.any.insert(key);
+                if flush {
+                    table.flush.insert(key);
+                }
+            }
+            if pairs.get(i + 1).is_none_or(|next| next.0 != key) {
+                entry.perm_dir |= LAST;
             }
             table.entries.push(entry);
         }
-        table.starts.push(table.entries.len() as u32);
         table
     }
 
+    /// The tag of `hash` without the [`FLUSH`] bit (never 0).
     #[inline]
-    fn fingerprint(hash: u64) -> u64 {
-        (hash as u32 | 1) as u64
+    fn tag(hash: u64) -> u64 {
+        (hash as u32 & !3 | 1) as u64
     }
 
     /// The first slot probed for `hash` (0: certainly absent).
@@ -637,26 +662,112 @@ impl Table {
         self.slots[(hash >> self.shift) as usize]
     }
 
-    /// The entries whose key has the fingerprint of `hash` (empty when none).
+    /// Calls `f` with the entries of every group whose tag equals that of `hash` (with an
+    /// all-zero-offset entry when `flush_only`); the group of `hash` itself is among them.
     #[inline]
-    fn group(&self, hash: u64) -> &[Entry] {
+    fn for_each_group(&self, hash: u64, flush_only: bool, mut f: impl FnMut(GroupIter<'_>)) {
         let mask = self.slots.len() - 1;
-        let fp = Self::fingerprint(hash);
+        let tag = Self::tag(hash);
+        let need = if flush_only { FLUSH } else { 0 };
         let mut s = (hash >> self.shift) as usize;
         loop {
             let v = self.slots[s];
             if v == 0 {
-                return &[];
+                return;
             }
-            if v >> 32 == fp {
-                let g = (v as u32) as usize;
-                if self.keys[g] == hash {
-                    return &self.entries[self.starts[g] as usize..self.starts[g + 1] as usize];
-                }
+            let t = v >> 32;
+            if t & !FLUSH == tag && t & need == need {
+                f(GroupIter {
+                    entries: &self.entries,
+                    next: v as u32 as usize,
+                    done: false,
+                });
             }
             s = (s + 1) & mask;
         }
     }
+}
+
+/// The entries of one group, in table order.
+struct GroupIter<'a> {
+    entries: &'a [Entry],
+    next: usize,
+    done: bool,
+}
+
+impl<'a> Iterator for GroupIter<'a> {
+    type Item = &'a Entry;
+
+    #[inline]
+    fn next(&mut self) -> Option<&'a Entry> {
+        if self.done {
+            return None;
+        }
+        let e = &self.entries[self.next];
+        self.next += 1;
+        self.done = e.perm_dir & LAST != 0;
+        Some(e)
+    }
+}
+
+/// A blocked Bloom filter of table keys: one 64-bit word per key with two bits set, about 4 to
+/// 8 bits per key (5 to 16% false positives). It is 16 to 32 times smaller than the slot array,
+/// so most lookups (whose keys are absent) are answered from the cache instead of missing in
+/// memory on the table.
+struct KeyFilter {
+    shift: u32,
+    words: Vec<u64>,
+}
+
+impl KeyFilter {
+    /// An empty filter sized for `keys` keys.
+    fn new(keys: usize) -> KeyFilter {
+        let words = (keys / 16).next_power_of_two().max(8);
+        KeyFilter {
+            shift: 64 - words.trailing_zeros(),
+            words: huge_zeroed(words),
+        }
+    }
+
+    /// The word index and the two bits of `hash` (remixed: the table uses the hash's top bits
+    /// for the slot and its low bits for the fingerprint).
+    #[inline]
+    fn place(&self, hash: u64) -> (usize, u64) {
+        let h = (hash ^ hash >> 29).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        let bits = 1u64 << (h & 63) | 1u64 << ((h >> 6) & 63);
+        ((h >> self.shift) as usize, bits)
+    }
+
+    fn insert(&mut self, hash: u64) {
+        let (w, bits) = self.place(hash);
+        self.words[w] |= bits;
+    }
+
+    /// False only if `hash` was never inserted (the search reads the words in a batch instead).
+    #[cfg(test)]
+    fn may_contain(&self, hash: u64) -> bool {
+        let (w, bits) = self.place(hash);
+        self.words[w] & bits == bits
+    }
+}
+
+/// A zeroed vector whose pages are not yet touched, marked for transparent huge pages where the
+/// OS supports it: the search reads the table and its filters at random, and with 4 KiB pages
+/// nearly every such read of a large table also misses the TLB.
+fn huge_zeroed(len: usize) -> Vec<u64> {
+    let v = vec![0u64; len];
+    #[cfg(target_os = "linux")]
+    {
+        const HUGE: usize = 2 << 20;
+        let start = (v.as_ptr() as usize).next_multiple_of(HUGE);
+        let end = (v.as_ptr() as usize + len * 8) / HUGE * HUGE;
+        if end > start {
+            // SAFETY: the range lies inside `v`'s allocation; the advice changes no contents.
+            // A refusal (no THP support) only leaves the default pages.
+            unsafe { libc::madvise(start as *mut libc::c_void, end - start, libc::MADV_HUGEPAGE) };
+        }
+    }
+    v
 }
 
 /// Packs a parent candidate so that a larger value is preferred: parent rank, then smaller
@@ -674,6 +785,9 @@ fn unpack(key: u64) -> (u32, Transform, [i8; 3]) {
     let tr = std::array::from_fn(|i| (((key >> (5 * i)) & 31) as i64 - 16) as i8);
     ((key >> 32) as u32, t, tr)
 }
+
+/// Bit of a kept tight cell index marking a region with no gap on any axis.
+const FLUSH_CELL: u32 = 1 << 31;
 
 /// Scratch buffers of one worker.
 struct Scratch {
@@ -778,12 +892,13 @@ fn for_each_direction(
     }
 }
 
-/// The tight cells of direction `d` in a dense box of `dims`: non-empty regions whose slab
-/// through the cell is non-empty on every axis (the region's bounding box starts there), i.e.
-/// every distinct region once.
-fn collect_tight(dims: [usize; 3], d: usize, count: &[u16], out: &mut Vec<u32>) {
+/// The tight cells of direction `d` in the dense box `bx` (grid side `n`): non-empty regions
+/// whose slab through the cell is non-empty on every axis (the region's bounding box starts
+/// there), i.e. every distinct region once. A cell whose region has no gap on any axis (see
+/// [`gaps`]; read here from the neighbours behind the cut) carries [`FLUSH_CELL`].
+fn collect_tight(bx: &DenseBox, n: usize, d: usize, count: &[u16], out: &mut Vec<u32>) {
     out.clear();
-    let [dx, dy, dz] = dims;
+    let [dx, dy, dz] = bx.dims;
     let neg = [d & 1 == 1, (d >> 1) & 1 == 1, (d >> 2) & 1 == 1];
     // The neighbour toward the inside of the region along an axis of `len` cells, if any.
     let next = |v: usize, len: usize, negative: bool| -> Option<usize> {
@@ -793,13 +908,31 @@ fn collect_tight(dims: [usize; 3], d: usize, count: &[u16], out: &mut Vec<u32>) 
             Some(v + 1).filter(|&w| w < len)
         }
     };
+    // The neighbour behind the cut, or `Err(flush)` at the box's end: the gap is zero there
+    // exactly when the box touches the cube face.
+    let back = |v: usize, ax: usize| -> Result<usize, bool> {
+        if neg[ax] {
+            if v + 1 == bx.dims[ax] {
+                Err(bx.lo[ax] + bx.dims[ax] == n)
+            } else {
+                Ok(v + 1)
+            }
+        } else if v == 0 {
+            Err(bx.lo[ax] == 0)
+        } else {
+            Ok(v - 1)
+        }
+    };
     for z in 0..dz {
         let nz = next(z, dz, neg[2]);
+        let bz = back(z, 2);
         for y in 0..dy {
             let r = dx * (y + dy * z);
             let row = &count[r..r + dx];
             let ny = next(y, dy, neg[1]).map(|w| &count[dx * (w + dy * z)..][..dx]);
             let nzr = nz.map(|w| &count[dx * (y + dy * w)..][..dx]);
+            let by = back(y, 1).map(|w| &count[dx * (w + dy * z)..][..dx]);
+            let bzr = bz.map(|w| &count[dx * (y + dy * w)..][..dx]);
             for x in 0..dx {
                 let c = row[x];
                 if c == 0 {
@@ -812,7 +945,10 @@ fn collect_tight(dims: [usize; 3], d: usize, count: &[u16], out: &mut Vec<u32>) 
                 let yv = ny.map_or(0, |rr| rr[x]);
                 let zv = nzr.map_or(0, |rr| rr[x]);
                 if c > nx && c > yv && c > zv {
-                    out.push((r + x) as u32);
+                    let flush = back(x, 0).map_or_else(|f| f, |w| row[w] != c)
+                        && by.map_or_else(|f| f, |rr| rr[x] != c)
+                        && bzr.map_or_else(|f| f, |rr| rr[x] != c);
+                    out.push((r + x) as u32 | if flush { FLUSH_CELL } else { 0 });
                 }
             }
         }
@@ -1055,6 +1191,8 @@ fn search_level(
         .collect();
     let lookups = AtomicU64::new(0);
     let confirmed = AtomicU64::new(0);
+    let passed = AtomicU64::new(0);
+    let hits = AtomicU64::new(0);
     let batches = items.len().div_ceil(TABLE_BATCH).max(1);
     progress.inc_length((items.len() * batches) as u64);
     for batch in 0..batches {
@@ -1085,6 +1223,8 @@ fn search_level(
                 let ra = rank[a];
                 let mut n_lookups = 0u64;
                 let mut n_confirmed = 0u64;
+                let mut n_passed = 0u64;
+                let mut n_hits = 0u64;
                 grid_of(a, &mut s.grid);
                 let bx = DenseBox::of(&info[a]);
                 load_dense(&g, &s.grid[..words], &bx, &mut s.hash[0], &mut s.count[0]);
@@ -1098,102 +1238,148 @@ fn search_level(
                     ..
                 } = s;
                 for_each_direction(bx.dims, hashes, counts, |d, hash, count| {
-                    collect_tight(bx.dims, d, count, tight);
+                    collect_tight(&bx, n, d, count, tight);
+                    n_lookups += tight.len() as u64;
+                    // The cache-resident filters first (most regions have no key in the table);
+                    // a region with no gap can only match an entry with no offset. All filter
+                    // words are loaded before any is tested, so that the loads overlap.
+                    let filter = |cell: u32| {
+                        let h = hash[(cell & !FLUSH_CELL) as usize];
+                        if cell & FLUSH_CELL != 0 {
+                            table.flush.place(h)
+                        } else {
+                            table.any.place(h)
+                        }
+                    };
+                    first.clear();
+                    first.extend(tight.iter().map(|&cell| {
+                        let (w, _) = filter(cell);
+                        if cell & FLUSH_CELL != 0 {
+                            table.flush.words[w]
+                        } else {
+                            table.any.words[w]
+                        }
+                    }));
+                    let mut kept = 0;
+                    for j in 0..tight.len() {
+                        let cell = tight[j];
+                        let (_, bits) = filter(cell);
+                        tight[kept] = cell;
+                        kept += (first[j] & bits == bits) as usize;
+                    }
+                    tight.truncate(kept);
+                    n_passed += tight.len() as u64;
                     // Independent loads first (they overlap in the memory system), then probes.
                     first.clear();
-                    first.extend(tight.iter().map(|&i| table.first(hash[i as usize])));
-                    n_lookups += tight.len() as u64;
-                    for (&i, &f) in tight.iter().zip(first.iter()) {
+                    first.extend(
+                        tight
+                            .iter()
+                            .map(|&i| table.first(hash[(i & !FLUSH_CELL) as usize])),
+                    );
+                    for (&cell, &f) in tight.iter().zip(first.iter()) {
                         if f == 0 {
                             continue;
                         }
-                        let i = i as usize;
+                        let flush = cell & FLUSH_CELL != 0;
+                        let i = (cell & !FLUSH_CELL) as usize;
                         let q = bx.point(i);
                         let cq = count[i];
-                        let group = table.group(hash[i]);
-                        if group.is_empty() {
-                            continue;
-                        }
-                        let gap = gaps(&bx, n, count, i, d);
-                        let widest = gap[0].max(gap[1]).max(gap[2]);
-                        'entries: for e in group {
-                            if e.max_offset() as usize > widest {
-                                break;
-                            }
-                            if (0..3).any(|ax| e.offset[ax] as usize > gap[ax]) {
-                                continue;
-                            }
-                            let b = e.item as usize;
-                            let k = (e.perm_dir >> 3) as usize;
-                            let db = (e.perm_dir & 7) as usize;
-                            let ib = &e.info;
-                            if b == a || ib.voxels != cq {
-                                continue 'entries;
-                            }
-                            let m = (d ^ db) as u8;
-                            let order = super::transform::PERMUTATIONS[perms[k]];
-                            // P(b) = Tr_s(M_m(A)): corner of P(b) toward d_B minus M_m(q).
-                            let mut shift = [0i8; 3];
-                            let mut origin = [0usize; 3];
-                            for ax in 0..3 {
-                                let qm = if (m >> ax) & 1 == 1 {
-                                    n - 1 - q[ax]
+                        let mut gap = None;
+                        table.for_each_group(hash[i], flush, |group| {
+                            n_hits += 1;
+                            let gap = *gap.get_or_insert_with(|| {
+                                if flush {
+                                    [0; 3]
                                 } else {
-                                    q[ax]
-                                } as i32;
-                                let j = order[ax] as usize;
-                                let o = if (db >> ax) & 1 == 0 {
-                                    let s_ax = ib.lo[j] as i32 - qm;
-                                    if s_ax > 0 {
-                                        continue 'entries;
-                                    }
-                                    shift[ax] = s_ax as i8;
-                                    -s_ax
-                                } else {
-                                    let s_ax = ib.hi[j] as i32 - qm;
-                                    if s_ax < 0 {
-                                        continue 'entries;
-                                    }
-                                    shift[ax] = s_ax as i8;
-                                    n as i32 - 1 - s_ax
-                                } as usize;
-                                origin[ax] = if (m >> ax) & 1 == 1 { n - 1 - o } else { o };
+                                    gaps(&bx, n, count, i, d)
+                                }
+                            });
+                            let widest = gap[0].max(gap[1]).max(gap[2]);
+                            'entries: for e in group {
+                                if e.max_offset() as usize > widest {
+                                    break;
+                                }
+                                if (0..3).any(|ax| e.offset[ax] as usize > gap[ax]) {
+                                    continue;
+                                }
+                                let b = e.item as usize;
+                                let k = ((e.perm_dir & !LAST) >> 3) as usize;
+                                let db = (e.perm_dir & 7) as usize;
+                                let ib = &e.info;
+                                if b == a || ib.voxels != cq {
+                                    continue 'entries;
+                                }
+                                let m = (d ^ db) as u8;
+                                let order = super::transform::PERMUTATIONS[perms[k]];
+                                // P(b) = Tr_s(M_m(A)): corner of P(b) toward d_B minus M_m(q).
+                                let mut shift = [0i8; 3];
+                                let mut origin = [0usize; 3];
+                                for ax in 0..3 {
+                                    let qm = if (m >> ax) & 1 == 1 {
+                                        n - 1 - q[ax]
+                                    } else {
+                                        q[ax]
+                                    } as i32;
+                                    let j = order[ax] as usize;
+                                    let o = if (db >> ax) & 1 == 0 {
+                                        let s_ax = ib.lo[j] as i32 - qm;
+                                        if s_ax > 0 {
+                                            continue 'entries;
+                                        }
+                                        shift[ax] = s_ax as i8;
+                                        -s_ax
+                                    } else {
+                                        let s_ax = ib.hi[j] as i32 - qm;
+                                        if s_ax < 0 {
+                                            continue 'entries;
+                                        }
+                                        shift[ax] = s_ax as i8;
+                                        n as i32 - 1 - s_ax
+                                    } as usize;
+                                    origin[ax] = if (m >> ax) & 1 == 1 { n - 1 - o } else { o };
+                                }
+                                // The window of A that stays inside must hold |b| voxels.
+                                if bx.cell(origin, d).map_or(0, |c| count[c]) != cq {
+                                    continue 'entries;
+                                }
+                                // b = P⁻¹(Tr_s(M_m(A))) = Tr_{L(s)}((P⁻¹ ∘ M_m)(A)).
+                                let pinv = inverse_perms[k];
+                                let t =
+                                    pinv.compose(Transform::from_parts(0, m).unwrap_or_default());
+                                if !set.contains(t) {
+                                    continue 'entries;
+                                }
+                                let tr = apply_to_vector(pinv, shift);
+                                let key = pack(ra, t, tr);
+                                if best[b].load(Ordering::Relaxed) >= key {
+                                    continue 'entries;
+                                }
+                                n_confirmed += 1;
+                                grid_of(b, &mut other);
+                                if confirm(&g, &grid_a[..words], &other[..words], t, tr) {
+                                    best[b].fetch_max(key, Ordering::Relaxed);
+                                }
                             }
-                            // The window of A that stays inside must hold |b| voxels.
-                            if bx.cell(origin, d).map_or(0, |c| count[c]) != cq {
-                                continue 'entries;
-                            }
-                            // b = P⁻¹(Tr_s(M_m(A))) = Tr_{L(s)}((P⁻¹ ∘ M_m)(A)).
-                            let pinv = inverse_perms[k];
-                            let t = pinv.compose(Transform::from_parts(0, m).unwrap_or_default());
-                            if !set.contains(t) {
-                                continue 'entries;
-                            }
-                            let tr = apply_to_vector(pinv, shift);
-                            let key = pack(ra, t, tr);
-                            if best[b].load(Ordering::Relaxed) >= key {
-                                continue 'entries;
-                            }
-                            n_confirmed += 1;
-                            grid_of(b, &mut other);
-                            if confirm(&g, &grid_a[..words], &other[..words], t, tr) {
-                                best[b].fetch_max(key, Ordering::Relaxed);
-                            }
-                        }
+                        });
                     }
                 });
                 lookups.fetch_add(n_lookups, Ordering::Relaxed);
                 confirmed.fetch_add(n_confirmed, Ordering::Relaxed);
+                passed.fetch_add(n_passed, Ordering::Relaxed);
+                hits.fetch_add(n_hits, Ordering::Relaxed);
                 progress.inc(1);
             },
         );
     }
     log::debug!(
-        "translations at {}^3: {} items, {:.1} s, {} lookups, {} confirmations",
+        "translations at {}^3: {} items, {:.1} s, {} lookups, {} past the filters, {} keys \
+         found, {} confirmations",
         n,
         items.len(),
         started.elapsed().as_secs_f64(),
         lookups.load(Ordering::Relaxed),
+        passed.load(Ordering::Relaxed),
+        hits.load(Ordering::Relaxed),
         confirmed.load(Ordering::Relaxed)
     );
     best.iter()
@@ -1222,11 +1408,56 @@ mod tests {
         let k1 = 0x0123_4567_89ab_cdef_u64;
         let k2 = k1 ^ (1 << 40);
         let table = Table::build(vec![(k1, entry(1)), (k2, entry(2)), (k1, entry(3))]);
-        assert_eq!(Table::fingerprint(k1), Table::fingerprint(k2));
-        let items = |k| table.group(k).iter().map(|e| e.item).collect::<Vec<_>>();
-        assert_eq!(items(k1), vec![1, 3]);
-        assert_eq!(items(k2), vec![2]);
-        assert!(items(k1 ^ 2).is_empty());
+        assert_eq!(Table::tag(k1), Table::tag(k2));
+        let items = |k| {
+            let mut out = Vec::new();
+            table.for_each_group(k, false, |g| {
+                out.push(g.map(|e| e.item).collect::<Vec<_>>())
+            });
+            out.sort();
+            out
+        };
+        // Both groups share the tag: a lookup visits both, never a mix of them.
+        assert_eq!(items(k1), vec![vec![1, 3], vec![2]]);
+        assert_eq!(items(k2), vec![vec![1, 3], vec![2]]);
+        assert!(items(k1 ^ 4).is_empty());
+    }
+
+    /// The filters never drop a key of the table: every key passes `any`, every key of a group
+    /// with a zero-offset entry passes `flush`; absent keys mostly fail.
+    #[test]
+    fn filters_keep_every_key() {
+        let mut rng = 0x1234_5678_9abc_def1_u64;
+        let mut next = || {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            rng
+        };
+        let pairs: Vec<(u64, Entry)> = (0..20_000)
+            .map(|i| {
+                let key = next() % 5000 * 0x9e37_79b9_7f4a_7c15;
+                let offset = [0, 1, 2].map(|_| (next() % 3 == 0) as u8 * (i % 5) as u8);
+                (key, Entry { offset, ..entry(i) })
+            })
+            .collect();
+        let table = Table::build(pairs.clone());
+        for (k, e) in &pairs {
+            assert!(table.any.may_contain(*k));
+            if e.max_offset() == 0 {
+                assert!(table.flush.may_contain(*k));
+            }
+            // The slot's flush bit: the key's own group is visited by a flush-only lookup
+            // exactly when it has an entry with no offset.
+            let mut visited = Vec::new();
+            table.for_each_group(*k, true, |g| visited.extend(g.map(|e| e.item)));
+            let flush_group = pairs.iter().any(|(k2, e2)| k2 == k && e2.max_offset() == 0);
+            assert_eq!(visited.contains(&e.item), flush_group);
+        }
+        let absent = (0..10_000)
+            .filter(|_| table.any.may_contain(next() | 1))
+            .count();
+        assert!(absent < 1500, "{absent} false positives of 10000");
     }
 
     /// `gaps` against counting the region of every cut position directly.
@@ -1260,6 +1491,36 @@ mod tests {
             let count: Vec<u16> = (0..cells)
                 .map(|i| region(bx.point(i).map(|v| v as isize), d))
                 .collect();
+            // Tight cells (the region's bounding box starts there) with their no-gap flag.
+            let mut tight = Vec::new();
+            collect_tight(&bx, n, d, &count, &mut tight);
+            let expected: Vec<u32> = (0..cells)
+                .filter(|&i| {
+                    let q = bx.point(i);
+                    count[i] > 0
+                        && (0..3).all(|ax| {
+                            voxels.iter().any(|v| {
+                                v[ax] == q[ax] && region(v.map(|c| c as isize), d) > 0 && {
+                                    let mut p = q.map(|c| c as isize);
+                                    p[ax] = v[ax] as isize;
+                                    (0..3).all(|k| {
+                                        let c = v[k] as isize;
+                                        if (d >> k) & 1 == 0 {
+                                            c >= p[k]
+                                        } else {
+                                            c <= p[k]
+                                        }
+                                    })
+                                }
+                            })
+                        })
+                })
+                .map(|i| {
+                    let flush = gaps(&bx, n, &count, i, d) == [0; 3];
+                    i as u32 | if flush { FLUSH_CELL } else { 0 }
+                })
+                .collect();
+            assert_eq!(tight, expected, "d {d}");
             for i in 0..cells {
                 let q = bx.point(i).map(|v| v as isize);
                 let c = count[i];
