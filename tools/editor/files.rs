@@ -19,6 +19,9 @@ use super::{load_scene, scene_size, Document, Running};
 use crate::commands::load_svdag;
 use crate::window::CameraInput;
 
+/// The egui id of the File panel (its collapsing state is unfolded by the shortcuts).
+const FILE_PANEL: &str = "voxdag editor file panel";
+
 /// The file options of `voxdag editor`.
 #[derive(Args)]
 pub struct FileArgs {
@@ -452,7 +455,7 @@ impl Running {
         let focus = self.files.focus;
         if focus.is_some() {
             // A shortcut unfolds the panel so that its field can take the focus.
-            let id = egui::Id::new("File").with("collapsing");
+            let id = egui::Id::new(FILE_PANEL).with("collapsing");
             let mut state =
                 egui::collapsing_header::CollapsingState::load_with_default_open(ctx, id, false);
             state.set_open(true);
@@ -461,6 +464,7 @@ impl Running {
         let mut focused = false;
         let mut has_focus = None;
         egui::Window::new("File")
+            .id(egui::Id::new(FILE_PANEL))
             .default_pos([8.0, 420.0])
             .default_open(false)
             .show(ctx, |ui| {
