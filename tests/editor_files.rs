@@ -274,6 +274,15 @@ fn opening_a_corrupt_file_shows_the_error_and_keeps_the_scene() {
     });
     ed.wait("the voxel count", |s| voxels(s) == voxels(&first));
     assert!(opened["last_error"].is_null(), "{opened}");
+    // The new scene survives a resize and a minimise / restore.
+    xdotool(&ed.display, &["windowsize", &ed.id, "520", "400"]);
+    ed.wait("the new size", |s| {
+        s["extent"] == serde_json::json!([520, 400])
+    });
+    xdotool(&ed.display, &["windowminimize", "--sync", &ed.id]);
+    std::thread::sleep(Duration::from_millis(1000));
+    xdotool(&ed.display, &["windowmap", "--sync", &ed.id]);
+    ed.frames_advance();
     ed.keys(&["Escape"]);
     ed.exits();
 }

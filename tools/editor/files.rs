@@ -102,7 +102,8 @@ pub struct FileState {
     prompt: Option<Prompt>,
     /// The last failed file action (shown in red, in the status file).
     last_error: Option<String>,
-    autosave_every: Option<Duration>,
+    /// Autosave interval in seconds (0: off); `--autosave-secs`, a setting in the panel.
+    autosave_secs: u64,
     last_autosave: Instant,
     /// The root last written to the autosave.
     autosaved_root: Option<Root>,
@@ -173,8 +174,7 @@ impl FileState {
             pending: (newer && args.recover == Recover::Yes).then_some(Pending::Recover),
             prompt: (newer && args.recover == Recover::Ask).then_some(Prompt::Recover),
             last_error: None,
-            autosave_every: (args.autosave_secs > 0)
-                .then(|| Duration::from_secs(args.autosave_secs)),
+            autosave_secs: args.autosave_secs,
             last_autosave: Instant::now(),
             autosaved_root: None,
             autosaves: 0,
@@ -341,10 +341,8 @@ impl Running {
                 }
             }
         }
-        let due = self
-            .files
-            .autosave_every
-            .is_some_and(|every| self.files.last_autosave.elapsed() >= every);
+        let every = Duration::from_secs(self.files.autosave_secs);
+        let due = self.files.autosave_secs > 0 && self.files.last_autosave.elapsed() >= every;
         if due && self.doc.unsaved > 0 && self.files.autosaved_root != Some(self.doc.dag.root()) {
             if let Err(e) = self.autosave() {
                 self.files.fail(e.context("autosave"));
@@ -536,15 +534,17 @@ impl Running {
                         Field::Record => Pending::Record(path),
                     });
                 }
-                ui.label(match files.autosave_every {
-                    Some(every) => format!(
-                        "autosave every {} s to {} ({} written)",
-                        every.as_secs(),
-                        autosave_path(&self.doc.path).display(),
-                        files.autosaves
-                    ),
-                    None => "autosave off (--autosave-secs 0)".into(),
-                });
+                ui.add(
+                    egui::DragValue::new(&mut files.autosave_secs)
+                        .range(0..=3600)
+                        .prefix("autosave every ")
+                        .suffix(" s (0: off)"),
+                );
+                ui.label(format!(
+                    "to {} ({} written)",
+                    autosave_path(&self.doc.path).display(),
+                    files.autosaves
+                ));
                 if recording && ui.button("stop recording (Ctrl+R)").clicked() {
                     self.stop_recording();
                 }
