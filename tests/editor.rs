@@ -84,23 +84,20 @@ fn wait_status(
     }
 }
 
-/// Starts the editor on `vdag` in an 800x600 window (internal scale 1/2) with a status file.
+/// Starts the editor on `vdag` in an 800x600 window (internal scale 1/2) with a status file,
+/// the sphere-add tool of radius 8.
 fn start_editor(x: &Xvfb, vdag: &Path, status: &Path) -> (Child, String) {
+    start_editor_with(x, vdag, status, &["--tool", "sphere-add", "--radius", "8"])
+}
+
+/// [`start_editor`] with the tool arguments `tool`.
+fn start_editor_with(x: &Xvfb, vdag: &Path, status: &Path, tool: &[&str]) -> (Child, String) {
     let mut cmd = voxdag(Some(&x.display));
     cmd.arg("editor")
         .arg(vdag)
-        .args([
-            "--size",
-            "800x600",
-            "--render-scale",
-            "0.5",
-            "--no-vsync",
-            "--tool",
-            "sphere-add",
-            "--radius",
-            "8",
-            "--status-file",
-        ])
+        .args(["--size", "800x600", "--render-scale", "0.5", "--no-vsync"])
+        .args(tool)
+        .arg("--status-file")
         .arg(status)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
@@ -251,6 +248,187 @@ fn survives_resize_and_minimise() {
     let after = frame(&status(&path).unwrap());
     wait_status(&path, &mut editor, "frames after the minimise", |s| {
         frame(s) > after + 1
+    });
+    close(&x, &id, editor);
+}
+
+/// Voxels of material `m` in a status.
+fn material(s: &serde_json::Value, m: usize) -> u64 {
+    s["materials"][m].as_u64().unwrap()
+}
+
+/// Moves the pointer to (`x`, `y`) in the window and waits until the status shows a hovered
+/// voxel other than `previous`; returns it.
+fn hover_at(
+    x: &Xvfb,
+    id: &str,
+    (px, py): (u32, u32),
+    path: &Path,
+    editor: &mut Child,
+    previous: &serde_json::Value,
+) -> serde_json::Value {
+    let (px, py) = (px.to_string(), py.to_string());
+    xdotool(&x.display, &["mousemove", "--window", id, &px, &py]);
+    let s = wait_status(path, editor, "a new hovered voxel", |s| {
+        s["hover"].is_array() && s["hover"] != *previous
+    });
+    s["hover"].clone()
+}
+
+#[test]
+fn paint_changes_materials_and_keeps_the_voxels() {
+    let dir = tempfile::tempdir().unwrap();
+    let vdag = scene(dir.path());
+    let x = Xvfb::start();
+    let path = dir.path().join("status.json");
+    let args = ["--tool", "paint", "--radius", "8", "--material", "5"];
+    let (mut editor, id) = start_editor_with(&x, &vdag, &path, &args);
+    let first = wait_status(&path, &mut editor, "voxel counts", |s| {
+        s["materials"].is_array()
+    });
+    let voxels = first["voxels"].as_u64().unwrap();
+    // A scene without materials loads with every voxel of material 0.
+    assert_eq!(material(&first, 0), voxels, "{first}");
+    hover_at(
+        &x,
+        &id,
+        (400, 300),
+        &path,
+        &mut editor,
+        &serde_json::Value::Null,
+    );
+    xdotool(&x.display, &["click", "1"]);
+    let painted = wait_status(&path, &mut editor, "painted voxels", |s| material(s, 5) > 0);
+    assert_eq!(
+        painted["voxels"].as_u64(),
+        Some(voxels),
+        "paint keeps the geometry"
+    );
+    assert_eq!(material(&painted, 0) + material(&painted, 5), voxels);
+    assert_eq!(painted["undo_depth"], 1, "{painted}");
+    assert_eq!(painted["last_edit"]["tool"], "paint", "{painted}");
+    xdotool(&x.display, &["windowfocus", "--sync", &id]);
+    xdotool(&x.display, &["key", "ctrl+z"]);
+    let undone = wait_status(&path, &mut editor, "the undo", |s| s["undo_depth"] == 0);
+    assert_eq!(material(&undone, 5), 0, "{undone}");
+    // Redo brings the paint back.
+    xdotool(&x.display, &["key", "ctrl+shift+z"]);
+    wait_status(&path, &mut editor, "the redo", |s| material(s, 5) > 0);
+    close(&x, &id, editor);
+}
+
+#[test]
+fn copy_stamps_the_picked_source_and_fill_floods() {
+    let dir = tempfile::tempdir().unwrap();
+    let vdag = scene(dir.path());
+    let x = Xvfb::start();
+    let path = dir.path().join("status.json");
+    let (mut editor, id) =
+        start_editor_with(&x, &vdag, &path, &["--tool", "copy", "--radius", "6"]);
+    let first = wait_status(&path, &mut editor, "a voxel count", |s| {
+        s["voxels"].as_u64().is_some()
+    });
+    let original = first["voxels"].as_u64().unwrap();
+    let hover = hover_at(
+        &x,
+        &id,
+        (400, 300),
+        &path,
+        &mut editor,
+        &serde_json::Value::Null,
+    );
+    // Without a source a click is no edit; Shift+click picks the source.
+    xdotool(&x.display, &["windowfocus", "--sync", &id]);
+    xdotool(
+        &x.display,
+        &["keydown", "shift", "click", "1", "keyup", "shift"],
+    );
+    let picked = wait_status(&path, &mut editor, "the copy source", |s| {
+        s["copy"]["source"].is_array()
+    });
+    assert_eq!(picked["undo_depth"], 0, "{picked}");
+    // Stamp a quarter turn elsewhere on the avocado: voxels are added.
+    xdotool(&x.display, &["key", "r"]);
+    wait_status(&path, &mut editor, "the rotation", |s| {
+        s["copy"]["quarter_turns"] == 1
+    });
+    let hover = hover_at(&x, &id, (440, 280), &path, &mut editor, &hover);
+    xdotool(&x.display, &["click", "1"]);
+    let copied = wait_status(&path, &mut editor, "copied voxels", |s| {
+        s["undo_depth"] == 1
+    });
+    assert_eq!(copied["last_edit"]["tool"], "copy", "{copied}");
+    let after_copy = copied["voxels"].as_u64().unwrap();
+    assert!(after_copy > original, "{copied}");
+    // Key 6: fill, which floods the empty voxels in front of the surface.
+    xdotool(&x.display, &["key", "6"]);
+    wait_status(&path, &mut editor, "the fill tool", |s| s["tool"] == "fill");
+    hover_at(&x, &id, (470, 320), &path, &mut editor, &hover);
+    xdotool(&x.display, &["click", "1"]);
+    let filled = wait_status(&path, &mut editor, "filled voxels", |s| {
+        s["undo_depth"] == 2
+    });
+    assert_eq!(filled["last_edit"]["tool"], "fill", "{filled}");
+    assert!(filled["voxels"].as_u64().unwrap() > after_copy, "{filled}");
+    close(&x, &id, editor);
+}
+
+#[test]
+fn table_switch_keeps_the_scene_and_trace_records_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let vdag = scene(dir.path());
+    let x = Xvfb::start();
+    let path = dir.path().join("status.json");
+    let trace = dir.path().join("trace.json");
+    let trace_arg = trace.to_str().unwrap();
+    let args = [
+        "--tool",
+        "sphere-add",
+        "--radius",
+        "8",
+        "--table",
+        "atomic64",
+        "--trace",
+        trace_arg,
+        "--trace-frames",
+        "3",
+    ];
+    let (mut editor, id) = start_editor_with(&x, &vdag, &path, &args);
+    // The first three frames go to the Chrome trace: GPU passes and CPU frame spans.
+    let first = wait_status(&path, &mut editor, "the trace", |s| {
+        s["traces_written"] == 1
+    });
+    assert_eq!(first["table"], "atomic64", "{first}");
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&trace).unwrap()).unwrap();
+    let events = json["traceEvents"].as_array().unwrap();
+    let named = |name: &str| events.iter().filter(|e| e["name"] == name).count();
+    assert_eq!(named("frame"), 3, "{json}");
+    assert!(named("primary rays") >= 1, "{json}");
+    hover_at(
+        &x,
+        &id,
+        (400, 300),
+        &path,
+        &mut editor,
+        &serde_json::Value::Null,
+    );
+    xdotool(&x.display, &["click", "1"]);
+    let added = wait_status(&path, &mut editor, "the edit", |s| s["undo_depth"] == 1);
+    let voxels = added["voxels"].as_u64().unwrap();
+    assert!(voxels > first["voxels"].as_u64().unwrap(), "{added}");
+    // T: the next variant, rebuilt from the edited scene; the history is dropped.
+    xdotool(&x.display, &["windowfocus", "--sync", &id]);
+    xdotool(&x.display, &["key", "t"]);
+    let switched = wait_status(&path, &mut editor, "the new table variant", |s| {
+        s["table"] == "ticket_board"
+    });
+    assert_eq!(switched["voxels"].as_u64(), Some(voxels), "{switched}");
+    assert_eq!(switched["undo_depth"], 0, "{switched}");
+    // Edits go on in the new tables.
+    xdotool(&x.display, &["mousemove", "--window", &id, "420", "310"]);
+    xdotool(&x.display, &["click", "1"]);
+    wait_status(&path, &mut editor, "an edit in the new tables", |s| {
+        s["undo_depth"] == 1 && s["table"] == "ticket_board"
     });
     close(&x, &id, editor);
 }

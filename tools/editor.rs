@@ -8,20 +8,20 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{anyhow, bail, Context, Result};
-use clap::{Args, ValueEnum};
-use glam::Vec3;
+use clap::Args;
 use rustc_hash::FxHashMap;
 use serde::Serialize;
-use voxdag::dag::Svdag;
+use voxdag::attr::Materials;
+use voxdag::dag::{Svdag, VdagFile};
 use voxdag::edit::gpu::{GpuHashDag, GpuHashDagConfig, HashDagImage};
-use voxdag::edit::item::{Child, InnerNode, Leaf, NodePtr, Root};
+use voxdag::edit::item::{Child, InnerNode, Leaf, NodePtr, Root, MATERIAL_COUNT};
 use voxdag::edit::replay::{Action, Replay};
-use voxdag::edit::tool::{Shape, Tool};
+use voxdag::edit::tool::Tool;
 use voxdag::gpu::{
     Buffer, GpuContext, Image, MemLocation, OverlayFrame, PassTiming, PresenterOptions, Profiler,
 };
 use voxdag::hash::HashVariant;
-use voxdag::render::gpu::{GpuRenderer, GpuScene, RenderFrame};
+use voxdag::render::gpu::{GpuRenderer, GpuScene, Palette, RenderFrame};
 use voxdag::render::hash_scene::buckets_for;
 use voxdag::render::{Camera, FirstHit, RenderOutput, RenderSettings};
 use voxdag::scene::{self, ImportOptions};
@@ -34,17 +34,24 @@ use winit::window::WindowId;
 mod files;
 mod record;
 
-use crate::commands::{check_output, load_svdag, progress_bar, write_json};
+use crate::commands::{check_output, progress_bar, write_json};
+use crate::edit::TableArg;
 use crate::view::MOTION_TARGET_MS;
 use crate::window::{require_display, CameraInput, GpuWindow, MIN_SCALE};
 
-/// Slab layout of the hash tables (the variant with the fastest edits in docs/editing-gpu.md).
-const TABLE_VARIANT: HashVariant = HashVariant::TicketBoard;
+mod brush;
+mod panels;
+
+use brush::CopyState;
+pub use brush::ToolKind;
+use panels::PanelState;
+
 /// Largest tool radius in voxels (slider and wheel).
 const MAX_RADIUS: f32 = 256.0;
-/// Colours of the 16 materials shown in the palette (editable in the Tools panel).
-const DEFAULT_PALETTE: [[u8; 3]; 16] = [
-    [200, 200, 200],
+/// Colours of the 16 materials (editable in the Tools panel) where the scene has no palette.
+/// Material 0 is the renderer's grey (linear 0.6) so a geometry-only scene looks as before.
+const DEFAULT_PALETTE: Palette = [
+    [203, 203, 203],
     [230, 80, 70],
     [240, 160, 60],
     [240, 220, 80],
@@ -61,64 +68,6 @@ const DEFAULT_PALETTE: [[u8; 3]; 16] = [
     [250, 250, 250],
     [170, 200, 240],
 ];
-
-/// The add / remove tools of the editor.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum, Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum ToolKind {
-    /// Add a ball of voxels.
-    SphereAdd,
-    /// Remove a ball of voxels.
-    SphereRemove,
-    /// Add an axis-aligned cube of voxels.
-    CubeAdd,
-    /// Remove an axis-aligned cube of voxels.
-    CubeRemove,
-}
-
-impl ToolKind {
-    const ALL: [ToolKind; 4] = [
-        ToolKind::SphereAdd,
-        ToolKind::SphereRemove,
-        ToolKind::CubeAdd,
-        ToolKind::CubeRemove,
-    ];
-
-    fn label(self) -> &'static str {
-        match self {
-            ToolKind::SphereAdd => "sphere add",
-            ToolKind::SphereRemove => "sphere remove",
-            ToolKind::CubeAdd => "cube add",
-            ToolKind::CubeRemove => "cube remove",
-        }
-    }
-
-    fn adds(self) -> bool {
-        matches!(self, ToolKind::SphereAdd | ToolKind::CubeAdd)
-    }
-
-    /// The tool at `center`.
-    fn tool(self, center: [f32; 3], radius: f32, material: u8) -> Tool {
-        let shape = match self {
-            ToolKind::SphereAdd | ToolKind::SphereRemove => Shape::Sphere,
-            ToolKind::CubeAdd | ToolKind::CubeRemove => Shape::Cube,
-        };
-        if self.adds() {
-            Tool::Add {
-                shape,
-                center,
-                radius,
-                material,
-            }
-        } else {
-            Tool::Remove {
-                shape,
-                center,
-                radius,
-            }
-        }
-    }
-}
 
 /// Arguments of `voxdag editor`.
 #[derive(Args)]
@@ -152,6 +101,21 @@ pub struct EditorArgs {
     /// Undo steps kept.
     #[arg(long, default_value_t = 64)]
     undo_depth: usize,
+    /// Slab layout of the hash tables at start (switchable in the Settings panel); Ticket
+    /// Board has the fastest edits in docs/editing-gpu.md.
+    #[arg(long, value_enum, default_value_t = TableArg::TicketBoard)]
+    table: TableArg,
+    /// Record a Chrome trace of the first --trace-frames frames to this file (also from the
+    /// Profiler panel).
+    #[arg(long)]
+    trace: Option<PathBuf>,
+    /// Frames the --trace recording covers.
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(1..=panels::MAX_TRACE_FRAMES as i64))]
+    trace_frames: u32,
+    /// Write frame and edit-latency statistics (JSON) here at exit (docs/editor.md,
+    /// "Benchmark").
+    #[arg(long)]
+    stats_json: Option<PathBuf>,
     /// Rewrite this JSON file atomically every frame (frame, voxels, undo_depth, ...).
     #[arg(long)]
     status_file: Option<PathBuf>,
@@ -191,6 +155,8 @@ pub fn editor(args: &EditorArgs) -> Result<()> {
         &args.status_file,
         &args.save,
         &args.screenshot,
+        &args.trace,
+        &args.stats_json,
         &args.files.record,
     ]
     .into_iter()
@@ -199,7 +165,7 @@ pub fn editor(args: &EditorArgs) -> Result<()> {
         check_output(path)?;
     }
     let display = require_display("editor")?;
-    let dag = load_scene(&args.scene, args.resolution)?;
+    let (dag, materials) = load_scene(&args.scene, args.resolution)?;
     let steps = match &args.replay {
         Some(path) => {
             let replay = Replay::load(path)?;
@@ -214,7 +180,7 @@ pub fn editor(args: &EditorArgs) -> Result<()> {
     event_loop.set_control_flow(ControlFlow::Poll);
     let mut app = App {
         args,
-        initial: Some(dag),
+        initial: Some((dag, materials)),
         steps,
         running: None,
         context: None,
@@ -229,6 +195,18 @@ pub fn editor(args: &EditorArgs) -> Result<()> {
         error,
         ..
     } = app;
+    if let (Some(path), Some(r)) = (&args.stats_json, &running) {
+        let stats = r.stats_json(args);
+        write_json(path, &stats)?;
+        println!(
+            "{}: {} frames, {:.1} fps while editing, edit latency p50 {:.1} ms p95 {:.1} ms",
+            path.display(),
+            stats["frames"],
+            stats["editing_fps"].as_f64().unwrap_or(0.0),
+            stats["edit_latency_ms"]["p50"].as_f64().unwrap_or(0.0),
+            stats["edit_latency_ms"]["p95"].as_f64().unwrap_or(0.0),
+        );
+    }
     drop(running);
     if let Some(e) = error {
         return Err(e);
@@ -242,17 +220,20 @@ pub fn editor(args: &EditorArgs) -> Result<()> {
     Ok(())
 }
 
-/// Loads a `.vdag` file, or voxelizes a mesh / `.vox` file at `resolution`; colours are
-/// dropped (the GPU hash DAG holds geometry).
-fn load_scene(path: &Path, resolution: Option<u32>) -> Result<Svdag> {
+/// Loads a `.vdag` file with its materials (`build --materials`), or voxelizes a mesh /
+/// `.vox` file at `resolution`. Colours are dropped: the GPU hash DAG holds materials, and a
+/// scene without them starts with every voxel of material 0.
+fn load_scene(path: &Path, resolution: Option<u32>) -> Result<(Svdag, Option<Materials>)> {
     let is_vdag = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("vdag"));
-    let mut dag = if is_vdag {
+    let (mut dag, materials) = if is_vdag {
         if resolution.is_some() {
             bail!("--resolution is for meshes; {} is a .vdag", path.display());
         }
-        load_svdag(path)?
+        let mut file = VdagFile::load(path)?;
+        let materials = file.materials.take();
+        (file.into_svdag(path)?, materials)
     } else {
         let options = ImportOptions {
             resolution,
@@ -260,17 +241,31 @@ fn load_scene(path: &Path, resolution: Option<u32>) -> Result<Svdag> {
             texture_override: None,
         };
         let voxels = scene::import_in(path, &options, None, &progress_bar(true))?;
-        Svdag::from_voxels(&voxels)?
+        (Svdag::from_voxels(&voxels)?, None)
     };
     dag.colors.clear();
-    Ok(dag)
+    Ok((dag, materials))
+}
+
+/// The tool of a number key (1..7).
+fn tool_key(code: KeyCode) -> Option<usize> {
+    const KEYS: [KeyCode; 7] = [
+        KeyCode::Digit1,
+        KeyCode::Digit2,
+        KeyCode::Digit3,
+        KeyCode::Digit4,
+        KeyCode::Digit5,
+        KeyCode::Digit6,
+        KeyCode::Digit7,
+    ];
+    KEYS.iter().position(|&k| k == code)
 }
 
 /// The winit application.
 struct App<'a> {
     args: &'a EditorArgs,
     /// The scene until the window opens.
-    initial: Option<Svdag>,
+    initial: Option<(Svdag, Option<Materials>)>,
     steps: record::Playlist,
     running: Option<Running>,
     context: Option<Arc<GpuContext>>,
@@ -333,8 +328,16 @@ impl App<'_> {
         let ctx = Arc::clone(&win.ctx);
         self.context = Some(Arc::clone(&ctx));
         let renderer = GpuRenderer::new(&ctx)?;
-        let svdag = self.initial.take().expect("opened once");
-        let doc = Document::load(&ctx, &renderer, &svdag, args.scene.clone(), args.undo_depth)?;
+        let (svdag, materials) = self.initial.take().expect("opened once");
+        let doc = Document::load(
+            &ctx,
+            &renderer,
+            &svdag,
+            materials,
+            args.scene.clone(),
+            args.undo_depth,
+            args.table.variant(),
+        )?;
         let mut slots = Vec::new();
         for _ in 0..win.presenter.frames_in_flight() {
             slots.push(Slot {
@@ -343,13 +346,14 @@ impl App<'_> {
                 frame: renderer.create_frame()?,
                 profiler: Profiler::new(&ctx)?,
                 view: None,
+                edit_input: None,
             });
         }
         let home = Camera::frame(&svdag);
         let input = CameraInput::new(home, scene_size(&svdag));
         let replaying = !self.steps.is_empty() || args.replay.is_some();
         let files = files::FileState::new(&args.files, &args.scene, svdag.resolution)?;
-        Ok(Running {
+        let mut running = Running {
             win,
             slots,
             doc,
@@ -361,7 +365,8 @@ impl App<'_> {
             tool: args.tool,
             radius: args.radius,
             material: args.material,
-            palette: DEFAULT_PALETTE,
+            copy: CopyState::default(),
+            palette_changed: false,
             painting: false,
             click: None,
             hover: None,
@@ -393,7 +398,15 @@ impl App<'_> {
             exit: false,
             clicks: 0,
             ui_clicks: 0,
-        })
+            ui: PanelState::new(!args.no_vsync),
+            traces_written: 0,
+            stats: FrameStats::default(),
+            last_pointer: None,
+        };
+        if let Some(path) = &args.trace {
+            running.start_trace(path.clone(), args.trace_frames)?;
+        }
+        Ok(running)
     }
 }
 
@@ -411,48 +424,83 @@ struct Document {
     scene: GpuScene,
     dag: GpuHashDag,
     path: PathBuf,
+    /// The colour of each material (the renderer's palette; edited in the Tools panel).
+    palette: Palette,
+    /// Palette entries of the loaded file (0: it had no materials). A save keeps at least
+    /// these, and a scene without them is saved without materials unless one was added.
+    file_palette: usize,
     /// Undo and redo steps available.
     undo: usize,
     redo: usize,
     /// Edits since the last save.
     unsaved: usize,
-    /// Voxels and nodes per level of each root counted so far (roots are immutable).
+    /// Voxels (per material) and nodes per level of each root counted so far (roots are
+    /// immutable).
     counts: FxHashMap<Root, RootCounts>,
-    /// Voxels counted under each node (shared between roots).
-    node_voxels: FxHashMap<NodePtr, u64>,
+    /// Voxels per material counted under each node (shared between roots).
+    node_voxels: FxHashMap<NodePtr, MaterialCounts>,
 }
+
+/// Solid voxels per material id.
+type MaterialCounts = [u64; MATERIAL_COUNT as usize];
 
 /// Voxels and unique nodes per level under a root.
 #[derive(Clone, Debug)]
 struct RootCounts {
     voxels: u64,
+    /// Voxels per material.
+    materials: MaterialCounts,
     levels: Vec<u64>,
 }
 
 impl Document {
-    /// Loads `svdag` into a new hash DAG and binds it for `renderer`.
+    /// Loads `svdag` with its `materials` (all 0 without) into a new hash DAG and binds it for
+    /// `renderer` with the palette.
     fn load(
         ctx: &Arc<GpuContext>,
         renderer: &GpuRenderer,
         svdag: &Svdag,
+        materials: Option<Materials>,
         path: PathBuf,
         undo_depth: usize,
+        variant: HashVariant,
     ) -> Result<Document> {
-        let config = GpuHashDagConfig::new(TABLE_VARIANT, buckets_for(svdag.words.len()))
+        let file_palette = materials.as_ref().map_or(0, |m| m.palette.len());
+        let materials = match materials {
+            Some(m) => m,
+            None => Materials::new(
+                vec![pack_colour(DEFAULT_PALETTE[0])],
+                vec![0; svdag.voxel_count() as usize],
+            )?,
+        };
+        let mut palette = DEFAULT_PALETTE;
+        for (entry, &c) in palette.iter_mut().zip(&materials.palette) {
+            *entry = [c as u8, (c >> 8) as u8, (c >> 16) as u8];
+        }
+        let config = GpuHashDagConfig::new(variant, buckets_for(svdag.words.len()))
             .with_undo_depth(undo_depth);
-        let dag = GpuHashDag::load(ctx, &config, svdag, None)
+        let dag = GpuHashDag::load_materials(ctx, &config, svdag, &materials, None)
             .with_context(|| format!("loading {} into the GPU hash DAG", path.display()))?;
-        let scene = renderer.bind_hash_dag(&dag, None)?;
+        let scene = renderer.bind_hash_dag(&dag, Some(&palette))?;
         Ok(Document {
             scene,
             dag,
             path,
+            palette,
+            file_palette,
             undo: 0,
             redo: 0,
             unsaved: 0,
             counts: FxHashMap::default(),
             node_voxels: FxHashMap::default(),
         })
+    }
+
+    /// Binds the hash DAG again with the current palette (after an edit of a colour; the
+    /// caller waits for frames in flight, which read the old binding).
+    fn rebind(&mut self, renderer: &GpuRenderer) -> Result<()> {
+        self.scene = renderer.bind_hash_dag(&self.dag, Some(&self.palette))?;
+        Ok(())
     }
 
     /// Voxels and nodes per level of the current root (downloads the tables the first time a
@@ -468,55 +516,86 @@ impl Document {
             Root::Full(m) => Child::Full(m),
             Root::Node(p) => Child::Node(p),
         };
-        let voxels = count_voxels(&image, child, image.root_level, &mut self.node_voxels)?;
+        let materials = count_voxels(&image, child, image.root_level, &mut self.node_voxels)?;
         let counts = RootCounts {
-            voxels,
+            voxels: materials.iter().sum(),
+            materials,
             levels: image.level_counts(root)?,
         };
         self.counts.insert(root, counts.clone());
         Ok(counts)
     }
 
-    /// The current root as an svdag32 file at `path` (atomic write).
+    /// The current root as an svdag32 file at `path` (atomic write), with its materials and
+    /// palette when the loaded file had them or an edit used a material other than 0.
     fn save(&mut self, path: &Path) -> Result<()> {
         let image = self.dag.download()?;
-        image.to_svdag(self.dag.root())?.save(path)?;
+        let root = self.dag.root();
+        let used = image
+            .voxels(root)?
+            .iter()
+            .map(|&(_, m)| m as usize + 1)
+            .max()
+            .unwrap_or(0);
+        if self.file_palette == 0 && used <= 1 {
+            image.to_svdag(root)?.save(path)?;
+        } else {
+            let entries = self.file_palette.max(used);
+            let palette: Vec<u32> = self.palette[..entries]
+                .iter()
+                .map(|&c| pack_colour(c))
+                .collect();
+            image.to_file(root, Some(&palette))?.save(path)?;
+        }
         self.unsaved = 0;
         Ok(())
     }
 }
 
-/// Solid voxels under `child` at `level`, memoised per stored node.
+/// The RGBA8 word (opaque) of an sRGB colour.
+fn pack_colour(c: [u8; 3]) -> u32 {
+    c[0] as u32 | (c[1] as u32) << 8 | (c[2] as u32) << 16 | 0xff00_0000
+}
+
+/// Solid voxels per material under `child` at `level`, memoised per stored node.
 fn count_voxels(
     image: &HashDagImage,
     child: Child,
     level: u32,
-    memo: &mut FxHashMap<NodePtr, u64>,
-) -> Result<u64> {
-    Ok(match child {
-        Child::Empty => 0,
-        Child::Full(_) => 64u64 << (3 * level),
+    memo: &mut FxHashMap<NodePtr, MaterialCounts>,
+) -> Result<MaterialCounts> {
+    let mut counts = [0; MATERIAL_COUNT as usize];
+    match child {
+        Child::Empty => {}
+        Child::Full(m) => {
+            *counts
+                .get_mut(m as usize)
+                .ok_or_else(|| anyhow!("full node of material {m}"))? = 64u64 << (3 * level)
+        }
         Child::Node(ptr) => {
-            if let Some(&n) = memo.get(&ptr) {
-                return Ok(n);
+            if let Some(n) = memo.get(&ptr) {
+                return Ok(*n);
             }
             let words = image.item(ptr)?;
-            let n = if level == 0 {
-                Leaf::decode(&words, image.with_materials)?
-                    .mask
-                    .count_ones() as u64
-            } else {
-                let node = InnerNode::decode(&words)?;
-                let mut sum = 0;
-                for c in node.children {
-                    sum += count_voxels(image, c, level - 1, memo)?;
+            if level == 0 {
+                let leaf = Leaf::decode(&words, image.with_materials)?;
+                for v in 0..64 {
+                    if leaf.mask >> v & 1 == 1 {
+                        counts[leaf.materials[v] as usize] += 1;
+                    }
                 }
-                sum
-            };
-            memo.insert(ptr, n);
-            n
+            } else {
+                for c in InnerNode::decode(&words)?.children {
+                    let below = count_voxels(image, c, level - 1, memo)?;
+                    for (sum, n) in counts.iter_mut().zip(below) {
+                        *sum += n;
+                    }
+                }
+            }
+            memo.insert(ptr, counts);
         }
-    })
+    }
+    Ok(counts)
 }
 
 /// Per frame-in-flight resources. `target` and `first_hits` follow the window size.
@@ -528,6 +607,41 @@ struct Slot {
     profiler: Profiler,
     /// The internal size and window size of the frame last recorded with this slot.
     view: Option<([u32; 2], [u32; 2])>,
+    /// Input time of the edit that frame is the first to show.
+    edit_input: Option<Instant>,
+}
+
+/// Frame and edit-latency statistics for `--stats-json` (the benchmark, docs/editor.md).
+#[derive(Default)]
+struct FrameStats {
+    /// Frames presented, and when the first was.
+    frames: usize,
+    first: Option<Instant>,
+    /// Frames presented between the first and the last edit (inclusive), and those times.
+    edit_frames: usize,
+    first_edit: Option<Instant>,
+    last_edit: Option<Instant>,
+    /// Input event to the end of the first frame showing the edit, per edit (ms).
+    latencies: Vec<f64>,
+    /// CPU wall time of each edit (ms).
+    edit_ms: Vec<f64>,
+    /// Render scale of each frame between the first and the last edit.
+    scales: Vec<f32>,
+}
+
+/// Mean, median, 95th percentile and maximum of `v` (0 when empty).
+fn summary(v: &[f64]) -> serde_json::Value {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    let at = |q: f64| {
+        s.get(((s.len() as f64 - 1.0) * q).round() as usize)
+            .copied()
+            .unwrap_or(0.0)
+    };
+    let mean = s.iter().sum::<f64>() / s.len().max(1) as f64;
+    serde_json::json!({
+        "count": s.len(), "mean": mean, "p50": at(0.5), "p95": at(0.95), "max": at(1.0)
+    })
 }
 
 /// The last edit: what the Profiler panel and the status file show.
@@ -557,6 +671,10 @@ struct Status<'a> {
     tool: ToolKind,
     radius: f32,
     material: u8,
+    /// Voxels per material of the current root.
+    materials: Option<MaterialCounts>,
+    palette: &'a Palette,
+    copy: CopyState,
     hover: Option<[u32; 3]>,
     extent: [u32; 2],
     internal: [u32; 2],
@@ -570,6 +688,12 @@ struct Status<'a> {
     clicks: usize,
     /// Presses a panel took.
     ui_clicks: usize,
+    /// Hash table variant.
+    table: &'a str,
+    vsync: bool,
+    present_mode: &'a str,
+    /// Chrome traces written so far.
+    traces_written: usize,
 }
 
 /// The open editor. The window (presenter: waits for the GPU) drops first.
@@ -585,7 +709,10 @@ struct Running {
     tool: ToolKind,
     radius: f32,
     material: u8,
-    palette: [[u8; 3]; 16],
+    /// The copy tool's source and rotation.
+    copy: CopyState,
+    /// A palette colour changed in this frame's panels: bind the scene again.
+    palette_changed: bool,
     /// Left button held over the scene: one edit per frame.
     painting: bool,
     /// A press not yet turned into an edit, with its time (so a click shorter than a frame
@@ -616,6 +743,14 @@ struct Running {
     /// Left-button presses on the scene and on the panels.
     clicks: usize,
     ui_clicks: usize,
+    /// Settings and Profiler panel state (`panels`).
+    ui: PanelState,
+    /// Chrome traces written so far.
+    traces_written: usize,
+    /// `--stats-json` statistics.
+    stats: FrameStats,
+    /// Time of the last pointer motion (the input of an edit while the button is held).
+    last_pointer: Option<Instant>,
 }
 
 impl Running {
@@ -650,7 +785,10 @@ impl Running {
                 MouseButton::Right => self.input.look_drag = false,
                 _ => {}
             },
-            WindowEvent::CursorMoved { position, .. } => self.input.cursor_moved(*position),
+            WindowEvent::CursorMoved { position, .. } => {
+                self.last_pointer = Some(Instant::now());
+                self.input.cursor_moved(*position)
+            }
             WindowEvent::MouseInput {
                 button: MouseButton::Left,
                 ..
@@ -679,14 +817,15 @@ impl Running {
                             self.redo()
                         }
                     }
-                    KeyCode::Digit1 | KeyCode::Digit2 | KeyCode::Digit3 | KeyCode::Digit4 => {
-                        let i = match code {
-                            KeyCode::Digit1 => 0,
-                            KeyCode::Digit2 => 1,
-                            KeyCode::Digit3 => 2,
-                            _ => 3,
-                        };
-                        self.tool = ToolKind::ALL[i];
+                    KeyCode::KeyT if !ctrl => {
+                        self.ui.pending_variant =
+                            Some(panels::next_variant(self.doc.dag.config().variant));
+                    }
+                    KeyCode::KeyR if !ctrl => {
+                        self.copy.quarter_turns = (self.copy.quarter_turns + 1) % 4;
+                    }
+                    _ if tool_key(code).is_some() => {
+                        self.tool = ToolKind::ALL[tool_key(code).expect("checked")];
                     }
                     _ if !ctrl => {
                         self.input.keys.insert(code);
@@ -700,6 +839,10 @@ impl Running {
                 ..
             } => match button {
                 MouseButton::Left if self.modifiers.alt_key() => self.input.orbit_drag = true,
+                MouseButton::Left if self.tool == ToolKind::Copy && self.modifiers.shift_key() => {
+                    self.clicks += 1;
+                    self.copy.source = self.brush_center();
+                }
                 MouseButton::Left => {
                     self.clicks += 1;
                     self.painting = true;
@@ -724,6 +867,7 @@ impl Running {
         }
     }
 
+    /// Undoes the last edit (if any).
     fn undo(&mut self) {
         if self.doc.dag.undo() {
             self.doc.undo -= 1;
@@ -733,6 +877,7 @@ impl Running {
         }
     }
 
+    /// Redoes the last undone edit (if any).
     fn redo(&mut self) {
         if self.doc.dag.redo() {
             self.doc.undo += 1;
@@ -752,17 +897,35 @@ impl Running {
         // GC (automatic, inside `edit`) may free nodes of roots that left the history while
         // frames in flight still read them.
         self.ctx.wait_idle()?;
-        self.edit_profiler.clear();
+        // While a trace records, the edit's kernels go into it too.
+        let tracing = self.ui.trace.is_some();
+        let (profiler, before) = match &mut self.ui.trace {
+            Some(t) => {
+                let n = t.profiler.passes().len();
+                (&mut t.profiler, n)
+            }
+            None => {
+                self.edit_profiler.clear();
+                (&mut self.edit_profiler, 0)
+            }
+        };
         let start = Instant::now();
-        let result = self.doc.dag.edit(tool, Some(&mut self.edit_profiler));
-        let ms = start.elapsed().as_secs_f64() * 1e3;
+        let result = self.doc.dag.edit(tool, Some(&mut *profiler));
+        let end = Instant::now();
+        let ms = (end - start).as_secs_f64() * 1e3;
         if let Err(e) = result {
             self.message = Some(format!("edit failed: {e}"));
             return Ok(());
         }
+        if tracing {
+            profiler.record_cpu_span("edit", start, end);
+        }
+        self.stats.edit_ms.push(ms);
+        self.stats.first_edit.get_or_insert(end);
+        self.stats.last_edit = Some(end);
         // The edit resolved its passes; sum them per kernel (one pass per level).
         let mut kernels: Vec<(String, f64)> = Vec::new();
-        for p in self.edit_profiler.passes() {
+        for p in &profiler.passes()[before..] {
             match kernels.iter_mut().find(|k| k.0 == p.name) {
                 Some(k) => k.1 += p.gpu_ms,
                 None => kernels.push((p.name.clone(), p.gpu_ms)),
@@ -828,7 +991,7 @@ impl Running {
     /// voxel itself otherwise.
     fn brush_center(&self) -> Option<[f32; 3]> {
         let hit = self.hover?;
-        let offset = if self.tool.adds() { 1 } else { 0 };
+        let offset = if self.tool.in_front() { 1 } else { 0 };
         Some([0, 1, 2].map(|a| (hit.voxel[a] as i64 + offset * hit.normal[a] as i64) as f32 + 0.5))
     }
 
@@ -840,10 +1003,20 @@ impl Running {
         let Some(frame) = self.win.presenter.begin_frame()? else {
             return Ok(());
         };
+        let frame_start = Instant::now();
         let passes = {
-            let profiler = &mut self.slots[frame.index].profiler;
-            let passes = profiler.resolve()?;
-            profiler.clear();
+            let slot = &mut self.slots[frame.index];
+            // The slot's last frame has finished: an edit it was the first to show is on
+            // screen now.
+            if let Some(input) = slot.edit_input.take() {
+                let latency = (frame_start - input).as_secs_f64() * 1e3;
+                self.stats.latencies.push(latency);
+                if let Some(edit) = &mut self.last_edit {
+                    edit.latency_ms = Some(latency);
+                }
+            }
+            let passes = slot.profiler.resolve()?;
+            slot.profiler.clear();
             passes
         };
         if let Some(p) = passes.iter().find(|p| p.name == "primary rays") {
@@ -862,10 +1035,17 @@ impl Running {
         if !self.replay_done {
             self.replay_frame(args.files.replay_pace)?;
         } else if self.click.is_some() || self.painting {
-            let input = self.click.take().unwrap_or_else(Instant::now);
+            // A press, else (button held) the last pointer motion not yet edited for, else now.
+            let since = self.stats.last_edit;
+            let moved = self.last_pointer.filter(|&t| since.is_none_or(|e| t > e));
+            let input = self.click.take().or(moved).unwrap_or(frame_start);
             if let Some(center) = self.brush_center() {
-                let tool = self.tool.tool(center, self.radius, self.material);
-                self.apply(&tool, input)?;
+                match brush::tool(self.tool, center, self.radius, self.material, &self.copy) {
+                    Some(tool) => self.apply(&tool, input)?,
+                    None => {
+                        self.message = Some("copy: Shift+click picks the source first".into());
+                    }
+                }
             }
         }
         let screenshot = finishing && self.replay_done && args.screenshot.is_some();
@@ -873,12 +1053,12 @@ impl Running {
         self.doc
             .scene
             .set_hash_root(&self.doc.dag, self.doc.dag.root())?;
-        let counts = match self.doc.counts() {
-            Ok(c) => Some(c),
-            Err(e) => {
-                self.message = Some(format!("counting voxels: {e:#}"));
-                None
-            }
+        // Counting downloads the tables once per new root: only for the status file (the
+        // Scene panel counts when it is open).
+        let counts = if args.status_file.is_some() {
+            self.counts_or_message()
+        } else {
+            None
         };
 
         let extent = frame.extent;
@@ -898,11 +1078,17 @@ impl Running {
 
         let raw_input = self.win.egui_state.take_egui_input(&self.win.window);
         let egui = self.win.egui.clone();
-        let output = egui.run_ui(raw_input, |ui| self.panels(ui, extent, counts.as_ref()));
+        let output = egui.run_ui(raw_input, |ui| self.panels(ui, extent));
         self.win
             .egui_state
             .handle_platform_output(&self.win.window, output.platform_output);
         let primitives = egui.tessellate(output.shapes, output.pixels_per_point);
+        if std::mem::take(&mut self.palette_changed) {
+            // Frames in flight read the old palette buffer.
+            self.ctx.wait_idle()?;
+            self.doc.rebind(&self.renderer)?;
+        }
+        self.apply_settings()?;
 
         let slot = &mut self.slots[frame.index];
         if slot
@@ -926,6 +1112,11 @@ impl Running {
         }
         let target = slot.target.as_ref().expect("allocated above");
         let hits = slot.first_hits.as_ref().expect("allocated above");
+        // A trace being recorded takes the frame's passes (resolved when it is written).
+        let profiler = match &mut self.ui.trace {
+            Some(t) => &mut t.profiler,
+            None => &mut slot.profiler,
+        };
         let mut cmd = self.ctx.begin_commands("editor frame")?;
         self.renderer.record_with_first_hits(
             &mut cmd,
@@ -934,9 +1125,10 @@ impl Running {
             &settings,
             target,
             hits,
-            Some(&mut slot.profiler),
+            Some(&mut *profiler),
         )?;
         slot.view = Some((internal, extent));
+        slot.edit_input = self.edit_input.take();
         self.win.presenter.end_frame(
             cmd,
             target,
@@ -947,19 +1139,20 @@ impl Running {
                 pixels_per_point: output.pixels_per_point,
             }),
             screenshot,
-            Some(&mut slot.profiler),
+            Some(&mut *profiler),
         )?;
         self.frames += 1;
         let now = Instant::now();
-        if let Some(input) = self.edit_input.take() {
-            if let Some(edit) = &mut self.last_edit {
-                edit.latency_ms = Some((now - input).as_secs_f64() * 1e3);
-            }
+        if let Some(t) = &mut self.ui.trace {
+            t.profiler.record_cpu_span("frame", frame_start, now);
         }
+        self.trace_frame_done()?;
         if let Some(prev) = self.last_frame {
             self.frame_ms = (now - prev).as_secs_f64() * 1e3;
+            self.ui.push_frame_time(self.frame_ms as f32);
         }
         self.last_frame = Some(now);
+        self.count_frame(now);
 
         if screenshot {
             let path = args.screenshot.as_ref().expect("checked above");
@@ -987,6 +1180,9 @@ impl Running {
                 tool: self.tool,
                 radius: self.radius,
                 material: self.material,
+                materials: counts.as_ref().map(|c| c.materials),
+                palette: &self.doc.palette,
+                copy: self.copy,
                 hover: self.hover.map(|h| h.voxel),
                 extent,
                 internal,
@@ -996,6 +1192,10 @@ impl Running {
                 clicks: self.clicks,
                 ui_clicks: self.ui_clicks,
                 files: self.file_status(),
+                table: self.doc.dag.config().variant.name(),
+                vsync: self.ui.vsync,
+                present_mode: &self.win.presenter.stats().present_mode,
+                traces_written: self.traces_written,
             };
             write_json(path, &status)?;
         }
@@ -1011,7 +1211,7 @@ impl Running {
     }
 
     /// The egui panels: Tools, Scene, Profiler, Settings, and the brush outline.
-    fn panels(&mut self, ui: &mut egui::Ui, extent: [u32; 2], counts: Option<&RootCounts>) {
+    fn panels(&mut self, ui: &mut egui::Ui, extent: [u32; 2]) {
         let ctx = ui.ctx().clone();
         self.brush_outline(&ctx, extent);
         self.files_panel(&ctx);
@@ -1019,43 +1219,7 @@ impl Running {
             .default_pos([8.0, 8.0])
             .resizable(false)
             .show(&ctx, |ui| {
-                for (i, kind) in ToolKind::ALL.iter().enumerate() {
-                    ui.radio_value(
-                        &mut self.tool,
-                        *kind,
-                        format!("{} ({})", kind.label(), i + 1),
-                    );
-                }
-                ui.add(
-                    egui::Slider::new(&mut self.radius, 1.0..=MAX_RADIUS)
-                        .logarithmic(true)
-                        .text("radius (Ctrl+wheel)"),
-                );
-                ui.label("material (added voxels)");
-                egui::Grid::new("palette").show(ui, |ui| {
-                    for (m, colour) in self.palette.iter_mut().enumerate() {
-                        let selected = self.material as usize == m;
-                        let [r, g, b] = *colour;
-                        let button = egui::Button::new("  ")
-                            .fill(egui::Color32::from_rgb(r, g, b))
-                            .stroke(if selected {
-                                egui::Stroke::new(2.0, egui::Color32::WHITE)
-                            } else {
-                                egui::Stroke::NONE
-                            });
-                        if ui.add(button).clicked() {
-                            self.material = m as u8;
-                        }
-                        if m % 8 == 7 {
-                            ui.end_row();
-                        }
-                    }
-                });
-                let m = self.material as usize;
-                ui.horizontal(|ui| {
-                    ui.label(format!("material {m}"));
-                    ui.color_edit_button_srgb(&mut self.palette[m]);
-                });
+                self.tools_panel(ui);
                 ui.horizontal(|ui| {
                     if ui
                         .add_enabled(self.doc.undo > 0, egui::Button::new("undo"))
@@ -1080,7 +1244,7 @@ impl Running {
         egui::Window::new("Scene")
             .default_pos([8.0, 330.0])
             .default_open(false)
-            .show(&ctx, |ui| self.scene_panel(ui, counts));
+            .show(&ctx, |ui| self.scene_panel(ui));
         egui::Window::new("Profiler")
             .default_pos([(extent[0] as f32 - 260.0).max(8.0), 8.0])
             .default_open(false)
@@ -1088,27 +1252,16 @@ impl Running {
         egui::Window::new("Settings")
             .default_pos([(extent[0] as f32 - 260.0).max(8.0), 300.0])
             .default_open(false)
-            .show(&ctx, |ui| {
-                ui.add(egui::Slider::new(&mut self.user_scale, MIN_SCALE..=1.0).text("render scale"));
-                ui.checkbox(&mut self.dynamic_scale, "lower scale while moving / editing");
-                ui.label(format!(
-                    "internal {}x{} of {}x{} (scale {:.2})",
-                    self.internal[0], self.internal[1], extent[0], extent[1], self.scale
-                ));
-                ui.label(format!(
-                    "present mode {} (vsync: restart without / with --no-vsync), {} frames in flight",
-                    self.win.presenter.stats().present_mode,
-                    self.win.presenter.frames_in_flight()
-                ));
-                ui.label(format!("hash table variant {TABLE_VARIANT:?}"));
-            });
+            .show(&ctx, |ui| self.settings_panel(ui, extent));
     }
 
-    fn scene_panel(&mut self, ui: &mut egui::Ui, counts: Option<&RootCounts>) {
+    /// Scene: file, resolution, voxels and nodes per level, history, table bytes, save / open.
+    fn scene_panel(&mut self, ui: &mut egui::Ui) {
+        let counts = self.counts_or_message();
         let dag = &self.doc.dag;
         ui.label(format!("file {}", self.doc.path.display()));
         ui.label(format!("resolution {}^3", dag.resolution()));
-        if let Some(c) = counts {
+        if let Some(c) = &counts {
             ui.label(format!("voxels {}", c.voxels));
             ui.label("nodes per level (0 = leaves)");
             for (level, n) in c.levels.iter().enumerate() {
@@ -1134,37 +1287,55 @@ impl Running {
         }
     }
 
-    fn profiler_panel(&mut self, ui: &mut egui::Ui) {
-        let fps = if self.frame_ms > 0.0 {
-            1e3 / self.frame_ms
-        } else {
-            0.0
+    /// The current root's counts; an error becomes the message.
+    fn counts_or_message(&mut self) -> Option<RootCounts> {
+        match self.doc.counts() {
+            Ok(c) => Some(c),
+            Err(e) => {
+                self.message = Some(format!("counting voxels: {e:#}"));
+                None
+            }
+        }
+    }
+
+    /// Counts a presented frame for `--stats-json`.
+    fn count_frame(&mut self, now: Instant) {
+        let stats = &mut self.stats;
+        stats.frames += 1;
+        stats.first.get_or_insert(now);
+        if stats.first_edit.is_some() && self.painting {
+            stats.edit_frames += 1;
+            stats.scales.push(self.scale);
+        }
+    }
+
+    /// The `--stats-json` document: frames, fps while editing, edit latency and time.
+    fn stats_json(&self, args: &EditorArgs) -> serde_json::Value {
+        let s = &self.stats;
+        let seconds = |a: Option<Instant>, b: Option<Instant>| match (a, b) {
+            (Some(a), Some(b)) => (b - a).as_secs_f64(),
+            _ => 0.0,
         };
-        ui.label(format!("{fps:.1} fps, {:.2} ms/frame", self.frame_ms));
-        ui.label("GPU passes (last frame)");
-        for p in &self.last_passes {
-            ui.label(format!("  {}: {:.2} ms", p.name, p.gpu_ms));
-        }
-        ui.separator();
-        match &self.last_edit {
-            Some(e) => {
-                ui.label(format!(
-                    "last edit: {} r {:.1} at {:.0?}, {:.2} ms, latency {}",
-                    e.tool,
-                    e.radius,
-                    e.center,
-                    e.ms,
-                    e.latency_ms
-                        .map_or("-".to_string(), |l| format!("{l:.1} ms"))
-                ));
-                for (name, ms) in &e.kernels {
-                    ui.label(format!("  {name}: {ms:.3} ms"));
-                }
-            }
-            None => {
-                ui.label("no edit yet");
-            }
-        }
+        let editing = seconds(s.first_edit, s.last_edit);
+        let scales: Vec<f64> = s.scales.iter().map(|&x| x as f64).collect();
+        serde_json::json!({
+            "scene": args.scene,
+            "resolution": self.doc.dag.resolution(),
+            "window": self.win.presenter.extent(),
+            "table": self.doc.dag.config().variant.name(),
+            "present_mode": self.win.presenter.stats().present_mode,
+            "tool": self.tool,
+            "radius": self.radius,
+            "frames": s.frames,
+            "seconds": seconds(s.first, self.last_frame),
+            "edits": s.edit_ms.len(),
+            "editing_seconds": editing,
+            "editing_frames": s.edit_frames,
+            "editing_fps": if editing > 0.0 { s.edit_frames as f64 / editing } else { 0.0 },
+            "editing_render_scale": summary(&scales),
+            "edit_latency_ms": summary(&s.latencies),
+            "edit_ms": summary(&s.edit_ms),
+        })
     }
 
     /// Runs the GPU GC over every live root.
@@ -1177,45 +1348,89 @@ impl Running {
         ))
     }
 
-    /// The brush under the cursor: its outline projected on the screen (egui painter).
+    /// The brush under the cursor, drawn on the overlay (`brush::draw_preview`).
     fn brush_outline(&self, ctx: &egui::Context, extent: [u32; 2]) {
         let Some(center) = self.brush_center() else {
             return;
         };
-        let camera = &self.input.camera;
-        let (w, h) = (extent[0], extent[1]);
-        let Some(c) = camera.project(center, w, h) else {
-            return;
-        };
-        let up = Vec3::from(camera.basis().up);
-        let edge = (Vec3::from(center) + up * self.radius).to_array();
-        let Some(e) = camera.project(edge, w, h) else {
-            return;
-        };
-        let ppp = ctx.pixels_per_point();
-        let to_points = |p: [f32; 2]| egui::pos2(p[0] / ppp, p[1] / ppp);
-        let (c, e) = (to_points(c), to_points(e));
-        let painter = ctx.layer_painter(egui::LayerId::background());
-        let colour = if self.tool.adds() {
-            egui::Color32::from_rgb(80, 220, 120)
-        } else {
-            egui::Color32::from_rgb(240, 90, 80)
-        };
-        let stroke = egui::Stroke::new(1.5, colour);
-        let radius = c.distance(e).max(2.0);
-        match self.tool {
-            ToolKind::SphereAdd | ToolKind::SphereRemove => {
-                painter.circle_stroke(c, radius, stroke);
-            }
-            ToolKind::CubeAdd | ToolKind::CubeRemove => {
-                painter.rect_stroke(
-                    egui::Rect::from_center_size(c, egui::vec2(2.0 * radius, 2.0 * radius)),
-                    0.0,
-                    stroke,
-                    egui::StrokeKind::Middle,
-                );
-            }
+        brush::draw_preview(
+            ctx,
+            &brush::Preview {
+                camera: &self.input.camera,
+                extent,
+                kind: self.tool,
+                center,
+                radius: self.radius,
+                material: self.doc.palette[self.material as usize],
+                copy_source: self.copy.source,
+            },
+        );
+    }
+
+    /// The tools, the radius slider, the copy source and rotation, the palette (16 swatches,
+    /// the selected one's colour editable).
+    fn tools_panel(&mut self, ui: &mut egui::Ui) {
+        for (i, kind) in ToolKind::ALL.iter().enumerate() {
+            ui.radio_value(
+                &mut self.tool,
+                *kind,
+                format!("{} ({})", kind.label(), i + 1),
+            );
         }
-        painter.circle_filled(c, 2.0, colour);
+        ui.add(
+            egui::Slider::new(&mut self.radius, 1.0..=MAX_RADIUS)
+                .logarithmic(true)
+                .text("radius (Ctrl+wheel)"),
+        );
+        if self.tool == ToolKind::Copy {
+            ui.horizontal(|ui| {
+                match self.copy.source {
+                    Some(s) => ui.label(format!("source {:.0?}", s)),
+                    None => ui.label("no source: Shift+click"),
+                };
+                if ui.button("clear").clicked() {
+                    self.copy.source = None;
+                }
+            });
+            ui.horizontal(|ui| {
+                ui.label("rotation (R)");
+                for turns in 0..4u8 {
+                    ui.radio_value(
+                        &mut self.copy.quarter_turns,
+                        turns,
+                        format!("{}", 90 * turns as u32),
+                    );
+                }
+            });
+        }
+        ui.label("material (add, paint, fill)");
+        egui::Grid::new("palette").show(ui, |ui| {
+            for (m, colour) in self.doc.palette.iter().enumerate() {
+                let selected = self.material as usize == m;
+                let [r, g, b] = *colour;
+                let button = egui::Button::new("  ")
+                    .fill(egui::Color32::from_rgb(r, g, b))
+                    .stroke(if selected {
+                        egui::Stroke::new(2.0, egui::Color32::WHITE)
+                    } else {
+                        egui::Stroke::NONE
+                    });
+                if ui.add(button).clicked() {
+                    self.material = m as u8;
+                }
+                if m % 8 == 7 {
+                    ui.end_row();
+                }
+            }
+        });
+        let m = self.material as usize;
+        let before = self.doc.palette[m];
+        ui.horizontal(|ui| {
+            ui.label(format!("material {m}"));
+            ui.color_edit_button_srgb(&mut self.doc.palette[m]);
+        });
+        if self.doc.palette[m] != before {
+            self.palette_changed = true;
+        }
     }
 }

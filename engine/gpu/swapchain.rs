@@ -136,6 +136,28 @@ pub struct Presenter {
     ctx: Arc<GpuContext>,
 }
 
+/// FIFO with `vsync`, else MAILBOX or IMMEDIATE where the surface offers them (FIFO if not).
+fn choose_present_mode(
+    ctx: &GpuContext,
+    surface: &Surface,
+    vsync: bool,
+) -> Result<vk::PresentModeKHR, GpuError> {
+    if vsync {
+        return Ok(vk::PresentModeKHR::FIFO);
+    }
+    // SAFETY: the surface and physical device are live for the call.
+    let modes = unsafe {
+        surface
+            .loader
+            .get_physical_device_surface_present_modes(ctx.physical, surface.raw)
+    }
+    .map_err(vk_err("vkGetPhysicalDeviceSurfacePresentModesKHR"))?;
+    Ok([vk::PresentModeKHR::MAILBOX, vk::PresentModeKHR::IMMEDIATE]
+        .into_iter()
+        .find(|m| modes.contains(m))
+        .unwrap_or(vk::PresentModeKHR::FIFO))
+}
+
 fn egui_err(e: egui_ash_renderer::RendererError) -> GpuError {
     GpuError::Surface(format!("egui renderer: {e}"))
 }
@@ -173,18 +195,7 @@ impl Presenter {
                         "the surface offers no B8G8R8A8/R8G8B8A8 UNORM format: {formats:?}"
                     ))
                 })?;
-            let modes = surface
-                .loader
-                .get_physical_device_surface_present_modes(ctx.physical, surface.raw)
-                .map_err(vk_err("vkGetPhysicalDeviceSurfacePresentModesKHR"))?;
-            let present_mode = if options.vsync {
-                vk::PresentModeKHR::FIFO
-            } else {
-                [vk::PresentModeKHR::MAILBOX, vk::PresentModeKHR::IMMEDIATE]
-                    .into_iter()
-                    .find(|m| modes.contains(m))
-                    .unwrap_or(vk::PresentModeKHR::FIFO)
-            };
+            let present_mode = choose_present_mode(&ctx, &surface, options.vsync)?;
             let loader = ash::khr::swapchain::Device::new(&ctx.instance, &ctx.device);
             let mut presenter = Presenter {
                 slots: Vec::new(),
@@ -271,6 +282,18 @@ impl Presenter {
             self.window_extent = extent;
             self.dirty = true;
         }
+    }
+
+    /// Switches between FIFO (`vsync`) and MAILBOX / IMMEDIATE (where offered); the swapchain
+    /// is rebuilt with the new mode before the next frame.
+    pub fn set_vsync(&mut self, vsync: bool) -> Result<(), GpuError> {
+        let mode = choose_present_mode(&self.ctx, &self.surface, vsync)?;
+        if mode != self.present_mode {
+            self.present_mode = mode;
+            self.stats.present_mode = format!("{mode:?}");
+            self.dirty = true;
+        }
+        Ok(())
     }
 
     /// Frames in flight.

@@ -9,14 +9,14 @@ use std::time::{Duration, Instant};
 use anyhow::{anyhow, bail, Result};
 use clap::{Args, ValueEnum};
 use serde::Serialize;
-use voxdag::dag::{export_vox, export_xyz_u32_file, Svdag};
+use voxdag::attr::Materials;
+use voxdag::dag::{export_vox, export_xyz_u32_file, Svdag, VdagFile};
 use voxdag::edit::item::Root;
 use voxdag::render::Camera;
 use winit::keyboard::KeyCode;
 
 use super::record::{Pace, Recorder};
 use super::{load_scene, scene_size, Document, Running};
-use crate::commands::load_svdag;
 use crate::window::CameraInput;
 
 /// The egui id of the File panel (its collapsing state is unfolded by the shortcuts).
@@ -142,6 +142,15 @@ fn newer(a: &Path, b: &Path) -> bool {
         (Some(a), Some(b)) => a > b,
         _ => false,
     }
+}
+
+/// The DAG and materials of an autosave file (what `load_scene` reads from a `.vdag`).
+fn load_autosave(path: &Path) -> Result<(Svdag, Option<Materials>)> {
+    let mut file = VdagFile::load(path)?;
+    let materials = file.materials.take();
+    let mut dag = file.into_svdag(path)?;
+    dag.colors.clear();
+    Ok((dag, materials))
 }
 
 /// The default save path of a scene: `NAME.edited.vdag` beside it.
@@ -274,10 +283,14 @@ impl Running {
         Ok(image.to_svdag(self.doc.dag.root())?)
     }
 
-    /// Writes the current root to the scene's autosave file (atomic).
+    /// Writes the current root to the scene's autosave file (atomic; the writer of a save,
+    /// materials included), leaving the edits unsaved.
     fn autosave(&mut self) -> Result<()> {
         let path = autosave_path(&self.doc.path);
-        self.current_svdag()?.save(&path)?;
+        let unsaved = self.doc.unsaved;
+        let result = self.doc.save(&path);
+        self.doc.unsaved = unsaved;
+        result?;
         self.files.autosaved_root = Some(self.doc.dag.root());
         self.files.last_autosave = Instant::now();
         self.files.autosaves += 1;
@@ -305,14 +318,23 @@ impl Running {
         Ok(())
     }
 
-    /// Replaces the document with `svdag` (named `path`); on error the current one stays.
-    fn replace_scene(&mut self, svdag: &Svdag, path: PathBuf, new_camera: bool) -> Result<()> {
+    /// Replaces the document with `svdag` and its `materials` (named `path`); on error the
+    /// current one stays.
+    fn replace_scene(
+        &mut self,
+        (svdag, materials): (Svdag, Option<Materials>),
+        path: PathBuf,
+        new_camera: bool,
+    ) -> Result<()> {
+        let svdag = &svdag;
         let doc = Document::load(
             &self.ctx,
             &self.renderer,
             svdag,
+            materials,
             path,
             self.doc.dag.undo_depth(),
+            self.doc.dag.config().variant,
         )?;
         // Frames in flight still read the old tables.
         self.ctx.wait_idle()?;
@@ -353,9 +375,9 @@ impl Running {
     fn run_pending(&mut self, pending: Pending) -> Result<()> {
         match pending {
             Pending::Open(path) => {
-                let svdag = load_scene(&path, None)
+                let scene = load_scene(&path, None)
                     .map_err(|e| e.context(format!("cannot open {}", path.display())))?;
-                self.replace_scene(&svdag, path.clone(), true)?;
+                self.replace_scene(scene, path.clone(), true)?;
                 self.save_path = default_save_path(&path).display().to_string();
                 self.message = Some(format!("opened {}", path.display()));
             }
@@ -369,15 +391,12 @@ impl Running {
                 {
                     bail!("{} is a .vdag: use Open (Ctrl+O)", path.display());
                 }
-                let svdag = load_scene(&path, (resolution > 0).then_some(resolution))
+                let scene = load_scene(&path, (resolution > 0).then_some(resolution))
                     .map_err(|e| e.context(format!("cannot import {}", path.display())))?;
-                self.replace_scene(&svdag, path.clone(), true)?;
+                let side = scene.0.resolution;
+                self.replace_scene(scene, path.clone(), true)?;
                 self.save_path = default_save_path(&path).display().to_string();
-                self.message = Some(format!(
-                    "imported {} at {}^3",
-                    path.display(),
-                    svdag.resolution
-                ));
+                self.message = Some(format!("imported {} at {side}^3", path.display()));
             }
             Pending::Export(path) => {
                 let ext = path
@@ -406,11 +425,10 @@ impl Running {
             }
             Pending::Recover => {
                 let path = autosave_path(&self.doc.path);
-                let mut svdag = load_svdag(&path)
+                let recovered = load_autosave(&path)
                     .map_err(|e| e.context(format!("cannot recover {}", path.display())))?;
-                svdag.colors.clear();
                 let scene = self.doc.path.clone();
-                self.replace_scene(&svdag, scene, false)?;
+                self.replace_scene(recovered, scene, false)?;
                 // The recovered edits are not in the scene file yet.
                 self.doc.unsaved = 1;
                 self.files.autosaved_root = Some(self.doc.dag.root());
