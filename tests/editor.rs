@@ -252,9 +252,14 @@ fn survives_resize_and_minimise() {
     close(&x, &id, editor);
 }
 
-/// Voxels of material `m` in a status.
+/// Voxels of material `m` in a status (0 while not counted: the button is held).
 fn material(s: &serde_json::Value, m: usize) -> u64 {
-    s["materials"][m].as_u64().unwrap()
+    s["materials"][m].as_u64().unwrap_or(0)
+}
+
+/// Whether the status has voxel counts (none while the left button is held).
+fn counted(s: &serde_json::Value) -> bool {
+    s["voxels"].is_u64()
 }
 
 /// Moves the pointer to (`x`, `y`) in the window and waits until the status shows a hovered
@@ -309,7 +314,9 @@ fn paint_changes_materials_and_keeps_the_voxels() {
     assert_eq!(painted["last_edit"]["tool"], "paint", "{painted}");
     xdotool(&x.display, &["windowfocus", "--sync", &id]);
     xdotool(&x.display, &["key", "ctrl+z"]);
-    let undone = wait_status(&path, &mut editor, "the undo", |s| s["undo_depth"] == 0);
+    let undone = wait_status(&path, &mut editor, "the undo", |s| {
+        s["undo_depth"] == 0 && counted(s)
+    });
     assert_eq!(material(&undone, 5), 0, "{undone}");
     // Redo brings the paint back.
     xdotool(&x.display, &["key", "ctrl+shift+z"]);
@@ -355,7 +362,7 @@ fn copy_stamps_the_picked_source_and_fill_floods() {
     let hover = hover_at(&x, &id, (440, 280), &path, &mut editor, &hover);
     xdotool(&x.display, &["click", "1"]);
     let copied = wait_status(&path, &mut editor, "copied voxels", |s| {
-        s["undo_depth"] == 1
+        s["undo_depth"] == 1 && counted(s)
     });
     assert_eq!(copied["last_edit"]["tool"], "copy", "{copied}");
     let after_copy = copied["voxels"].as_u64().unwrap();
@@ -366,7 +373,7 @@ fn copy_stamps_the_picked_source_and_fill_floods() {
     hover_at(&x, &id, (470, 320), &path, &mut editor, &hover);
     xdotool(&x.display, &["click", "1"]);
     let filled = wait_status(&path, &mut editor, "filled voxels", |s| {
-        s["undo_depth"] == 2
+        s["undo_depth"] == 2 && counted(s)
     });
     assert_eq!(filled["last_edit"]["tool"], "fill", "{filled}");
     assert!(filled["voxels"].as_u64().unwrap() > after_copy, "{filled}");
@@ -413,7 +420,9 @@ fn table_switch_keeps_the_scene_and_trace_records_frames() {
         &serde_json::Value::Null,
     );
     xdotool(&x.display, &["click", "1"]);
-    let added = wait_status(&path, &mut editor, "the edit", |s| s["undo_depth"] == 1);
+    let added = wait_status(&path, &mut editor, "the edit", |s| {
+        s["undo_depth"] == 1 && counted(s)
+    });
     let voxels = added["voxels"].as_u64().unwrap();
     assert!(voxels > first["voxels"].as_u64().unwrap(), "{added}");
     // T: the next variant, rebuilt from the edited scene; the history is dropped.

@@ -456,14 +456,14 @@ fn a_recorded_session_replays_to_the_saved_file() {
     std::thread::sleep(Duration::from_millis(400));
     xdotool(&ed.display, &["keyup", "w"]);
     ed.keys(&["4"]);
-    ed.hover(390, 310);
+    ed.hover(420, 310);
     ed.click();
     ed.keys(&["ctrl+z"]);
     ed.wait("the undo", |s| s["undo_depth"] == 1);
     ed.keys(&["ctrl+y"]);
     ed.wait("the redo", |s| s["undo_depth"] == 2);
     ed.keys(&["2"]);
-    ed.hover(410, 290);
+    ed.hover(430, 290);
     ed.click();
     ed.keys(&["ctrl+s"]);
     let s = ed.wait("the save", |s| s["unsaved_edits"] == 0);

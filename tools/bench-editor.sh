@@ -29,8 +29,9 @@ trap cleanup EXIT
 export DISPLAY=$display
 for _ in $(seq 1 100); do xdpyinfo >/dev/null 2>&1 && break; sleep 0.1; done
 
+status=$(mktemp -u /tmp/bench-editor-status.XXXXXX)
 "$bin" editor "$scene" --size 1280x720 --no-vsync --tool "$tool" --radius "$radius" \
-    --material 3 --stats-json "$out" &
+    --material 3 --stats-json "$out" --status-file "$status" &
 editor=$!
 id=
 for _ in $(seq 1 1200); do
@@ -40,10 +41,15 @@ for _ in $(seq 1 1200); do
     sleep 0.5
 done
 [ -n "$id" ] || { echo "no editor window" >&2; exit 1; }
-# Let the first frames (pipeline creation, first hover) pass.
-sleep 5
+# Wait for the scene to load and 3 frames to pass (first pass timings for the dynamic scale),
+# then for the hover hit under the pointer.
+frame() { python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['$1'])" "$status" 2>/dev/null || echo none; }
 xdotool mousemove --window "$id" 640 360
-sleep 1
+for _ in $(seq 1 2400); do
+    f=$(frame frame)
+    [ "$f" != none ] && [ "$f" -ge 3 ] && [ "$(frame hover)" != None ] && break
+    sleep 0.25
+done
 xdotool mousedown 1
 end=$((SECONDS + seconds))
 while [ "$SECONDS" -lt "$end" ]; do
@@ -58,3 +64,4 @@ sleep 1
 xdotool windowfocus --sync "$id" key --delay 200 Escape d
 wait "$editor"
 editor=
+rm -f "$status"

@@ -1053,9 +1053,9 @@ impl Running {
         self.doc
             .scene
             .set_hash_root(&self.doc.dag, self.doc.dag.root())?;
-        // Counting downloads the tables once per new root: only for the status file (the
-        // Scene panel counts when it is open).
-        let counts = if args.status_file.is_some() {
+        // Counting downloads the tables once per new root: only for the status file and not
+        // while the button is held (one new root per frame); the Scene panel counts when open.
+        let counts = if args.status_file.is_some() && !self.painting {
             self.counts_or_message()
         } else {
             None
