@@ -106,10 +106,11 @@ fn start_editor_with(x: &Xvfb, vdag: &Path, status: &Path, tool: &[&str]) -> (Ch
     (editor, id)
 }
 
-/// Closes the editor with Esc and checks it exits cleanly (no validation messages).
+/// Closes the editor with Esc (then D: discard, should it ask about unsaved edits) and checks it
+/// exits cleanly (no validation messages).
 fn close(x: &Xvfb, id: &str, editor: Child) {
     xdotool(&x.display, &["windowfocus", "--sync", id]);
-    xdotool(&x.display, &["key", "Escape"]);
+    xdotool(&x.display, &["key", "Escape", "d"]);
     let out = wait_exit(editor);
     assert!(
         out.status.success(),

@@ -60,7 +60,8 @@ while [ "$SECONDS" -lt "$end" ]; do
 done
 xdotool mouseup 1
 sleep 1
-xdotool windowfocus --sync "$id" key Escape
+# Esc asks about the unsaved edits; D discards them (and their autosave).
+xdotool windowfocus --sync "$id" key --delay 200 Escape d
 wait "$editor"
 editor=
 rm -f "$status"

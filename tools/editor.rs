@@ -15,7 +15,7 @@ use voxdag::attr::Materials;
 use voxdag::dag::{Svdag, VdagFile};
 use voxdag::edit::gpu::{GpuHashDag, GpuHashDagConfig, HashDagImage};
 use voxdag::edit::item::{Child, InnerNode, Leaf, NodePtr, Root, MATERIAL_COUNT};
-use voxdag::edit::replay::{Replay, Step};
+use voxdag::edit::replay::{Action, Replay};
 use voxdag::edit::tool::Tool;
 use voxdag::gpu::{
     Buffer, GpuContext, Image, MemLocation, OverlayFrame, PassTiming, PresenterOptions, Profiler,
@@ -30,6 +30,9 @@ use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
 use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{KeyCode, ModifiersState, PhysicalKey};
 use winit::window::WindowId;
+
+mod files;
+mod record;
 
 use crate::commands::{check_output, progress_bar, write_json};
 use crate::edit::TableArg;
@@ -132,6 +135,9 @@ pub struct EditorArgs {
     /// Save the first frame after the replay (render scale 1, no overlay) as a PNG.
     #[arg(long, requires = "exit_after_replay")]
     screenshot: Option<PathBuf>,
+    /// Autosave, recovery, recording and replay pace (tools/editor/files.rs).
+    #[command(flatten)]
+    files: files::FileArgs,
 }
 
 /// `voxdag editor`.
@@ -151,6 +157,7 @@ pub fn editor(args: &EditorArgs) -> Result<()> {
         &args.screenshot,
         &args.trace,
         &args.stats_json,
+        &args.files.record,
     ]
     .into_iter()
     .flatten()
@@ -163,9 +170,10 @@ pub fn editor(args: &EditorArgs) -> Result<()> {
         Some(path) => {
             let replay = Replay::load(path)?;
             let depth = args.replay_depth.unwrap_or(dag.resolution.trailing_zeros());
-            replay.steps(dag.resolution, depth, args.material)?
+            let steps = replay.steps(dag.resolution, depth, args.material)?;
+            record::Playlist::new(&replay, steps)
         }
-        None => Vec::new(),
+        None => record::Playlist::default(),
     };
     let event_loop = EventLoop::new()
         .map_err(|e| anyhow!("cannot open a window on display {display:?}: {e}"))?;
@@ -258,7 +266,7 @@ struct App<'a> {
     args: &'a EditorArgs,
     /// The scene until the window opens.
     initial: Option<(Svdag, Option<Materials>)>,
-    steps: Vec<(usize, Step)>,
+    steps: record::Playlist,
     running: Option<Running>,
     context: Option<Arc<GpuContext>>,
     error: Option<anyhow::Error>,
@@ -344,6 +352,7 @@ impl App<'_> {
         let home = Camera::frame(&svdag);
         let input = CameraInput::new(home, scene_size(&svdag));
         let replaying = !self.steps.is_empty() || args.replay.is_some();
+        let files = files::FileState::new(&args.files, &args.scene, svdag.resolution)?;
         let mut running = Running {
             win,
             slots,
@@ -376,7 +385,7 @@ impl App<'_> {
             last_frame: None,
             frame_ms: 0.0,
             frames: 0,
-            steps: std::mem::take(&mut self.steps).into_iter(),
+            steps: std::mem::take(&mut self.steps),
             replay_done: !replaying,
             message: None,
             save_path: args
@@ -385,7 +394,7 @@ impl App<'_> {
                 .unwrap_or_else(|| args.scene.with_extension("edited.vdag"))
                 .display()
                 .to_string(),
-            open_path: args.scene.display().to_string(),
+            files,
             exit: false,
             clicks: 0,
             ui_clicks: 0,
@@ -672,6 +681,9 @@ struct Status<'a> {
     replay_done: bool,
     last_edit: Option<&'a LastEdit>,
     message: Option<&'a str>,
+    /// Scene and save paths, last file error, prompt, autosave, recording.
+    #[serde(flatten)]
+    files: files::FileStatus<'a>,
     /// Left-button presses on the scene (not taken by a panel) so far.
     clicks: usize,
     /// Presses a panel took.
@@ -720,12 +732,13 @@ struct Running {
     last_frame: Option<Instant>,
     frame_ms: f64,
     frames: usize,
-    steps: std::vec::IntoIter<(usize, Step)>,
+    steps: record::Playlist,
     replay_done: bool,
     /// The last error or notice (shown in the Scene panel and the status file).
     message: Option<String>,
     save_path: String,
-    open_path: String,
+    /// File panel, prompts, autosave and recording (tools/editor/files.rs).
+    files: files::FileState,
     exit: bool,
     /// Left-button presses on the scene and on the panels.
     clicks: usize,
@@ -749,7 +762,7 @@ impl Running {
             .on_window_event(&self.win.window, event)
             .consumed;
         match event {
-            WindowEvent::CloseRequested => self.exit = true,
+            WindowEvent::CloseRequested => self.request_close(),
             WindowEvent::Resized(size) => self.win.presenter.resize([size.width, size.height]),
             WindowEvent::ModifiersChanged(m) => {
                 self.modifiers = m.state();
@@ -791,8 +804,10 @@ impl Running {
                 }
                 let ctrl = self.modifiers.control_key();
                 let shift = self.modifiers.shift_key();
+                if self.file_key(code, ctrl, shift) {
+                    return;
+                }
                 match code {
-                    KeyCode::Escape => self.exit = true,
                     KeyCode::Home => self.input.go_home(),
                     KeyCode::KeyZ if ctrl && shift => self.redo(),
                     KeyCode::KeyZ | KeyCode::KeyY if ctrl => {
@@ -802,7 +817,6 @@ impl Running {
                             self.redo()
                         }
                     }
-                    KeyCode::KeyS if ctrl => self.save_ui(),
                     KeyCode::KeyT if !ctrl => {
                         self.ui.pending_variant =
                             Some(panels::next_variant(self.doc.dag.config().variant));
@@ -859,6 +873,7 @@ impl Running {
             self.doc.undo -= 1;
             self.doc.redo += 1;
             self.doc.unsaved += 1;
+            self.record(Action::Undo);
         }
     }
 
@@ -868,52 +883,17 @@ impl Running {
             self.doc.undo += 1;
             self.doc.redo -= 1;
             self.doc.unsaved += 1;
-        }
-    }
-
-    /// Saves to the path in the Scene panel; errors become the panel's message.
-    fn save_ui(&mut self) {
-        let path = PathBuf::from(&self.save_path);
-        self.message = Some(match self.doc.save(&path) {
-            Ok(()) => format!("saved {}", path.display()),
-            Err(e) => format!("save failed: {e:#}"),
-        });
-    }
-
-    /// Opens the file in the Scene panel; on any error the current scene stays.
-    fn open_ui(&mut self) {
-        let path = PathBuf::from(&self.open_path);
-        let result = load_scene(&path, None).and_then(|(svdag, materials)| {
-            let doc = Document::load(
-                &self.ctx,
-                &self.renderer,
-                &svdag,
-                materials,
-                path.clone(),
-                self.doc.dag.undo_depth(),
-                self.doc.dag.config().variant,
-            )?;
-            Ok((doc, svdag))
-        });
-        match result {
-            Ok((doc, svdag)) => {
-                // Frames in flight still read the old tables.
-                if let Err(e) = self.ctx.wait_idle() {
-                    self.message = Some(format!("open failed: {e}"));
-                    return;
-                }
-                self.doc = doc;
-                self.input = CameraInput::new(Camera::frame(&svdag), scene_size(&svdag));
-                self.hover = None;
-                self.message = Some(format!("opened {}", path.display()));
-            }
-            Err(e) => self.message = Some(format!("cannot open {}: {e:#}", path.display())),
+            self.record(Action::Redo);
         }
     }
 
     /// Applies `tool`; the result becomes the current root. Errors (pool full, bad tool) are
     /// shown and leave the scene as it was.
     fn apply(&mut self, tool: &Tool, input: Instant) -> Result<()> {
+        let Some(tool) = self.recordable(tool) else {
+            return Ok(());
+        };
+        let tool = &tool;
         // GC (automatic, inside `edit`) may free nodes of roots that left the history while
         // frames in flight still read them.
         self.ctx.wait_idle()?;
@@ -954,6 +934,7 @@ impl Running {
         self.doc.undo = (self.doc.undo + 1).min(self.doc.dag.undo_depth());
         self.doc.redo = 0;
         self.doc.unsaved += 1;
+        self.record(record::action_of(tool));
         let (name, center, radius) = match *tool {
             Tool::Add { center, radius, .. } => ("add", center, radius),
             Tool::Remove { center, radius, .. } => ("remove", center, radius),
@@ -1014,32 +995,6 @@ impl Running {
         Some([0, 1, 2].map(|a| (hit.voxel[a] as i64 + offset * hit.normal[a] as i64) as f32 + 0.5))
     }
 
-    /// The replay's steps up to and including its next edit or end of frame.
-    fn replay_frame(&mut self) -> Result<()> {
-        let now = Instant::now();
-        while let Some((line, step)) = self.steps.next() {
-            match step {
-                Step::Edit(tool) => {
-                    self.ctx.wait_idle()?;
-                    self.doc
-                        .dag
-                        .edit(&tool, None)
-                        .with_context(|| format!("replay line {line}"))?;
-                    self.doc.undo = (self.doc.undo + 1).min(self.doc.dag.undo_depth());
-                    self.doc.redo = 0;
-                    self.doc.unsaved += 1;
-                    self.edit_input = Some(now);
-                    return Ok(());
-                }
-                Step::Undo => self.undo(),
-                Step::Redo => self.redo(),
-                Step::EndFrame => return Ok(()),
-            }
-        }
-        self.replay_done = true;
-        Ok(())
-    }
-
     /// One frame: hover hit, edits, panels, render, present, status file.
     fn redraw(&mut self, args: &EditorArgs) -> Result<()> {
         let dt = self
@@ -1078,7 +1033,7 @@ impl Running {
         // the button is held).
         let finishing = !self.replay_done;
         if !self.replay_done {
-            self.replay_frame()?;
+            self.replay_frame(args.files.replay_pace)?;
         } else if self.click.is_some() || self.painting {
             // A press, else (button held) the last pointer motion not yet edited for, else now.
             let since = self.stats.last_edit;
@@ -1094,6 +1049,7 @@ impl Running {
             }
         }
         let screenshot = finishing && self.replay_done && args.screenshot.is_some();
+        self.files_frame();
         self.doc
             .scene
             .set_hash_root(&self.doc.dag, self.doc.dag.root())?;
@@ -1235,6 +1191,7 @@ impl Running {
                 message: self.message.as_deref(),
                 clicks: self.clicks,
                 ui_clicks: self.ui_clicks,
+                files: self.file_status(),
                 table: self.doc.dag.config().variant.name(),
                 vsync: self.ui.vsync,
                 present_mode: &self.win.presenter.stats().present_mode,
@@ -1242,6 +1199,7 @@ impl Running {
             };
             write_json(path, &status)?;
         }
+        self.record_frame();
         if finishing && self.replay_done && args.exit_after_replay {
             if let Some(path) = &args.save {
                 self.doc.save(path)?;
@@ -1256,6 +1214,7 @@ impl Running {
     fn panels(&mut self, ui: &mut egui::Ui, extent: [u32; 2]) {
         let ctx = ui.ctx().clone();
         self.brush_outline(&ctx, extent);
+        self.files_panel(&ctx);
         egui::Window::new("Tools")
             .default_pos([8.0, 8.0])
             .resizable(false)
@@ -1322,19 +1281,7 @@ impl Running {
                 ui.label(format!("  {words}-word items: {} bytes", t.gpu_bytes()));
             }
         }
-        ui.separator();
-        ui.horizontal(|ui| {
-            ui.text_edit_singleline(&mut self.save_path);
-            if ui.button("save (Ctrl+S)").clicked() {
-                self.save_ui();
-            }
-        });
-        ui.horizontal(|ui| {
-            ui.text_edit_singleline(&mut self.open_path);
-            if ui.button("open").clicked() {
-                self.open_ui();
-            }
-        });
+        ui.label("open, save, import, export, record: the File panel");
         if let Some(m) = &self.message {
             ui.colored_label(egui::Color32::YELLOW, m);
         }
