@@ -119,34 +119,24 @@ pub fn check_output_path(path: &Path) -> io::Result<()> {
     Ok(())
 }
 
-/// Writes `path` atomically: a new temporary file in the same directory (created exclusively
-/// under a random name, so a planted file or symlink is never followed), fsync, rename, fsync
-/// the directory. The temporary file is removed on failure, Ctrl-C, SIGTERM and out of memory.
-/// `-` writes to stdout; an existing FIFO or device (and `/dev/...`) is written in place,
-/// never replaced.
-pub fn write_atomic(
-    path: &Path,
-    write: impl FnOnce(&mut BufWriter<File>) -> io::Result<()>,
-) -> io::Result<()> {
-    if written_in_place(path) {
-        let file = if path.as_os_str() == "-" {
-            use std::os::fd::AsFd;
-            File::from(io::stdout().as_fd().try_clone_to_owned()?)
-        } else {
-            let regular = std::fs::metadata(path).is_ok_and(|m| m.is_file());
-            OpenOptions::new()
-                .write(true)
-                .truncate(regular)
-                .open(path)?
-        };
-        let mut out = BufWriter::new(file);
-        write(&mut out)?;
-        return out.into_inner().map_err(|e| e.into_error()).map(drop);
+/// Opens an output that is written in place (see [`written_in_place`]): stdout for `-`, else
+/// the existing file, truncated only when it is a regular file.
+fn open_in_place(path: &Path) -> io::Result<File> {
+    if path.as_os_str() == "-" {
+        use std::os::fd::AsFd;
+        return Ok(File::from(io::stdout().as_fd().try_clone_to_owned()?));
     }
+    let regular = std::fs::metadata(path).is_ok_and(|m| m.is_file());
+    OpenOptions::new().write(true).truncate(regular).open(path)
+}
+
+/// A new file beside `path`, created exclusively under a random name (a planted file or
+/// symlink is never followed) and registered for removal on signals; returns the file, its
+/// path (removed when dropped) and its registration slot, to unregister once renamed.
+fn create_temp(path: &Path) -> io::Result<(File, tempfile::TempPath, Option<usize>)> {
     let name = path
         .file_name()
         .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "path has no file name"))?;
-    let dir = parent_dir(path);
     let mut prefix = std::ffi::OsString::from(".");
     prefix.push(name);
     prefix.push(".tmp-");
@@ -155,7 +145,7 @@ pub fn write_atomic(
     let mut slot = None;
     let (file, tmp) = tempfile::Builder::new()
         .prefix(&prefix)
-        .make_in(&dir, |candidate| {
+        .make_in(parent_dir(path), |candidate| {
             let registered = register_temp(candidate);
             let created = OpenOptions::new()
                 .write(true)
@@ -169,6 +159,24 @@ pub fn write_atomic(
             created
         })?
         .into_parts();
+    Ok((file, tmp, slot))
+}
+
+/// Writes `path` atomically: a new temporary file in the same directory (created exclusively
+/// under a random name, so a planted file or symlink is never followed), fsync, rename, fsync
+/// the directory. The temporary file is removed on failure, Ctrl-C, SIGTERM and out of memory.
+/// `-` writes to stdout; an existing FIFO or device (and `/dev/...`) is written in place,
+/// never replaced.
+pub fn write_atomic(
+    path: &Path,
+    write: impl FnOnce(&mut BufWriter<File>) -> io::Result<()>,
+) -> io::Result<()> {
+    if written_in_place(path) {
+        let mut out = BufWriter::new(open_in_place(path)?);
+        write(&mut out)?;
+        return out.into_inner().map_err(|e| e.into_error()).map(drop);
+    }
+    let (file, tmp, slot) = create_temp(path)?;
     let result = (|| -> io::Result<()> {
         let mut out = BufWriter::new(file);
         write(&mut out)?;
@@ -183,7 +191,24 @@ pub fn write_atomic(
         unregister_temp(i);
     }
     result?;
-    File::open(&dir)?.sync_all()
+    File::open(parent_dir(path))?.sync_all()
+}
+
+/// Opens `path` for an output written as it goes that must survive a kill up to its last
+/// flush (a session recording): a new file created as in [`write_atomic`] and renamed over
+/// `path` at once, so a planted symlink at `path` is replaced, never written through. `-`,
+/// FIFOs and devices are written in place.
+pub fn create_streamed(path: &Path) -> io::Result<File> {
+    if written_in_place(path) {
+        return open_in_place(path);
+    }
+    let (file, tmp, slot) = create_temp(path)?;
+    let persisted = tmp.persist(path).map_err(|e| e.error);
+    if let Some(i) = slot {
+        unregister_temp(i);
+    }
+    persisted?;
+    Ok(file)
 }
 
 #[cfg(test)]
@@ -232,5 +257,21 @@ mod tests {
         remove_temp_files();
         unregister_temp(slot);
         assert!(!path.exists());
+    }
+
+    #[test]
+    fn streamed_output_replaces_a_symlink_and_is_visible_at_once() {
+        let _serial = REGISTRY.lock().unwrap_or_else(|p| p.into_inner());
+        let dir = tempfile::tempdir().unwrap();
+        let victim = dir.path().join("victim");
+        std::fs::write(&victim, b"precious").unwrap();
+        let path = dir.path().join("session.csv");
+        std::os::unix::fs::symlink(&victim, &path).unwrap();
+        let mut file = create_streamed(&path).unwrap();
+        file.write_all(b"EndFrame\n").unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), b"EndFrame\n");
+        assert_eq!(std::fs::read(&victim).unwrap(), b"precious");
+        let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert_eq!(names.len(), 2, "no temporary left beside the output");
     }
 }

@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 use clap::ValueEnum;
 use glam::Vec3;
+use voxdag::atomic_file::create_streamed;
 use voxdag::edit::replay::{Action, Replay, Step};
 use voxdag::edit::tool::Tool;
 use voxdag::render::Camera;
@@ -90,10 +91,10 @@ pub struct Recorder {
 }
 
 impl Recorder {
-    /// Starts a recording at `path` (replaced).
+    /// Starts a recording at `path` (replaced, never written through a symlink).
     pub fn create(path: &Path) -> Result<Recorder> {
-        let file =
-            File::create(path).with_context(|| format!("cannot record to {}", path.display()))?;
+        let file = create_streamed(path)
+            .with_context(|| format!("cannot record to {}", path.display()))?;
         Ok(Recorder {
             path: path.to_path_buf(),
             out: BufWriter::new(file),
