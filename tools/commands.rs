@@ -320,11 +320,7 @@ pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
         quiet,
     )?;
     let encode_time = start.elapsed();
-    let bytes = encoded.byte_size();
-    let kind = match &encoded {
-        EncodedDag::Tsvdag(e) => format!("tsvdag ({} mode)", e.options.mode_name()),
-        other => other.kind().name().to_string(),
-    };
+    let summary = EncodedSummary::of(&encoded);
     let (colors, stored_colors, materials) = match args.materials {
         Some(k) => (Vec::new(), None, Some(quantize_materials(&dag, k)?)),
         None => {
@@ -340,23 +336,58 @@ pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
         materials,
     };
     file.save(&args.output)?;
-    println!(
-        "{}: {}^3, {} voxels, {} SVDAG nodes, {} {} bytes (voxelize {:.2} s, build {:.2} s, encode {}, peak {:.0} MiB)",
-        args.output.display(),
-        report.resolution,
-        report.voxels,
-        report.stats.levels.iter().map(|l| l.svdag).sum::<u64>(),
-        bytes,
-        kind,
-        report.voxelize_s,
-        report.build_s,
-        seconds(encode_time),
-        report.peak_rss_bytes as f64 / (1024.0 * 1024.0)
+    let timing = format!(
+        "voxelize {:.2} s, build {:.2} s",
+        report.voxelize_s, report.build_s
     );
-    if let Some(path) = &args.report {
-        write_json(path, &report)?;
+    summary.finish(args, &report, &timing, encode_time)
+}
+
+/// What a build's summary line says of its encoded DAG, taken before the DAG is moved into
+/// its file.
+pub struct EncodedSummary {
+    bytes: u64,
+    kind: String,
+}
+
+impl EncodedSummary {
+    /// The byte size and encoding name (with the TSVDAG mode) of `encoded`.
+    pub fn of(encoded: &EncodedDag) -> EncodedSummary {
+        let kind = match encoded {
+            EncodedDag::Tsvdag(e) => format!("tsvdag ({} mode)", e.options.mode_name()),
+            other => other.kind().name().to_string(),
+        };
+        EncodedSummary {
+            bytes: encoded.byte_size(),
+            kind,
+        }
     }
-    Ok(())
+
+    /// Prints the build's one-line summary (`timing`: how the voxels were made, and in what
+    /// time) and writes `--report`.
+    pub fn finish(
+        &self,
+        args: &BuildArgs,
+        report: &BuildReport,
+        timing: &str,
+        encode_time: Duration,
+    ) -> Result<()> {
+        println!(
+            "{}: {}^3, {} voxels, {} SVDAG nodes, {} {} bytes ({timing}, encode {}, peak {:.0} MiB)",
+            args.output.display(),
+            report.resolution,
+            report.voxels,
+            report.stats.levels.iter().map(|l| l.svdag).sum::<u64>(),
+            self.bytes,
+            self.kind,
+            seconds(encode_time),
+            report.peak_rss_bytes as f64 / (1024.0 * 1024.0)
+        );
+        if let Some(path) = &args.report {
+            write_json(path, report)?;
+        }
+        Ok(())
+    }
 }
 
 /// `--materials K`: the DAG's colours quantized into a palette of at most `k` entries

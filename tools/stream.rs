@@ -12,7 +12,7 @@ use voxdag::safety::human_bytes;
 use voxdag::scene::{self, voxelize, ImportOptions, Source};
 
 use crate::commands::{
-    encode_dag, peak_rss_bytes, progress_bar, seconds, tsvdag_modes, write_json, BuildReport,
+    encode_dag, peak_rss_bytes, progress_bar, tsvdag_modes, BuildReport, EncodedSummary,
 };
 use crate::{BuildArgs, EncodingArg};
 
@@ -163,11 +163,7 @@ pub fn build_streaming(args: &BuildArgs, quiet: bool) -> Result<()> {
         )?,
     };
     let encode_time = start.elapsed();
-    let bytes = encoded.byte_size();
-    let kind = match &encoded {
-        EncodedDag::Tsvdag(e) => format!("tsvdag ({} mode)", e.options.mode_name()),
-        other => other.kind().name().to_string(),
-    };
+    let summary = EncodedSummary::of(&encoded);
     if let Some(c) = &colors {
         println!(
             "colours: {} {} -> {} bytes ({:.1}% of RGB888) in {} chunks at depth {}, RMSE {:.4}",
@@ -198,24 +194,11 @@ pub fn build_streaming(args: &BuildArgs, quiet: bool) -> Result<()> {
         peak_rss_bytes: peak_rss_bytes(),
         stats,
     };
-    println!(
-        "{}: {}^3, {} voxels, {} SVDAG nodes, {} {} bytes (voxelize+build streamed {:.2} s, \
-         layout {:.2} s, encode {}, peak {:.0} MiB)",
-        args.output.display(),
-        report.resolution,
-        report.voxels,
-        report.stats.levels.iter().map(|l| l.svdag).sum::<u64>(),
-        bytes,
-        kind,
-        report.voxelize_s,
-        report.build_s,
-        seconds(encode_time),
-        report.peak_rss_bytes as f64 / (1024.0 * 1024.0)
+    let timing = format!(
+        "voxelize+build streamed {:.2} s, layout {:.2} s",
+        report.voxelize_s, report.build_s
     );
-    if let Some(path) = &args.report {
-        write_json(path, &report)?;
-    }
-    Ok(())
+    summary.finish(args, &report, &timing, encode_time)
 }
 
 /// What `--memory-budget` leaves for the DAG and the colour chunk tables once the process as
