@@ -8,36 +8,12 @@
 mod common;
 
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
 use common::repo;
-use common::xvfb::{find_window, wait_exit, xdotool, Xvfb};
+use common::xvfb::{find_window, run, voxdag, wait_exit, xdotool, Xvfb};
 use serde_json::Value;
-
-/// The CLI with validation on, pinned to no display unless given one.
-fn voxdag(display: Option<&str>) -> Command {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_voxdag"));
-    cmd.env("VOXDAG_VALIDATION", "1")
-        .env_remove("WAYLAND_DISPLAY");
-    match display {
-        Some(d) => cmd.env("DISPLAY", d),
-        None => cmd.env_remove("DISPLAY"),
-    };
-    cmd
-}
-
-fn run(mut cmd: Command) -> Output {
-    let out = cmd.output().expect("running voxdag");
-    assert!(
-        out.status.success(),
-        "{cmd:?} failed ({}):\n{}\n{}",
-        out.status,
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
 
 /// The bundled avocado at `resolution`^3.
 fn scene(dir: &Path, resolution: u32) -> PathBuf {

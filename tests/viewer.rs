@@ -5,35 +5,11 @@
 mod common;
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::Stdio;
 use std::time::Duration;
 
-use common::xvfb::{find_window, wait_exit, xdotool, Xvfb};
+use common::xvfb::{find_window, run, voxdag, wait_exit, xdotool, Xvfb};
 use common::{compare, failure_dir, repo, save_png};
-
-/// The CLI with validation on, pinned to no display unless given one.
-fn voxdag(display: Option<&str>) -> Command {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_voxdag"));
-    cmd.env("VOXDAG_VALIDATION", "1")
-        .env_remove("WAYLAND_DISPLAY");
-    match display {
-        Some(d) => cmd.env("DISPLAY", d),
-        None => cmd.env_remove("DISPLAY"),
-    };
-    cmd
-}
-
-fn run(mut cmd: Command) -> Output {
-    let out = cmd.output().expect("running voxdag");
-    assert!(
-        out.status.success(),
-        "{cmd:?} failed ({}):\n{}\n{}",
-        out.status,
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
 
 /// A small coloured scene: the bundled avocado at 128^3 (lossless colour chunks).
 fn scene(dir: &Path) -> PathBuf {

@@ -158,3 +158,28 @@ pub fn wait_exit(viewer: Child) -> Output {
     }
     viewer.wait_with_output().unwrap()
 }
+
+/// The CLI with validation on, pinned to no display unless given one.
+pub fn voxdag(display: Option<&str>) -> Command {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_voxdag"));
+    cmd.env("VOXDAG_VALIDATION", "1")
+        .env_remove("WAYLAND_DISPLAY");
+    match display {
+        Some(d) => cmd.env("DISPLAY", d),
+        None => cmd.env_remove("DISPLAY"),
+    };
+    cmd
+}
+
+/// Runs `cmd`; panics with its output unless it succeeds.
+pub fn run(mut cmd: Command) -> Output {
+    let out = cmd.output().expect("running voxdag");
+    assert!(
+        out.status.success(),
+        "{cmd:?} failed ({}):\n{}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
