@@ -78,7 +78,7 @@ fn start_editor_with(x: &Xvfb, vdag: &Path, status: &Path, tool: &[&str]) -> (Ch
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
     let mut editor = cmd.spawn().expect("starting voxdag editor");
-    let id = find_window(&x.display, "voxdag editor", &mut editor);
+    let id = find_window(x, "voxdag editor", &mut editor);
     (editor, id)
 }
 

@@ -88,7 +88,7 @@ impl Editor {
             .stdout(Stdio::piped())
             .stderr(Stdio::piped());
         let mut child = cmd.spawn().expect("starting voxdag editor");
-        let id = find_window(&x.display, "voxdag editor", &mut child);
+        let id = find_window(x, "voxdag editor", &mut child);
         Editor {
             child,
             id,

@@ -91,7 +91,7 @@ fn survives_an_external_resize_and_closes_on_escape() {
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
     let mut viewer = cmd.spawn().expect("starting voxdag view");
-    let id = find_window(&x.display, "voxdag view", &mut viewer);
+    let id = find_window(&x, "voxdag view", &mut viewer);
     // Let it present a few frames at the first size, then resize from outside (as a window
     // manager would), let it present at the new size, then close it with Esc.
     std::thread::sleep(Duration::from_millis(1500));

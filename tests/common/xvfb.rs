@@ -11,23 +11,20 @@ pub struct Xvfb {
     child: Child,
     /// The display name (":N").
     pub display: String,
-    /// Held while the server lives: one server per test binary at a time, so no server's
-    /// shutdown (which removes its lock and socket) can race another's start on the same display.
+    /// Xvfb's stderr, quoted when a client cannot connect; removed on drop.
+    log: std::path::PathBuf,
+    /// Held while the server lives (see `XVFB_START`).
     _one_at_a_time: Option<MutexGuard<'static, ()>>,
 }
 
-/// Serialises the Xvfb start-ups of this test binary (its tests run in parallel). An X server
-/// picking a display with `-displayfd` takes `/tmp/.X<n>-lock`; a stale lock (left by a server
-/// killed with SIGKILL, as these tests did) is removed by whichever starting server sees it, and
-/// two servers starting at once can both remove it and both take display n. The test whose server
-/// lost the socket then fails with the viewer's "Failed to open connection to X server" before its
-/// window appears (reproduced once in 15 runs of this file on the loaded machine).
+/// One server per test binary at a time (its tests run in parallel): fewer processes on a loaded
+/// machine, and no server's shutdown overlaps another's start.
 static XVFB_START: Mutex<()> = Mutex::new(());
 
 impl Xvfb {
     /// Starts `Xvfb -displayfd 1` (the server picks a free display number and prints it once it
     /// accepts connections) and checks that a client can connect; a server that cannot be
-    /// reached (another process raced it for the display) is replaced, at most 3 times.
+    /// reached is replaced, at most 3 times.
     pub fn start() -> Xvfb {
         let one_at_a_time = XVFB_START.lock().unwrap_or_else(|e| e.into_inner());
         let mut failures = Vec::new();
@@ -43,15 +40,48 @@ impl Xvfb {
                 return x;
             }
             failures.push(format!(
-                "{}: {}",
+                "{}: {} ({})",
                 x.display,
-                String::from_utf8_lossy(&probe.stderr).trim()
+                String::from_utf8_lossy(&probe.stderr).trim(),
+                x.state()
             ));
         }
         panic!("no Xvfb server accepted a connection: {failures:?}");
     }
 
+    /// The server's state for failure messages: running or not, socket file, its stderr.
+    pub fn state(&self) -> String {
+        let pid = self.child.id();
+        // The third field of /proc/<pid>/stat is the state; Z once the server exited.
+        let running = std::fs::read_to_string(format!("/proc/{pid}/stat"))
+            .map(|stat| stat.split_whitespace().nth(2) != Some("Z"))
+            .unwrap_or(false);
+        let socket = format!("/tmp/.X11-unix/X{}", &self.display[1..]);
+        format!(
+            "Xvfb pid {pid} {}, socket {} {}, Xvfb stderr: {:?}",
+            if running { "running" } else { "exited" },
+            socket,
+            if std::path::Path::new(&socket).exists() {
+                "present"
+            } else {
+                "missing"
+            },
+            std::fs::read_to_string(&self.log)
+                .unwrap_or_default()
+                .trim()
+        )
+    }
+
     fn spawn() -> Xvfb {
+        let log = std::env::temp_dir().join(format!(
+            "voxdag-test-xvfb-{}-{:?}.log",
+            std::process::id(),
+            Instant::now()
+        ));
+        let log_file = std::fs::File::create(&log).expect("creating the Xvfb log");
+        // -noreset: by default the server resets when its last client disconnects (the probe
+        // below, or a closed viewer), and a client connecting during the reset is refused
+        // ("Failed to open connection to X server", seen once under load).
         let mut child = Command::new("Xvfb")
             .args([
                 "-displayfd",
@@ -61,9 +91,10 @@ impl Xvfb {
                 "1024x768x24",
                 "-nolisten",
                 "tcp",
+                "-noreset",
             ])
             .stdout(Stdio::piped())
-            .stderr(Stdio::null())
+            .stderr(log_file)
             .spawn()
             .unwrap_or_else(|e| {
                 panic!("cannot start Xvfb ({e}): run tools/setup.sh (installs xvfb and xdotool)")
@@ -79,6 +110,7 @@ impl Xvfb {
         Xvfb {
             child,
             display: format!(":{number}"),
+            log,
             _one_at_a_time: None,
         }
     }
@@ -100,6 +132,7 @@ impl Drop for Xvfb {
             std::thread::sleep(Duration::from_millis(20));
         }
         let _ = self.child.wait();
+        let _ = std::fs::remove_file(&self.log);
     }
 }
 
@@ -119,7 +152,8 @@ pub fn xdotool(display: &str, args: &[&str]) -> String {
 }
 
 /// Waits (up to 60 s) for a window whose name contains `name` and returns its id.
-pub fn find_window(display: &str, name: &str, viewer: &mut Child) -> String {
+pub fn find_window(x: &Xvfb, name: &str, viewer: &mut Child) -> String {
+    let display = &x.display;
     let start = Instant::now();
     loop {
         let out = Command::new("xdotool")
@@ -135,7 +169,10 @@ pub fn find_window(display: &str, name: &str, viewer: &mut Child) -> String {
             if let Some(mut e) = viewer.stderr.take() {
                 let _ = std::io::Read::read_to_string(&mut e, &mut stderr);
             }
-            panic!("the viewer exited ({status}) before its window appeared: {stderr}");
+            panic!(
+                "the viewer exited ({status}) before its window appeared on {display} ({}): {stderr}",
+                x.state()
+            );
         }
         assert!(
             start.elapsed() < Duration::from_secs(60),
