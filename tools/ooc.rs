@@ -6,8 +6,8 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand, ValueEnum};
 use voxdag::ooc::prepare::{Instance, SourceMesh};
 use voxdag::ooc::{
-    format, prepare, render_in_core, render_out_of_core, OocScene, PrepareOptions, ProxySet,
-    RenderOptions, SceneSource,
+    format, prepare, render_in_core, render_out_of_core, Eviction, OocScene, PrepareOptions,
+    ProxySet, RenderOptions, SceneSource,
 };
 use voxdag::scene::{self, ImportOptions};
 
@@ -80,6 +80,15 @@ pub enum OnOff {
     Off,
 }
 
+/// The cache's eviction policy (`--eviction`).
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum EvictionArg {
+    /// The point the fewest queued rays will still visit.
+    Demand,
+    /// The least recently used point.
+    Lru,
+}
+
 /// Arguments of `voxdag ooc render`.
 #[derive(Args)]
 pub struct OocRenderArgs {
@@ -113,6 +122,10 @@ pub struct OocRenderArgs {
     /// points after it; a chosen point's rays are traced again before it is loaded.
     #[arg(long, value_enum, default_value = "on")]
     lookahead: OnOff,
+    /// Eviction: `demand` evicts the resident point the fewest queued rays will still visit
+    /// (least recently used on ties), `lru` the least recently used one.
+    #[arg(long, value_enum, default_value = "demand")]
+    eviction: EvictionArg,
     /// Camera position x,y,z (default: in front of and above the scene).
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     eye: Option<[f32; 3]>,
@@ -290,6 +303,10 @@ fn render(args: &OocRenderArgs, quiet: bool) -> Result<()> {
         memory_budget: args.memory_budget,
         rays_in_flight: args.rays_in_flight,
         lookahead: args.lookahead == OnOff::On,
+        eviction: match args.eviction {
+            EvictionArg::Demand => Eviction::Demand,
+            EvictionArg::Lru => Eviction::Lru,
+        },
         eye: args.eye,
         target: args.target,
         ..Default::default()

@@ -5,7 +5,8 @@
 //! `geometry.bin`, an index with the points' bounds, and per proxy resolution one shared
 //! multi-root SVDAG of conservative voxelizations (`proxies-R.bin`). [`render`] traces paths
 //! with batched ray traversal (Pharr et al. 1997): rays wait in per-point queues, the point with
-//! the most queued rays is loaded (LRU cache under a memory budget) and all its rays are
+//! the most queued rays is loaded (a cache under a memory budget, evicting the point the fewest
+//! queued rays still need) and all its rays are
 //! intersected at once. With proxies on, a ray is queued at a point only when it touches the
 //! point's SVDAG proxy, which skips loads of geometry the ray would miss. See
 //! `docs/out-of-core.md`.
@@ -23,7 +24,9 @@ use crate::dag::DagError;
 pub use format::{OocScene, PointEntry};
 pub use prepare::{prepare, PrepareOptions, PrepareSummary, SceneSource, Terrain};
 pub use proxy::{Grid, ProxySet};
-pub use render::{render_in_core, render_out_of_core, Image, RenderOptions, RenderStats};
+pub use render::{
+    render_in_core, render_out_of_core, Eviction, Image, RenderOptions, RenderStats, Resident,
+};
 
 /// Errors of scene preparation, scene loading and rendering; each names the file involved.
 /// Malformed files and I/O errors are [`DagError::Format`] and [`DagError::Io`] (the same

@@ -44,6 +44,8 @@ pub struct RenderOptions {
     /// points after it, and a chosen point's rays are traced again before it is loaded
     /// ([`Tracer::speculate`]); off: the batched traversal of Pharr et al. as published.
     pub lookahead: bool,
+    /// Out-of-core only: which resident point the cache evicts to make room.
+    pub eviction: Eviction,
     /// Camera position; default: in front of and above the scene.
     pub eye: Option<[f32; 3]>,
     /// Point looked at; default: the centre of the scene.
@@ -63,10 +65,48 @@ impl Default for RenderOptions {
             memory_budget: 1 << 30,
             rays_in_flight: 1 << 16,
             lookahead: true,
+            eviction: Eviction::default(),
             eye: None,
             target: None,
             fov_degrees: 50.0,
         }
+    }
+}
+
+/// Which resident point the out-of-core cache evicts when a load needs room. Never changes the
+/// image, only which points are read again later.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Eviction {
+    /// The least recently used point.
+    Lru,
+    /// The point the fewest queued rays will still visit (its *demand*: rays waiting at other
+    /// points that have it later on their list, proxy-tested), least recently used on ties: a
+    /// Belady-like choice from the queues' contents.
+    #[default]
+    Demand,
+}
+
+/// A resident point as the eviction choice sees it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Resident {
+    /// Point id.
+    pub id: u32,
+    /// Cache clock of its last use (larger: more recent).
+    pub last_used: u64,
+    /// Queued rays that will still visit it.
+    pub demand: u32,
+}
+
+impl Eviction {
+    /// The point to evict among `resident`: the smallest `last_used` (LRU) or the smallest
+    /// `(demand, last_used)` (demand); the lowest id on ties. `None` when nothing is resident.
+    pub fn victim(self, resident: impl IntoIterator<Item = Resident>) -> Option<u32> {
+        let key = |r: &Resident| match self {
+            Eviction::Lru => (0, r.last_used, r.id),
+            Eviction::Demand => (r.demand, r.last_used, r.id),
+        };
+        resident.into_iter().min_by_key(key).map(|r| r.id)
     }
 }
 
@@ -77,6 +117,8 @@ pub struct RenderStats {
     pub mode: String,
     /// Whether proxies culled the queueing.
     pub proxies: bool,
+    /// Eviction policy of the cache (out-of-core).
+    pub eviction: Option<Eviction>,
     /// Proxy resolution (0 without proxies).
     pub proxy_resolution: u32,
     /// Bytes the proxies take in memory.
@@ -478,6 +520,19 @@ impl<'a> Tracer<'a> {
         }
     }
 
+    /// The points a ray waiting at `path.wait` may visit after it: the later candidates whose
+    /// proxy (with proxies) the segment up to its closest hit so far touches. An estimate of
+    /// its future demand for the eviction choice; the ray's closest hit may still shorten it.
+    fn later(&self, path: &PathState) -> Vec<u32> {
+        let (wt, wid) = path.wait;
+        self.candidates(path)
+            .into_iter()
+            .filter(|&(t, id, _)| t.total_cmp(&wt).then(id.cmp(&wid)).is_gt())
+            .filter(|&c| self.may_hit(path, c))
+            .map(|c| c.1)
+            .collect()
+    }
+
     /// Visits, ahead of order, the resident points among `later` (the candidates after the
     /// ray's next point, which is not resident) that the ray may still hit, so that their
     /// closest hit shortens the segment tested against the proxies of the points before them.
@@ -678,8 +733,18 @@ pub fn render_in_core(
     ))
 }
 
-/// The LRU cache of loaded points.
+/// Takes the rays of `queue` out of the demand counts (they leave their queue).
+fn release(queue: &[u32], future: &mut [Vec<u32>], demand: &mut [u32]) {
+    for &r in queue {
+        for x in future[r as usize].drain(..) {
+            demand[x as usize] -= 1;
+        }
+    }
+}
+
+/// The cache of loaded points.
 struct Cache {
+    eviction: Eviction,
     budget: u64,
     used: u64,
     clock: u64,
@@ -689,7 +754,8 @@ struct Cache {
 }
 
 /// Renders with batched ray traversal: per-point ray queues, the fullest queue first, points
-/// loaded into an LRU cache of `memory_budget` bytes minus the proxies (with `proxies`, a ray is
+/// loaded into a cache of `memory_budget` bytes minus the proxies (evicting by
+/// `opts.eviction`) (with `proxies`, a ray is
 /// queued at a point only when it touches its proxy).
 pub fn render_out_of_core(
     scene: &OocScene,
@@ -708,6 +774,7 @@ pub fn render_out_of_core(
     let mut stats = RenderStats {
         mode: "out-of-core".into(),
         proxies: proxies.is_some(),
+        eviction: Some(opts.eviction),
         proxy_resolution: proxies.map_or(0, |p| p.resolution),
         proxy_bytes,
         memory_budget: opts.memory_budget,
@@ -724,12 +791,17 @@ pub fn render_out_of_core(
     stats.rays += in_flight as u64;
     let mut next = in_flight;
     let mut queues: Vec<Vec<u32>> = vec![Vec::new(); scene.points.len()];
+    // Per queued ray: the points it may visit after the one it waits at; per point: how many
+    // queued rays list it (the eviction's demand; kept only for `Eviction::Demand`).
+    let mut future: Vec<Vec<u32>> = vec![Vec::new(); in_flight as usize];
+    let mut demand: Vec<u32> = vec![0; scene.points.len()];
     // Per point: `cache_misses` when its queue was last traced again (see below).
     let mut checked_at: Vec<u64> = vec![u64::MAX; scene.points.len()];
     let (mut requeued, mut requeue_total, mut requeue_kept) = (None::<u32>, 0u64, 0u64);
     // True while `pending` holds the rays taken out of the queue of `requeued`.
     let mut requeue_round = false;
     let mut cache = Cache {
+        eviction: opts.eviction,
         budget: opts.memory_budget - proxy_bytes,
         used: 0,
         clock: 0,
@@ -750,7 +822,8 @@ pub fn render_out_of_core(
         while !pending.is_empty() {
             let entries = &cache.entries;
             let resident = |id: u32| entries.get(&id).map(|e| &e.0);
-            let outs: Vec<(u32, Advance, StepCount, Vec<u32>)> = pending
+            let demand_on = opts.eviction == Eviction::Demand;
+            let outs: Vec<(u32, Advance, StepCount, Vec<u32>, Vec<u32>)> = pending
                 .par_iter()
                 .map(|&(r, mut path, first)| {
                     let mut count = StepCount::default();
@@ -788,7 +861,13 @@ pub fn render_out_of_core(
                                 path = p;
                                 visit = Some(id);
                             }
-                            adv => return (r, adv, count, used),
+                            adv => {
+                                let later = match &adv {
+                                    Advance::Queued(p, _) if demand_on => tracer.later(p),
+                                    _ => Vec::new(),
+                                };
+                                return (r, adv, count, used, later);
+                            }
                         }
                     }
                 })
@@ -799,7 +878,7 @@ pub fn render_out_of_core(
             }
             pending.clear();
             let mut touched = Vec::new();
-            for (r, adv, count, used) in outs {
+            for (r, adv, count, used, later) in outs {
                 stats.rays += count.rays;
                 stats.proxy_culls += count.culls;
                 stats.ray_visits += count.visits;
@@ -814,6 +893,10 @@ pub fn render_out_of_core(
                         }
                         rays[r as usize] = path;
                         queues[id as usize].push(r);
+                        for &x in &later {
+                            demand[x as usize] += 1;
+                        }
+                        future[r as usize] = later;
                     }
                     Advance::Done(slot, c) => {
                         slots[slot as usize] = c;
@@ -852,6 +935,7 @@ pub fn render_out_of_core(
         if opts.lookahead && checked_at[id as usize] != stats.cache_misses {
             checked_at[id as usize] = stats.cache_misses;
             let queue = std::mem::take(&mut queues[id as usize]);
+            release(&queue, &mut future, &mut demand);
             stats.requeued_rays += queue.len() as u64;
             requeued = Some(id);
             requeue_total = queue.len() as u64;
@@ -860,9 +944,10 @@ pub fn render_out_of_core(
             pending = queue.iter().map(|&r| (r, rays[r as usize], None)).collect();
             continue;
         }
-        cache.get(scene, id, &mut stats)?;
+        cache.get(scene, id, &demand, &mut stats)?;
         stats.batching_events += 1;
         let queue = std::mem::take(&mut queues[id as usize]);
+        release(&queue, &mut future, &mut demand);
         pending = queue
             .iter()
             .map(|&r| (r, rays[r as usize], Some(id)))
@@ -877,9 +962,15 @@ pub fn render_out_of_core(
 }
 
 impl Cache {
-    /// Makes point `id` resident: a hit, or a load from disk evicting the least recently used
-    /// points until it fits.
-    fn get(&mut self, scene: &OocScene, id: u32, stats: &mut RenderStats) -> Result<(), OocError> {
+    /// Makes point `id` resident: a hit, or a load from disk evicting points by the policy
+    /// (`demand`: per point, the queued rays that will visit it) until it fits.
+    fn get(
+        &mut self,
+        scene: &OocScene,
+        id: u32,
+        demand: &[u32],
+        stats: &mut RenderStats,
+    ) -> Result<(), OocError> {
         self.clock += 1;
         if let Some(e) = self.entries.get_mut(&id) {
             e.1 = self.clock;
@@ -902,10 +993,13 @@ impl Cache {
             )));
         }
         while self.used + need > self.budget {
-            let (&victim, _) = self
-                .entries
-                .iter()
-                .min_by_key(|(_, e)| e.1)
+            let victim = self
+                .eviction
+                .victim(self.entries.iter().map(|(&id, e)| Resident {
+                    id,
+                    last_used: e.1,
+                    demand: demand[id as usize],
+                }))
                 .expect("something to evict while over budget");
             let (p, _) = self.entries.remove(&victim).expect("present");
             self.used -= p.bytes();
