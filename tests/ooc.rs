@@ -1,5 +1,6 @@
 //! Out-of-core path tracing: the batched renderer equals the in-core one bit for bit (proxies on
-//! and off, several budgets), proxies are conservative, corrupt scene files are errors naming
+//! and off, several budgets, every eviction and schedule policy), the policies choose as
+//! hand-checked, proxies are conservative, corrupt scene files are errors naming
 //! file and offset.
 
 mod common;
@@ -10,8 +11,8 @@ use indicatif::ProgressBar;
 use voxdag::dag::DagError;
 use voxdag::ooc::prepare::{Instance, SourceMesh};
 use voxdag::ooc::{
-    format, prepare, render_in_core, render_out_of_core, Grid, OocError, OocScene, PrepareOptions,
-    ProxySet, RenderOptions, SceneSource,
+    format, prepare, render_in_core, render_out_of_core, Eviction, Grid, OocError, OocScene,
+    PrepareOptions, ProxySet, RenderOptions, RenderStats, Resident, SceneSource, Schedule,
 };
 use voxdag::scene::{self, ImportOptions};
 
@@ -161,6 +162,94 @@ fn out_of_core_equals_in_core_bit_for_bit() {
             }
         }
     }
+}
+
+#[test]
+fn eviction_and_schedule_choose_as_hand_checked() {
+    let r = |id, last_used, demand| Resident {
+        id,
+        last_used,
+        demand,
+    };
+    // Point 4 was used last but no queued ray needs it; 7 is the oldest but 3 rays need it;
+    // 2 and 9 are needed by one ray each.
+    let resident = [r(7, 1, 3), r(2, 5, 1), r(4, 9, 0), r(9, 3, 1)];
+    assert_eq!(Eviction::Lru.victim(resident), Some(7));
+    assert_eq!(Eviction::Demand.victim(resident), Some(4));
+    // Without 4: the fewest rays (2 and 9: one each), then the least recently used (9).
+    assert_eq!(
+        Eviction::Demand.victim([resident[0], resident[1], resident[3]]),
+        Some(9)
+    );
+    // Equal keys: the lowest id.
+    assert_eq!(Eviction::Demand.victim([r(5, 2, 0), r(3, 2, 0)]), Some(3));
+    assert_eq!(Eviction::Lru.victim([]), None);
+    // (point, queued, demand): 1 is the fullest, but 6 more of its rays are still coming;
+    // net: 1 -> 10 - 6 = 4, 8 -> 7 - 0 = 7, 3 -> 7 - 2 = 5.
+    let queues = [(1, 10, 6), (8, 7, 0), (3, 7, 2)];
+    assert_eq!(Schedule::Fullest.choose(queues), Some(1));
+    assert_eq!(Schedule::Net.choose(queues), Some(8));
+    // Ties: the lowest id.
+    assert_eq!(Schedule::Net.choose([(6, 4, 1), (2, 3, 0)]), Some(2));
+    assert_eq!(Schedule::Fullest.choose([(6, 4, 1), (2, 4, 0)]), Some(2));
+    assert_eq!(Schedule::Net.choose([]), None);
+}
+
+/// Every eviction and schedule policy renders the in-core image bit for bit; on this scene
+/// the default (demand, net) reads fewer bytes than the published LRU and fullest queue.
+#[test]
+fn policies_render_identical_images() {
+    let source = SceneSource::landscape(vec![avocado()], 60_000, 11).unwrap();
+    let dir = prepared(&source, "policies", 2000, &[32]);
+    let scene = OocScene::open(&dir).unwrap();
+    let proxies = ProxySet::read(&dir.join("proxies-32.bin"), scene.points.len() as u32).unwrap();
+    let base = RenderOptions {
+        width: 40,
+        height: 30,
+        spp: 2,
+        seed: 5,
+        max_bounces: 2,
+        rays_in_flight: 4096,
+        ..Default::default()
+    };
+    assert_eq!(
+        (base.eviction, base.schedule),
+        (Eviction::Demand, Schedule::Net)
+    );
+    let (reference, _) = render_in_core(&scene, &base, &ProgressBar::hidden()).unwrap();
+    let largest = scene.points.iter().map(|p| p.bytes()).max().unwrap();
+    for with_proxies in [false, true] {
+        let set = with_proxies.then_some(&proxies);
+        let mut read = Vec::new();
+        for (eviction, schedule) in [
+            (Eviction::Lru, Schedule::Fullest),
+            (Eviction::Demand, Schedule::Fullest),
+            (Eviction::Lru, Schedule::Net),
+            (Eviction::Demand, Schedule::Net),
+        ] {
+            let opts = RenderOptions {
+                memory_budget: proxies.bytes() + 8 * largest,
+                eviction,
+                schedule,
+                ..base.clone()
+            };
+            let (image, stats): (_, RenderStats) =
+                render_out_of_core(&scene, set, &opts, &ProgressBar::hidden()).unwrap();
+            let what = format!("{eviction:?} {schedule:?} proxies {with_proxies}");
+            assert_eq!(bits(&image), bits(&reference), "{what}");
+            assert_eq!(stats.eviction, Some(eviction));
+            assert!(
+                stats.cache_misses > stats.points_loaded,
+                "{what}: reloads {stats:?}"
+            );
+            read.push(stats.disk_bytes_read);
+        }
+        assert!(
+            read[3] < read[0],
+            "proxies {with_proxies}: bytes read {read:?}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]

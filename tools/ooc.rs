@@ -7,7 +7,7 @@ use clap::{Args, Subcommand, ValueEnum};
 use voxdag::ooc::prepare::{Instance, SourceMesh};
 use voxdag::ooc::{
     format, prepare, render_in_core, render_out_of_core, Eviction, OocScene, PrepareOptions,
-    ProxySet, RenderOptions, SceneSource,
+    ProxySet, RenderOptions, SceneSource, Schedule,
 };
 use voxdag::scene::{self, ImportOptions};
 
@@ -89,6 +89,15 @@ pub enum EvictionArg {
     Lru,
 }
 
+/// The renderer's choice of the next point to load (`--schedule`).
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum ScheduleArg {
+    /// The most queued rays less those still to arrive.
+    Net,
+    /// The most queued rays.
+    Fullest,
+}
+
 /// Arguments of `voxdag ooc render`.
 #[derive(Args)]
 pub struct OocRenderArgs {
@@ -126,6 +135,10 @@ pub struct OocRenderArgs {
     /// (least recently used on ties), `lru` the least recently used one.
     #[arg(long, value_enum, default_value = "demand")]
     eviction: EvictionArg,
+    /// Which queue is loaded next: `net` the most queued rays less those queued elsewhere that
+    /// will still arrive, `fullest` the most queued rays.
+    #[arg(long, value_enum, default_value = "net")]
+    schedule: ScheduleArg,
     /// Camera position x,y,z (default: in front of and above the scene).
     #[arg(long, value_parser = parse_vec3, allow_hyphen_values = true)]
     eye: Option<[f32; 3]>,
@@ -306,6 +319,10 @@ fn render(args: &OocRenderArgs, quiet: bool) -> Result<()> {
         eviction: match args.eviction {
             EvictionArg::Demand => Eviction::Demand,
             EvictionArg::Lru => Eviction::Lru,
+        },
+        schedule: match args.schedule {
+            ScheduleArg::Net => Schedule::Net,
+            ScheduleArg::Fullest => Schedule::Fullest,
         },
         eye: args.eye,
         target: args.target,

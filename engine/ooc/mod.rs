@@ -26,6 +26,7 @@ pub use prepare::{prepare, PrepareOptions, PrepareSummary, SceneSource, Terrain}
 pub use proxy::{Grid, ProxySet};
 pub use render::{
     render_in_core, render_out_of_core, Eviction, Image, RenderOptions, RenderStats, Resident,
+    Schedule,
 };
 
 /// Errors of scene preparation, scene loading and rendering; each names the file involved.

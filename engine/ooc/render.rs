@@ -46,6 +46,8 @@ pub struct RenderOptions {
     pub lookahead: bool,
     /// Out-of-core only: which resident point the cache evicts to make room.
     pub eviction: Eviction,
+    /// Out-of-core only: which point's queue is loaded next.
+    pub schedule: Schedule,
     /// Camera position; default: in front of and above the scene.
     pub eye: Option<[f32; 3]>,
     /// Point looked at; default: the centre of the scene.
@@ -66,6 +68,7 @@ impl Default for RenderOptions {
             rays_in_flight: 1 << 16,
             lookahead: true,
             eviction: Eviction::default(),
+            schedule: Schedule::default(),
             eye: None,
             target: None,
             fov_degrees: 50.0,
@@ -85,6 +88,33 @@ pub enum Eviction {
     /// Belady-like choice from the queues' contents.
     #[default]
     Demand,
+}
+
+/// Which point's queue the out-of-core renderer loads next. Never changes the image.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Schedule {
+    /// The most queued rays (Pharr et al.).
+    Fullest,
+    /// The most queued rays net of its demand (rays queued elsewhere that will still arrive):
+    /// a point whose rays are still coming is deferred, so that one load serves them all.
+    #[default]
+    Net,
+}
+
+impl Schedule {
+    /// The point to load among `(point, queued rays, demand)` of the non-empty queues: the
+    /// largest `queued` (fullest) or `queued - demand` (net); the lowest id on ties.
+    pub fn choose(self, queues: impl IntoIterator<Item = (u32, u32, u32)>) -> Option<u32> {
+        let score = |&(_, q, d): &(u32, u32, u32)| match self {
+            Schedule::Fullest => i64::from(q),
+            Schedule::Net => i64::from(q) - i64::from(d),
+        };
+        queues
+            .into_iter()
+            .max_by(|a, b| score(a).cmp(&score(b)).then(b.0.cmp(&a.0)))
+            .map(|c| c.0)
+    }
 }
 
 /// A resident point as the eviction choice sees it.
@@ -119,6 +149,8 @@ pub struct RenderStats {
     pub proxies: bool,
     /// Eviction policy of the cache (out-of-core).
     pub eviction: Option<Eviction>,
+    /// Which queue is loaded next (out-of-core).
+    pub schedule: Option<Schedule>,
     /// Proxy resolution (0 without proxies).
     pub proxy_resolution: u32,
     /// Bytes the proxies take in memory.
@@ -775,6 +807,7 @@ pub fn render_out_of_core(
         mode: "out-of-core".into(),
         proxies: proxies.is_some(),
         eviction: Some(opts.eviction),
+        schedule: Some(opts.schedule),
         proxy_resolution: proxies.map_or(0, |p| p.resolution),
         proxy_bytes,
         memory_budget: opts.memory_budget,
@@ -792,7 +825,7 @@ pub fn render_out_of_core(
     let mut next = in_flight;
     let mut queues: Vec<Vec<u32>> = vec![Vec::new(); scene.points.len()];
     // Per queued ray: the points it may visit after the one it waits at; per point: how many
-    // queued rays list it (the eviction's demand; kept only for `Eviction::Demand`).
+    // queued rays list it (its demand; kept for `Eviction::Demand` and `Schedule::Net`).
     let mut future: Vec<Vec<u32>> = vec![Vec::new(); in_flight as usize];
     let mut demand: Vec<u32> = vec![0; scene.points.len()];
     // Per point: `cache_misses` when its queue was last traced again (see below).
@@ -822,7 +855,7 @@ pub fn render_out_of_core(
         while !pending.is_empty() {
             let entries = &cache.entries;
             let resident = |id: u32| entries.get(&id).map(|e| &e.0);
-            let demand_on = opts.eviction == Eviction::Demand;
+            let demand_on = opts.eviction == Eviction::Demand || opts.schedule == Schedule::Net;
             let outs: Vec<(u32, Advance, StepCount, Vec<u32>, Vec<u32>)> = pending
                 .par_iter()
                 .map(|&(r, mut path, first)| {
@@ -919,17 +952,17 @@ pub fn render_out_of_core(
         if requeued.take().is_some() {
             stats.requeue_culls += requeue_total - requeue_kept;
         }
-        // The point with the most queued rays (lowest id on ties). Queued rays wait only at
-        // points that are not resident.
-        let Some((id, _)) = queues
-            .iter()
-            .enumerate()
-            .filter(|(_, q)| !q.is_empty())
-            .max_by(|a, b| a.1.len().cmp(&b.1.len()).then(b.0.cmp(&a.0)))
-        else {
+        // The point to load (`Schedule`). Queued rays wait only at points that are not resident.
+        let Some(id) = opts.schedule.choose(
+            queues
+                .iter()
+                .zip(&demand)
+                .enumerate()
+                .filter(|(_, (q, _))| !q.is_empty())
+                .map(|(i, (q, &d))| (i as u32, q.len() as u32, d)),
+        ) else {
             break;
         };
-        let id = id as u32;
         // Before loading it, its rays are traced again against the points resident now: points
         // loaded since they were queued may hold hits that let the proxy cull this point.
         if opts.lookahead && checked_at[id as usize] != stats.cache_misses {
