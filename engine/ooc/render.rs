@@ -765,6 +765,10 @@ pub fn render_in_core(
     ))
 }
 
+/// A ray after its advance in a batch: its slot, where it ended, its counters, the resident
+/// points it visited, and the points it may visit after the one it waits at.
+type Advanced = (u32, Advance, StepCount, Vec<u32>, Vec<u32>);
+
 /// Takes the rays of `queue` out of the demand counts (they leave their queue).
 fn release(queue: &[u32], future: &mut [Vec<u32>], demand: &mut [u32]) {
     for &r in queue {
@@ -856,7 +860,7 @@ pub fn render_out_of_core(
             let entries = &cache.entries;
             let resident = |id: u32| entries.get(&id).map(|e| &e.0);
             let demand_on = opts.eviction == Eviction::Demand || opts.schedule == Schedule::Net;
-            let outs: Vec<(u32, Advance, StepCount, Vec<u32>, Vec<u32>)> = pending
+            let outs: Vec<Advanced> = pending
                 .par_iter()
                 .map(|&(r, mut path, first)| {
                     let mut count = StepCount::default();
