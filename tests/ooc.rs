@@ -487,6 +487,20 @@ fn cli_generate_prepare_render() {
             "exr",
             vec!["--proxies", "off", "--memory-budget", "300K"],
         ),
+        (
+            "lru",
+            "png",
+            vec![
+                "--memory-budget",
+                "300K",
+                "--proxy-resolution",
+                "32",
+                "--eviction",
+                "lru",
+                "--schedule",
+                "fullest",
+            ],
+        ),
     ] {
         let image = dir.join(format!("{name}.{ext}"));
         let report = dir.join(format!("{name}.json"));
@@ -523,10 +537,22 @@ fn cli_generate_prepare_render() {
         ] {
             assert!(json.get(key).is_some(), "{key} missing");
         }
+        if name != "in" {
+            let policies = (&json["eviction"], &json["schedule"]);
+            if name == "lru" {
+                assert_eq!(policies, (&"lru".into(), &"fullest".into()));
+            } else {
+                assert_eq!(policies, (&"demand".into(), &"net".into()), "defaults");
+            }
+        }
         images.push(std::fs::read(&image).unwrap());
     }
     assert_eq!(images[0], images[1]);
     assert_eq!(images[0], images[2]);
+    assert_eq!(
+        images[0], images[5],
+        "LRU and the fullest queue: the same image"
+    );
     assert_eq!(images[3], images[4], "EXR: out of core equals in core");
     // The EXR holds the linear radiance the PNG was tonemapped from.
     let exr = image::load_from_memory(&images[3]).unwrap().to_rgb32f();
