@@ -5,7 +5,7 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use indicatif::ProgressBar;
 use voxdag::dag::DagError;
@@ -22,14 +22,31 @@ fn avocado() -> SourceMesh {
     SourceMesh::from_mesh(&mesh).unwrap()
 }
 
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("voxdag-ooc-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+/// A test's scratch folder, removed when dropped (also when the test fails).
+struct Scratch(tempfile::TempDir);
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        self.0.path()
+    }
 }
 
-fn prepared(source: &SceneSource, name: &str, k: u32, resolutions: &[u32]) -> PathBuf {
+impl AsRef<Path> for Scratch {
+    fn as_ref(&self) -> &Path {
+        self.0.path()
+    }
+}
+
+fn scratch(name: &str) -> Scratch {
+    let dir = tempfile::Builder::new()
+        .prefix(&format!("voxdag-ooc-test-{name}-"))
+        .tempdir()
+        .unwrap();
+    Scratch(dir)
+}
+
+fn prepared(source: &SceneSource, name: &str, k: u32, resolutions: &[u32]) -> Scratch {
     let dir = scratch(name);
     let options = PrepareOptions {
         batch_triangles: k,
@@ -249,7 +266,6 @@ fn policies_render_identical_images() {
             "proxies {with_proxies}: bytes read {read:?}"
         );
     }
-    std::fs::remove_dir_all(&dir).unwrap();
 }
 
 #[test]
@@ -299,7 +315,6 @@ fn proxies_are_conservative_on_shared_meshes() {
         let dir = prepared(&source, name, 20_000, &[64]);
         let n = check_conservative(&dir, 64);
         assert_eq!(n, mesh.triangles.len(), "{name}");
-        let _ = std::fs::remove_dir_all(&dir);
     }
 }
 
@@ -411,7 +426,6 @@ fn corrupt_scene_files_are_errors_with_file_and_offset() {
         "{err}"
     );
     assert!(!out_png.exists());
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -576,7 +590,6 @@ fn cli_generate_prepare_render() {
     ]);
     assert!(!out.status.success(), "a .bmp output is refused");
     assert!(!bad.exists());
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// Names in `dir`, sorted.
@@ -625,9 +638,6 @@ fn failed_prepare_leaves_no_temporary_files() {
         listing(&clean),
         [format::GEOMETRY_FILE, format::INDEX_FILE, "proxies-16.bin"]
     );
-    for d in [failed_geometry, failed_proxies, clean] {
-        std::fs::remove_dir_all(d).unwrap();
-    }
 }
 
 /// All triangles of a scene directory as bit patterns, sorted.
@@ -665,7 +675,4 @@ fn bucketed_grouping_keeps_every_triangle_once() {
     assert!(a == b, "the bucketed scene holds other triangles");
     let points = |d: &Path| OocScene::open(d).unwrap().points.len();
     assert!(points(&cut) > points(&whole), "the buckets cut points");
-    for d in [whole, cut] {
-        std::fs::remove_dir_all(d).unwrap();
-    }
 }
