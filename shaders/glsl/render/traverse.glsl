@@ -9,6 +9,7 @@
 // Provides `struct Hit`,
 //   void traverse_begin(uint root_level); // once per invocation, before any trace_ray
 //   bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit);
+//   bool trace_ray_indexed(..., bool want_color, out Hit hit); // colour index only if wanted
 // `root_level` is `RenderParams::root_level` (log2(N) - 2); the grid is [0, 4 << root_level)^3.
 //
 // Every floating-point step performs the same f32 operations in the same order as the CPU code
@@ -257,7 +258,11 @@ uint traverse_block_mask(uvec2 bits) {
 // - a pop and the next child's test share an iteration;
 // - the colour index is computed once, after the loop (inside it, its loops and loads would run
 //   masked on every iteration).
-bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit) {
+// `want_color`: compute `hit.color_index` (else it stays 0): callers whose albedo does not read
+// it (no colours, a uniform albedo, shadow rays) skip its loads and, for S+A+T, the walk of the
+// translated cell.
+bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool want_color,
+                       out Hit hit) {
     hit.t = 0.0;
     hit.voxel = uvec3(0u);
     hit.normal = ivec3(0);
@@ -322,103 +327,128 @@ bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit)
 #else
     const ivec3 base = ivec3(0);
 #endif
+    // Two nested loops: the inner one advances (pops, slab tests, descents into the cheap
+    // sub-block levels) until a lane needs a child fetch, has found its voxel or is done; the
+    // outer one then runs the format's child fetch once. lavapipe runs every part of a loop
+    // body on every iteration (masked), so the fetch, the format's costly part, now runs once
+    // per descent instead of once per iteration of the advance.
+    bool fetch = false;
+    uint fetch_c = 0u;
+    uvec3 fetch_local = uvec3(0u);
+    ivec3 fetch_child = ivec3(0);
     for (;;) {
-        if (todo == 0u) {
-            if (depth == 0u) {
+        for (;;) {
+            if (todo == 0u) {
+                if (depth == 0u) {
+                    break;
+                }
+#if defined(TSVDAG_TRANSLATIONS)
+                TraverseShift top = shifts == 1u ? sh0 : (shifts == 2u ? sh1 : sh2);
+                if (shifts > 0u && top.depth == depth) {
+                    shifts -= 1u;
+                    base = top.base;
+                    cursor = top.cursor;
+                    clip_lo = top.lo;
+                    clip_hi = top.hi;
+                }
+#endif
+                depth -= 1u;
+                node = stack_node[depth];
+                uint st = stack_state[depth];
+                aux = st & 0xffffu;
+                xform = (st >> 24u) & 63u;
+                // The frame keeps the ordinals it had left when it descended, the one it
+                // descended into included (its lowest bit: the colour index reads it).
+                uint left = (st >> 16u) & 0xffu;
+                todo = left & (left - 1u);
+            }
+            if (todo == 0u) {
+                continue;
+            }
+            uint i = uint(findLSB(todo));
+            uint ordinals = todo;
+            todo &= todo - 1u;
+            uint c = i ^ r.mirror;
+            uint size = n >> depth;
+            uint half_size = size >> 1u;
+            uvec3 child_local =
+                (cursor & ~uvec3(size - 1u)) + ((uvec3(c, c >> 1u, c >> 2u) & 1u) * half_size);
+            ivec3 child = base + ivec3(child_local);
+#if defined(TSVDAG_TRANSLATIONS)
+            if (shifts > 0u && any(greaterThanEqual(max(clip_lo, child),
+                                                    min(clip_hi, child + ivec3(half_size))))) {
+                continue;
+            }
+#endif
+            traverse_slab(r, child, half_size, t_near, t_far, axis);
+            t_enter = max(t_near, 0.0);
+            if (!(t_enter < t_far && t_enter < t_max)) {
+                continue;
+            }
+            cursor = child_local;
+            if (depth + 1u == voxel_depth) {
+                found = true;
+                hit_t_near = t_near;
+                hit_axis = axis;
+                hit_c = c;
+                hit_voxel = child;
                 break;
             }
-#if defined(TSVDAG_TRANSLATIONS)
-            TraverseShift top = shifts == 1u ? sh0 : (shifts == 2u ? sh1 : sh2);
-            if (shifts > 0u && top.depth == depth) {
-                shifts -= 1u;
-                base = top.base;
-                cursor = top.cursor;
-                clip_lo = top.lo;
-                clip_hi = top.hi;
+            stack_node[depth] = node;
+            stack_state[depth] = aux | (ordinals << 16u) | (xform << 24u);
+            if (depth + 1u <= leaf_depth) {
+                // Inner or leaf child: its pointer is followed by the outer loop.
+                fetch = true;
+                fetch_c = c;
+                fetch_local = child_local;
+                fetch_child = child;
+                break;
             }
-#endif
-            depth -= 1u;
-            node = stack_node[depth];
-            uint st = stack_state[depth];
-            aux = st & 0xffffu;
-            xform = (st >> 19u) & 63u;
-            mask = depth >= leaf_depth ? aux : dag_frame_mask(aux, xform);
-            todo = traverse_order(mask, r.mirror) & (0xfeu << ((st >> 16u) & 7u)) & 0xffu;
+            // Sub-block c of the leaf in leaf_bits.
+            uint block = (leaf_bits[c >> 2u] >> (8u * (c & 3u))) & 0xffu;
+            depth += 1u;
+            aux = block;
+            todo = traverse_order(block, r.mirror);
         }
-        if (todo == 0u) {
-            continue;
-        }
-        uint i = uint(findLSB(todo));
-        todo &= todo - 1u;
-        uint c = i ^ r.mirror;
-        uint size = n >> depth;
-        uint half_size = size >> 1u;
-        uvec3 child_local =
-            (cursor & ~uvec3(size - 1u)) + ((uvec3(c, c >> 1u, c >> 2u) & 1u) * half_size);
-        ivec3 child = base + ivec3(child_local);
-#if defined(TSVDAG_TRANSLATIONS)
-        if (shifts > 0u && any(greaterThanEqual(max(clip_lo, child),
-                                                min(clip_hi, child + ivec3(half_size))))) {
-            continue;
-        }
-#endif
-        traverse_slab(r, child, half_size, t_near, t_far, axis);
-        t_enter = max(t_near, 0.0);
-        if (!(t_enter < t_far && t_enter < t_max)) {
-            continue;
-        }
-        cursor = child_local;
-        if (depth + 1u == voxel_depth) {
-            found = true;
-            hit_t_near = t_near;
-            hit_axis = axis;
-            hit_c = c;
-            hit_voxel = child;
+        if (!fetch) {
             break;
         }
-        stack_node[depth] = node;
-        stack_state[depth] = aux | (i << 16u) | (xform << 19u);
+        fetch = false;
+        // Follow the pointer of world octant fetch_c of the frame at `depth`.
         uint child_node = node;
         uint child_xform = xform;
         uint child_mask;
         uint child_aux;
         ivec3 shift = ivec3(0);
-        if (depth + 1u <= leaf_depth) {
-            // Inner or leaf child: follow the pointer of world octant c.
-            uint at;
-            uint level = root_level - depth;
-            dag_child(node, xform, aux, level, c, child_node, child_xform, shift, at);
-            uvec2 bits;
-            dag_child_masks(child_node, child_xform, level - 1u, child_mask, bits, child_aux);
-            if (depth + 1u == leaf_depth) {
-                leaf_bits = bits;
-                child_mask = traverse_block_mask(bits);
-                child_aux = child_mask;
-            }
-        } else {
-            // Sub-block c of the leaf in leaf_bits.
-            child_mask = (leaf_bits[c >> 2u] >> (8u * (c & 3u))) & 0xffu;
+        uint at;
+        uint level = root_level - depth;
+        dag_child(node, xform, aux, level, fetch_c, child_node, child_xform, shift, at);
+        uvec2 bits;
+        dag_child_masks(child_node, child_xform, level - 1u, child_mask, bits, child_aux);
+        if (depth + 1u == leaf_depth) {
+            leaf_bits = bits;
+            child_mask = traverse_block_mask(bits);
             child_aux = child_mask;
         }
         depth += 1u;
         node = child_node;
         xform = child_xform;
         aux = child_aux;
-        mask = child_mask;
         todo = traverse_order(child_mask, r.mirror);
 #if defined(TSVDAG_TRANSLATIONS)
         if (any(notEqual(shift, ivec3(0)))) {
             // Enter a translated subtree: its frames start at its translated origin; only
             // the voxels inside the cell (and any outer translated cell) count.
+            uint half_size = (n >> depth);
             TraverseShift e;
             e.depth = depth;
             e.base = base;
-            e.cursor = child_local;
+            e.cursor = fetch_local;
             e.lo = clip_lo;
             e.hi = clip_hi;
-            clip_lo = max(clip_lo, child);
-            clip_hi = min(clip_hi, child + ivec3(half_size));
-            base = child + shift;
+            clip_lo = max(clip_lo, fetch_child);
+            clip_hi = min(clip_hi, fetch_child + ivec3(half_size));
+            base = fetch_child + shift;
             e.origin = base;
             cursor = uvec3(0u);
             if (shifts == 0u) {
@@ -438,6 +468,9 @@ bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit)
     hit.t = max(hit_t_near, 0.0);
     hit.voxel = uvec3(hit_voxel);
     hit.normal = traverse_normal(dir, hit_t_near, hit_axis);
+    if (!want_color) {
+        return true;
+    }
     // Colour index: voxels of the preceding siblings (world order) on the path, then the rank
     // inside the leaf (or inside the outermost translated subtree).
     uint64_t color = 0ul;
@@ -449,8 +482,8 @@ bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit)
 #endif
     for (uint d = 0u; d < ranked_depth; d++) {
         uint st = stack_state[d];
-        uint cd = ((st >> 16u) & 7u) ^ r.mirror;
-        color += dag_voxels_before(stack_node[d], (st >> 19u) & 63u, st & 0xffffu, root_level - d,
+        uint cd = uint(findLSB((st >> 16u) & 0xffu)) ^ r.mirror;
+        color += dag_voxels_before(stack_node[d], (st >> 24u) & 63u, st & 0xffffu, root_level - d,
                                    cd);
     }
 #if defined(TSVDAG_TRANSLATIONS)
@@ -461,17 +494,17 @@ bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit)
         uint side = n >> d0;
         ivec3 cell = sh0.base + ivec3(sh0.cursor);
         color += uint64_t(traverse_shifted_rank(
-            stack_node[d0], (stack_state[d0] >> 19u) & 63u, root_level - d0,
+            stack_node[d0], (stack_state[d0] >> 24u) & 63u, root_level - d0,
             sh0.origin, cell, side, hit_voxel));
         hit.color_index = color;
         return true;
     }
 #endif
     // Rank inside the leaf: its voxels before Morton code (sub-block << 3 | voxel).
-    uint code = ((((stack_state[leaf_depth] >> 16u) & 7u) ^ r.mirror) << 3u) | hit_c;
+    uint code = ((uint(findLSB((stack_state[leaf_depth] >> 16u) & 0xffu)) ^ r.mirror) << 3u) | hit_c;
 #if defined(DAG_HAS_LEAF_RANK)
     // The format's own index inside the leaf (hash DAG: the voxel's material).
-    uint rank = dag_leaf_rank(stack_node[leaf_depth], (stack_state[leaf_depth] >> 19u) & 63u, code);
+    uint rank = dag_leaf_rank(stack_node[leaf_depth], (stack_state[leaf_depth] >> 24u) & 63u, code);
 #else
     uint rank = code < 32u ? uint(bitCount(leaf_bits.x & ((1u << code) - 1u)))
                            : uint(bitCount(leaf_bits.x)) +
@@ -479,6 +512,11 @@ bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit)
 #endif
     hit.color_index = color + uint64_t(rank);
     return true;
+}
+
+// `trace_ray_indexed` with the colour index.
+bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit) {
+    return trace_ray_indexed(origin, dir, t_max, root_level, true, hit);
 }
 
 #endif
