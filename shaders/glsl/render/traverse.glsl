@@ -59,12 +59,12 @@ TraverseRay traverse_setup(vec3 origin, vec3 dir) {
     return r;
 }
 
-// Slab test of the cube [pos, pos + size]^3: near/far parameters and the axis of the near one
+// Slab test of the box [box_lo, box_hi]: near/far parameters and the axis of the near one
 // (ties keep the earlier axis). The near plane of axis k is the low one unless mirror bit k is set.
-void traverse_slab(TraverseRay r, ivec3 pos, uint size, out float t_near, out float t_far,
-                   out uint axis) {
-    precise vec3 lo = (vec3(pos) - r.origin) * r.inv;
-    precise vec3 hi = (vec3(pos + ivec3(size)) - r.origin) * r.inv;
+void traverse_slab_box(TraverseRay r, ivec3 box_lo, ivec3 box_hi, out float t_near,
+                       out float t_far, out uint axis) {
+    precise vec3 lo = (vec3(box_lo) - r.origin) * r.inv;
+    precise vec3 hi = (vec3(box_hi) - r.origin) * r.inv;
     vec3 near_t;
     vec3 far_t;
     for (uint k = 0u; k < 3u; k++) {
@@ -81,6 +81,12 @@ void traverse_slab(TraverseRay r, ivec3 pos, uint size, out float t_near, out fl
     }
     t_near = max(max(near_t.x, near_t.y), near_t.z);
     t_far = min(min(far_t.x, far_t.y), far_t.z);
+}
+
+// Slab test of the cube [pos, pos + size]^3.
+void traverse_slab(TraverseRay r, ivec3 pos, uint size, out float t_near, out float t_far,
+                   out uint axis) {
+    traverse_slab_box(r, pos, pos + ivec3(size), t_near, t_far, axis);
 }
 
 // Entry face normal: the entry axis, or the dominant direction axis when the ray starts inside
@@ -374,13 +380,23 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
             uvec3 child_local =
                 (cursor & ~uvec3(size - 1u)) + ((uvec3(c, c >> 1u, c >> 2u) & 1u) * half_size);
             ivec3 child = base + ivec3(child_local);
+            ivec3 box_lo = child;
+            ivec3 box_hi = child + ivec3(half_size);
 #if defined(TSVDAG_TRANSLATIONS)
-            if (shifts > 0u && any(greaterThanEqual(max(clip_lo, child),
-                                                    min(clip_hi, child + ivec3(half_size))))) {
-                continue;
+            // Inside a translated subtree the ray is tested against the part of the child in
+            // the clip box: a child the ray crosses only outside it holds no visible voxel.
+            // Exact: a voxel lies wholly inside or outside the (cell-aligned) clip box, and a
+            // box containing the hit voxel passes the slab test whenever the voxel does
+            // ((x - o) * inv is monotonic in x).
+            if (shifts > 0u) {
+                box_lo = max(box_lo, clip_lo);
+                box_hi = min(box_hi, clip_hi);
+                if (any(greaterThanEqual(box_lo, box_hi))) {
+                    continue;
+                }
             }
 #endif
-            traverse_slab(r, child, half_size, t_near, t_far, axis);
+            traverse_slab_box(r, box_lo, box_hi, t_near, t_far, axis);
             t_enter = max(t_near, 0.0);
             if (!(t_enter < t_far && t_enter < t_max)) {
                 continue;
