@@ -109,17 +109,6 @@ ivec3 traverse_normal(vec3 dir, float t_near, uint entry_axis) {
 }
 
 #if defined(TSVDAG_TRANSLATIONS)
-// An entry of the translated-subtree stack: the depth of the subtree's root frame, the outer
-// base and cursor to restore, the outer clip box, the subtree's translated origin.
-struct TraverseShift {
-    uint depth;
-    ivec3 base;
-    uvec3 cursor;
-    ivec3 lo;
-    ivec3 hi;
-    ivec3 origin;
-};
-
 // Morton code of a point inside a 16^3 cell (4 bits per axis).
 uint traverse_morton16(uvec3 p) {
     uint code = 0u;
@@ -315,21 +304,28 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     uint hit_c = 0u;
     ivec3 hit_voxel = ivec3(0);
 #if defined(TSVDAG_TRANSLATIONS)
-    // The second stack: one entry per translated subtree on the path (its depth, the outer
-    // base and cursor to restore, the outer clip box, its own origin); voxels outside the clip
-    // box (the translated cells) are dropped, as the destructive translation says.
+    // The second stack: one entry per translated subtree on the path: the depth of its root
+    // frame, its cell (world) and the outer base. Voxels outside the clip box (the
+    // intersection of the cells) are dropped, as the destructive translation says. A pop
+    // derives the rest: the outer cursor is cell - outer base, the outer clip box the
+    // intersection of the outer cells, the subtree's origin the next entry's outer base (or
+    // the current base). Its entries are three sets of registers (selects) rather than arrays
+    // (lavapipe turns a dynamically indexed array write into a scalar store per lane and
+    // field), kept to 7 values each: every value live across the loop costs on every
+    // iteration (spills).
     ivec3 base = ivec3(0);
     ivec3 clip_lo = ivec3(0);
     ivec3 clip_hi = ivec3(n);
-    // Its entries are three sets of registers (selects) rather than arrays: lavapipe turns a
-    // dynamically indexed array write into a scalar store per lane and field, on every iteration.
     uint shifts = 0u;
-    TraverseShift sh0;
-    TraverseShift sh1;
-    TraverseShift sh2;
-    sh0.depth = 0u;
-    sh1.depth = 0u;
-    sh2.depth = 0u;
+    uint sh_depth0 = 0u;
+    uint sh_depth1 = 0u;
+    uint sh_depth2 = 0u;
+    ivec3 sh_cell0 = ivec3(0);
+    ivec3 sh_cell1 = ivec3(0);
+    ivec3 sh_cell2 = ivec3(0);
+    ivec3 sh_base0 = ivec3(0);
+    ivec3 sh_base1 = ivec3(0);
+    ivec3 sh_base2 = ivec3(0);
 #else
     const ivec3 base = ivec3(0);
 #endif
@@ -340,7 +336,6 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     // per descent instead of once per iteration of the advance.
     bool fetch = false;
     uint fetch_c = 0u;
-    uvec3 fetch_local = uvec3(0u);
     ivec3 fetch_child = ivec3(0);
     for (;;) {
         for (;;) {
@@ -349,13 +344,22 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
                     break;
                 }
 #if defined(TSVDAG_TRANSLATIONS)
-                TraverseShift top = shifts == 1u ? sh0 : (shifts == 2u ? sh1 : sh2);
-                if (shifts > 0u && top.depth == depth) {
+                uint top_depth = shifts == 1u ? sh_depth0 : (shifts == 2u ? sh_depth1 : sh_depth2);
+                if (shifts > 0u && top_depth == depth) {
+                    ivec3 cell = shifts == 1u ? sh_cell0 : (shifts == 2u ? sh_cell1 : sh_cell2);
+                    base = shifts == 1u ? sh_base0 : (shifts == 2u ? sh_base1 : sh_base2);
+                    cursor = uvec3(cell - base);
                     shifts -= 1u;
-                    base = top.base;
-                    cursor = top.cursor;
-                    clip_lo = top.lo;
-                    clip_hi = top.hi;
+                    clip_lo = ivec3(0);
+                    clip_hi = ivec3(n);
+                    if (shifts >= 1u) {
+                        clip_lo = max(clip_lo, sh_cell0);
+                        clip_hi = min(clip_hi, sh_cell0 + ivec3(n >> sh_depth0));
+                    }
+                    if (shifts >= 2u) {
+                        clip_lo = max(clip_lo, sh_cell1);
+                        clip_hi = min(clip_hi, sh_cell1 + ivec3(n >> sh_depth1));
+                    }
                 }
 #endif
                 depth -= 1u;
@@ -416,7 +420,6 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
                 // Inner or leaf child: its pointer is followed by the outer loop.
                 fetch = true;
                 fetch_c = c;
-                fetch_local = child_local;
                 fetch_child = child;
                 break;
             }
@@ -455,25 +458,24 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
         if (any(notEqual(shift, ivec3(0)))) {
             // Enter a translated subtree: its frames start at its translated origin; only
             // the voxels inside the cell (and any outer translated cell) count.
-            uint half_size = (n >> depth);
-            TraverseShift e;
-            e.depth = depth;
-            e.base = base;
-            e.cursor = fetch_local;
-            e.lo = clip_lo;
-            e.hi = clip_hi;
+            uint half_size = n >> depth;
+            if (shifts == 0u) {
+                sh_depth0 = depth;
+                sh_cell0 = fetch_child;
+                sh_base0 = base;
+            } else if (shifts == 1u) {
+                sh_depth1 = depth;
+                sh_cell1 = fetch_child;
+                sh_base1 = base;
+            } else {
+                sh_depth2 = depth;
+                sh_cell2 = fetch_child;
+                sh_base2 = base;
+            }
             clip_lo = max(clip_lo, fetch_child);
             clip_hi = min(clip_hi, fetch_child + ivec3(half_size));
             base = fetch_child + shift;
-            e.origin = base;
             cursor = uvec3(0u);
-            if (shifts == 0u) {
-                sh0 = e;
-            } else if (shifts == 1u) {
-                sh1 = e;
-            } else {
-                sh2 = e;
-            }
             shifts += 1u;
         }
 #endif
@@ -493,7 +495,7 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     uint ranked_depth = leaf_depth;
 #if defined(TSVDAG_TRANSLATIONS)
     if (shifts > 0u) {
-        ranked_depth = sh0.depth;
+        ranked_depth = sh_depth0;
     }
 #endif
     for (uint d = 0u; d < ranked_depth; d++) {
@@ -506,12 +508,12 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     if (shifts > 0u) {
         // The siblings before the translated cell are counted; add the voxel's rank among the
         // voxels the translated subtree leaves in its cell.
-        uint d0 = sh0.depth;
+        uint d0 = sh_depth0;
         uint side = n >> d0;
-        ivec3 cell = sh0.base + ivec3(sh0.cursor);
+        ivec3 origin0 = shifts == 1u ? base : sh_base1;
         color += uint64_t(traverse_shifted_rank(
             stack_node[d0], (stack_state[d0] >> 24u) & 63u, root_level - d0,
-            sh0.origin, cell, side, hit_voxel));
+            origin0, sh_cell0, side, hit_voxel));
         hit.color_index = color;
         return true;
     }
