@@ -141,17 +141,11 @@ impl GpuPathTracer {
             })
         };
         let made = PtPipelines {
-            mega: {
-                // TEMP-EXPERIMENT: SPIR-V override
-                let words: Option<Vec<u32>> = std::env::var("VOXDAG_PT_MEGA_SPV").ok().map(|f| {
-                    let b = std::fs::read(f).unwrap();
-                    b.chunks(4).map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
-                });
-                match words {
-                    Some(w) => make("megakernel", Box::leak(w.into_boxed_slice()), &WORKGROUP)?,
-                    None => make("megakernel", shaders::RENDER_PT_MEGA_BY_FORMAT[i], &WORKGROUP)?,
-                }
-            },
+            mega: make(
+                "megakernel",
+                shaders::RENDER_PT_MEGA_BY_FORMAT[i],
+                &WORKGROUP,
+            )?,
             generate: make("generate", shaders::RENDER_PT_GENERATE_BY_FORMAT[i], &[])?,
             extend: make("extend", shaders::RENDER_PT_EXTEND_BY_FORMAT[i], &[])?,
             shade: make("shade", shaders::RENDER_PT_SHADE_BY_FORMAT[i], &[])?,
