@@ -162,13 +162,16 @@ uvec2 xform_leaf(uint t, uvec2 bits) {
 }
 
 // `T(Shift_t(X)) = Shift_t'(T(X))`: the translation seen through t (`transform_translation`).
+// Selects rather than `tr[axis]`: a vector indexed by a value lavapipe cannot fold costs
+// several times more (docs/pathtracing.md).
+int xform_pick(ivec3 v, uint axis) {
+    return axis == 0u ? v.x : (axis == 1u ? v.y : v.z);
+}
+
 ivec3 xform_translation(uint t, ivec3 tr) {
-    ivec3 out_t;
-    for (uint i = 0u; i < 3u; i++) {
-        int v = tr[xform_axis(t, i)];
-        out_t[i] = ((t >> i) & 1u) != 0u ? -v : v;
-    }
-    return out_t;
+    ivec3 v = ivec3(xform_pick(tr, xform_axis(t, 0u)), xform_pick(tr, xform_axis(t, 1u)),
+                    xform_pick(tr, xform_axis(t, 2u)));
+    return mix(v, -v, notEqual(uvec3(t) & uvec3(1u, 2u, 4u), uvec3(0u)));
 }
 
 #if defined(DAG_FORMAT_SSVDAG) || defined(DAG_FORMAT_TSVDAG)
@@ -385,11 +388,17 @@ void dag_child(uint node, uint xform, uint aux, uint level, uint c, out uint chi
     e >>= len;
     t = sym >> 3u;
 #if defined(TSVDAG_TRANSLATIONS)
-    for (uint a = 0u; a < 3u; a++) {
-        if (((sym >> a) & 1u) != 0u) {
-            tr[a] = int(tsvdag_take(e, tb)) - side;
-        }
-    }
+    // The fields of the axes in the symbol's low 3 bits, x first, each tb bits (at most 15
+    // bits in all: read from the low word with 32-bit shifts).
+    uint fields = uint(e);
+    uint field_mask = (1u << tb) - 1u;
+    uint off_y = (sym & 1u) * tb;
+    uint off_z = off_y + ((sym >> 1u) & 1u) * tb;
+    uint used = off_z + ((sym >> 2u) & 1u) * tb;
+    ivec3 value = ivec3(fields & field_mask, (fields >> off_y) & field_mask,
+                        (fields >> off_z) & field_mask) - side;
+    tr = mix(ivec3(0), value, notEqual(uvec3(sym) & uvec3(1u, 2u, 4u), uvec3(0u)));
+    e >>= used;
 #endif
 #else
     uint set_word = g_dag_set;

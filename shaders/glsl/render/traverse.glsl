@@ -424,7 +424,7 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
                 break;
             }
             // Sub-block c of the leaf in leaf_bits.
-            uint block = (leaf_bits[c >> 2u] >> (8u * (c & 3u))) & 0xffu;
+            uint block = (((c & 4u) != 0u ? leaf_bits.y : leaf_bits.x) >> (8u * (c & 3u))) & 0xffu;
             depth += 1u;
             aux = block;
             todo = traverse_order(block, r.mirror);
