@@ -244,13 +244,15 @@ uint traverse_block_mask(uvec2 bits) {
 // runs 8 invocations as the lanes of one SIMD loop and executes every branch of the loop body
 // on every iteration (masked) while any lane is still looping (docs/pathtracing.md, "Where the
 // time goes on lavapipe"):
-// - the current frame lives in registers (node, transform, world mask, ordinals left to visit);
+// - the current frame lives in registers (node, transform, aux word, ordinals left to visit);
 //   the stack arrays are written on a descent and read on a pop only;
 // - `todo` holds the ordinals of the non-empty children left, so empty octants take no
 //   iteration (the CPU steps through all 8);
 // - the 64 bits of the current leaf stay in registers: sub-block masks and the leaf rank cost
 //   no loads;
 // - a pop and the next child's test share an iteration;
+// - the child fetch (the format's costly part) is in an outer loop around the advance loop,
+//   so it runs once per descent instead of on every iteration (see the loops below);
 // - the colour index is computed once, after the loop (inside it, its loops and loads would run
 //   masked on every iteration).
 // `want_color`: compute `hit.color_index` (else it stays 0): callers whose albedo does not read
@@ -281,8 +283,9 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     if (!(t_enter < t_far && t_enter < t_max)) {
         return false;
     }
-    // Frame d below the current one: node handle and (aux word | ordinal visited << 16 |
-    // transform id << 19). The aux word is what the format's child fetch takes (svdag32: the
+    // Frame d below the current one: node handle and (aux word | ordinals left when it
+    // descended, the visited one included as the lowest bit, << 16 | transform id << 24).
+    // The aux word is what the format's child fetch takes (svdag32: the
     // child mask; SSVDAG/TSVDAG: the node header, so a descent does not load it again); leaf
     // and sub-block frames keep their world child mask there.
     uint stack_node[TRAVERSE_MAX_FRAMES];
