@@ -162,48 +162,37 @@ uvec2 xform_leaf(uint t, uvec2 bits) {
 }
 
 // `T(Shift_t(X)) = Shift_t'(T(X))`: the translation seen through t (`transform_translation`).
+// Selects rather than `tr[axis]`: a vector indexed by a value lavapipe cannot fold costs
+// several times more (docs/pathtracing.md).
+int xform_pick(ivec3 v, uint axis) {
+    return axis == 0u ? v.x : (axis == 1u ? v.y : v.z);
+}
+
 ivec3 xform_translation(uint t, ivec3 tr) {
-    ivec3 out_t;
-    for (uint i = 0u; i < 3u; i++) {
-        int v = tr[xform_axis(t, i)];
-        out_t[i] = ((t >> i) & 1u) != 0u ? -v : v;
-    }
-    return out_t;
+    ivec3 v = ivec3(xform_pick(tr, xform_axis(t, 0u)), xform_pick(tr, xform_axis(t, 1u)),
+                    xform_pick(tr, xform_axis(t, 2u)));
+    return mix(v, -v, notEqual(uvec3(t) & uvec3(1u, 2u, 4u), uvec3(0u)));
 }
 
 #if defined(DAG_FORMAT_SSVDAG) || defined(DAG_FORMAT_TSVDAG)
 #define DAG_ENCODED 1
 
 // Copies of the info block's scalars, read once per invocation (`dag_begin`, called by
-// `traverse_begin`) instead of once per child fetch.
+// `traverse_begin`) instead of once per child fetch. The per-level words are read where they
+// are used: an array of them indexed by level costs more on lavapipe than the load (A/B in
+// docs/pathtracing.md, "Where the time goes on lavapipe").
 uint g_dag_stream_base;
-uint g_dag_level_start[DAG_MAX_LEVELS];
 #if defined(DAG_FORMAT_TSVDAG)
 uint g_dag_set;
 uint g_dag_coding;
 #if defined(TSVDAG_LUT)
 uint g_dag_table_base;
-uint g_dag_table_start[DAG_MAX_LEVELS];
-#endif
-#if defined(TSVDAG_HUFFMAN)
-uint g_dag_huff_kind[DAG_MAX_LEVELS];
-uint g_dag_huff_lut[DAG_MAX_LEVELS];
 #endif
 #endif
 
 #define DAG_HAS_BEGIN 1
 void dag_begin(uint root_level) {
     g_dag_stream_base = dag_info(DAG_INFO_STREAM_BASE);
-    for (uint l = 0u; l <= root_level && l < DAG_MAX_LEVELS; l++) {
-        g_dag_level_start[l] = dag_info(DAG_INFO_LEVEL_START + l);
-#if defined(TSVDAG_LUT)
-        g_dag_table_start[l] = dag_info(DAG_INFO_TABLE_START + l);
-#endif
-#if defined(TSVDAG_HUFFMAN)
-        g_dag_huff_kind[l] = dag_info(DAG_INFO_HUFF_KIND + l);
-        g_dag_huff_lut[l] = dag_info(DAG_INFO_HUFF_LUT + l);
-#endif
-    }
 #if defined(DAG_FORMAT_TSVDAG)
     g_dag_set = dag_info(DAG_INFO_SET);
     g_dag_coding = dag_info(DAG_INFO_CODING);
@@ -324,7 +313,7 @@ void dag_child(uint node, uint xform, uint aux, uint level, uint c, out uint chi
     uint code;
     uint64_t v = dag_read_pointer(node, aux, c ^ xform, code, at);
     uint target = uint(v >> 3u);
-    child = level == 1u ? target : g_dag_level_start[level - 1u] + target;
+    child = level == 1u ? target : dag_info(DAG_INFO_LEVEL_START + level - 1u) + target;
     child_xform = xform ^ uint(v & 7ul);
     shift = ivec3(0);
 }
@@ -341,12 +330,12 @@ void dag_root(uint root_level, out uint node, out uint xform) {
 // the symbol and its length, looked up in the level's decode table (`huffman_decode_table` in
 // engine/render/format.rs: one load instead of a bit-serial loop with a load per bit).
 uint tsvdag_huffman(uint cl, uint64_t e, out uint len) {
-    uint kind = g_dag_huff_kind[cl];
+    uint kind = dag_info(DAG_INFO_HUFF_KIND + cl);
     len = 0u;
     if ((kind & 0xffffu) == 1u) {
         return kind >> 16u;
     }
-    uint lut = g_dag_huff_lut[cl];
+    uint lut = dag_info(DAG_INFO_HUFF_LUT + cl);
     uint entry = dag_info((lut & 0xffffffu) + (uint(e) & ((1u << (lut >> 24u)) - 1u)));
     entry = (kind & 0xffffu) == 2u ? entry : 0u;
     len = entry >> 16u;
@@ -382,7 +371,7 @@ void dag_child(uint node, uint xform, uint aux, uint level, uint c, out uint chi
         e = v >> 1u;
     }
     if (in_table) {
-        uint w = g_dag_table_base + 2u * (g_dag_table_start[cl] + uint(index));
+        uint w = g_dag_table_base + 2u * (dag_info(DAG_INFO_TABLE_START + cl) + uint(index));
         e = packUint2x32(dag_word_pair(w));
     }
 #endif
@@ -399,11 +388,17 @@ void dag_child(uint node, uint xform, uint aux, uint level, uint c, out uint chi
     e >>= len;
     t = sym >> 3u;
 #if defined(TSVDAG_TRANSLATIONS)
-    for (uint a = 0u; a < 3u; a++) {
-        if (((sym >> a) & 1u) != 0u) {
-            tr[a] = int(tsvdag_take(e, tb)) - side;
-        }
-    }
+    // The fields of the axes in the symbol's low 3 bits, x first, each tb bits (at most 15
+    // bits in all: read from the low word with 32-bit shifts).
+    uint fields = uint(e);
+    uint field_mask = (1u << tb) - 1u;
+    uint off_y = (sym & 1u) * tb;
+    uint off_z = off_y + ((sym >> 1u) & 1u) * tb;
+    uint used = off_z + ((sym >> 2u) & 1u) * tb;
+    ivec3 value = ivec3(fields & field_mask, (fields >> off_y) & field_mask,
+                        (fields >> off_z) & field_mask) - side;
+    tr = mix(ivec3(0), value, notEqual(uvec3(sym) & uvec3(1u, 2u, 4u), uvec3(0u)));
+    e >>= used;
 #endif
 #else
     uint set_word = g_dag_set;
@@ -443,7 +438,7 @@ void dag_child(uint node, uint xform, uint aux, uint level, uint c, out uint chi
     }
 #endif
     uint target = uint(e);
-    child = cl == 0u ? target : g_dag_level_start[cl] + target;
+    child = cl == 0u ? target : dag_info(DAG_INFO_LEVEL_START + cl) + target;
     child_xform = xform_compose(xform, t);
     shift = xform_translation(xform, tr);
 }

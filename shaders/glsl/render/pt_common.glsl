@@ -168,6 +168,11 @@ void pt_camera_ray(uvec2 pixel, RenderParams p, float jx, float jy, out vec3 ori
     dir = d;
 }
 
+// Whether `pt_albedo` reads the hit's colour index (a coloured scene without a uniform albedo).
+bool pt_needs_color_index(RenderParams p, PtParams pt) {
+    return pt.env.w < 0.0 && (p.flags & RENDER_FLAG_HAS_COLORS) != 0u;
+}
+
 // Linear albedo of a hit: the uniform albedo (pt.env.w >= 0), the voxel's colour through the
 // sRGB -> linear table, or grey 0.6 without colours (like the raster shading).
 vec3 pt_albedo(RenderParams p, PtParams pt, uint64_t color_index) {

@@ -21,8 +21,10 @@ void main() {
     vec3 dir = paths.p[index].dir.xyz;
     traverse_begin(p.root_level);
     Hit h;
-    bool hit = trace_ray(origin, dir, TRAVERSE_T_UNBOUNDED, p.root_level, h);
-    if (push.bounce == 0u && push.sample_index == 0u && pt.first_hits != 0ul) {
+    bool first = push.bounce == 0u && push.sample_index == 0u && pt.first_hits != 0ul;
+    bool hit = trace_ray_indexed(origin, dir, TRAVERSE_T_UNBOUNDED, p.root_level,
+                                 first || pt_needs_color_index(p, pt), h);
+    if (first) {
         pt_write_first_hit(pt, index, hit, h);
     }
     paths.p[index].t = h.t;

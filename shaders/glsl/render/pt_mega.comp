@@ -27,10 +27,13 @@ void main() {
     vec3 throughput = vec3(1.0);
     precise vec3 radiance = vec3(0.0);
     vec3 sun = pt.sun.xyz;
+    bool want_color = pt_needs_color_index(p, pt);
     for (uint k = 0u; k <= pt.bounces; k++) {
         Hit h;
-        bool hit = trace_ray(origin, dir, TRAVERSE_T_UNBOUNDED, p.root_level, h);
-        if (k == 0u && push.sample_index == 0u && pt.first_hits != 0ul) {
+        bool first = k == 0u && push.sample_index == 0u && pt.first_hits != 0ul;
+        bool hit = trace_ray_indexed(origin, dir, TRAVERSE_T_UNBOUNDED, p.root_level,
+                                     first || want_color, h);
+        if (first) {
             pt_write_first_hit(pt, index, hit, h);
         }
         if (!hit) {
@@ -47,7 +50,8 @@ void main() {
             float n_dot_l = pt_n_dot_l(h.normal, sun);
             if (n_dot_l > 0.0) {
                 Hit blocker;
-                if (!trace_ray(start, sun, TRAVERSE_T_UNBOUNDED, p.root_level, blocker)) {
+                if (!trace_ray_indexed(start, sun, TRAVERSE_T_UNBOUNDED, p.root_level, false,
+                                       blocker)) {
                     radiance = radiance + pt_sun_contribution(pt, throughput, albedo, n_dot_l);
                 }
             }

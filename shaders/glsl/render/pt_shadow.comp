@@ -18,7 +18,8 @@ void main() {
     PtShadowRay ray = PtShadowsRef(pt.shadow_queue).r[slot];
     traverse_begin(p.root_level);
     Hit blocker;
-    if (!trace_ray(ray.origin.xyz, pt.sun.xyz, TRAVERSE_T_UNBOUNDED, p.root_level, blocker)) {
+    if (!trace_ray_indexed(ray.origin.xyz, pt.sun.xyz, TRAVERSE_T_UNBOUNDED, p.root_level, false,
+                           blocker)) {
         uint index = floatBitsToUint(ray.origin.w);
         PtPathsRef paths = PtPathsRef(pt.paths);
         precise vec3 r = paths.p[index].radiance.xyz + ray.contribution.xyz;

@@ -9,6 +9,7 @@
 // Provides `struct Hit`,
 //   void traverse_begin(uint root_level); // once per invocation, before any trace_ray
 //   bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit);
+//   bool trace_ray_indexed(..., bool want_color, out Hit hit); // colour index only if wanted
 // `root_level` is `RenderParams::root_level` (log2(N) - 2); the grid is [0, 4 << root_level)^3.
 //
 // Every floating-point step performs the same f32 operations in the same order as the CPU code
@@ -58,12 +59,12 @@ TraverseRay traverse_setup(vec3 origin, vec3 dir) {
     return r;
 }
 
-// Slab test of the cube [pos, pos + size]^3: near/far parameters and the axis of the near one
+// Slab test of the box [box_lo, box_hi]: near/far parameters and the axis of the near one
 // (ties keep the earlier axis). The near plane of axis k is the low one unless mirror bit k is set.
-void traverse_slab(TraverseRay r, ivec3 pos, uint size, out float t_near, out float t_far,
-                   out uint axis) {
-    precise vec3 lo = (vec3(pos) - r.origin) * r.inv;
-    precise vec3 hi = (vec3(pos + ivec3(size)) - r.origin) * r.inv;
+void traverse_slab_box(TraverseRay r, ivec3 box_lo, ivec3 box_hi, out float t_near,
+                       out float t_far, out uint axis) {
+    precise vec3 lo = (vec3(box_lo) - r.origin) * r.inv;
+    precise vec3 hi = (vec3(box_hi) - r.origin) * r.inv;
     vec3 near_t;
     vec3 far_t;
     for (uint k = 0u; k < 3u; k++) {
@@ -80,6 +81,12 @@ void traverse_slab(TraverseRay r, ivec3 pos, uint size, out float t_near, out fl
     }
     t_near = max(max(near_t.x, near_t.y), near_t.z);
     t_far = min(min(far_t.x, far_t.y), far_t.z);
+}
+
+// Slab test of the cube [pos, pos + size]^3.
+void traverse_slab(TraverseRay r, ivec3 pos, uint size, out float t_near, out float t_far,
+                   out uint axis) {
+    traverse_slab_box(r, pos, pos + ivec3(size), t_near, t_far, axis);
 }
 
 // Entry face normal: the entry axis, or the dominant direction axis when the ray starts inside
@@ -102,17 +109,6 @@ ivec3 traverse_normal(vec3 dir, float t_near, uint entry_axis) {
 }
 
 #if defined(TSVDAG_TRANSLATIONS)
-// An entry of the translated-subtree stack: the depth of the subtree's root frame, the outer
-// base and cursor to restore, the outer clip box, the subtree's translated origin.
-struct TraverseShift {
-    uint depth;
-    ivec3 base;
-    uvec3 cursor;
-    ivec3 lo;
-    ivec3 hi;
-    ivec3 origin;
-};
-
 // Morton code of a point inside a 16^3 cell (4 bits per axis).
 uint traverse_morton16(uvec3 p) {
     uint code = 0u;
@@ -248,16 +244,22 @@ uint traverse_block_mask(uvec2 bits) {
 // runs 8 invocations as the lanes of one SIMD loop and executes every branch of the loop body
 // on every iteration (masked) while any lane is still looping (docs/pathtracing.md, "Where the
 // time goes on lavapipe"):
-// - the current frame lives in registers (node, transform, world mask, ordinals left to visit);
+// - the current frame lives in registers (node, transform, aux word, ordinals left to visit);
 //   the stack arrays are written on a descent and read on a pop only;
 // - `todo` holds the ordinals of the non-empty children left, so empty octants take no
 //   iteration (the CPU steps through all 8);
 // - the 64 bits of the current leaf stay in registers: sub-block masks and the leaf rank cost
 //   no loads;
 // - a pop and the next child's test share an iteration;
+// - the child fetch (the format's costly part) is in an outer loop around the advance loop,
+//   so it runs once per descent instead of on every iteration (see the loops below);
 // - the colour index is computed once, after the loop (inside it, its loops and loads would run
 //   masked on every iteration).
-bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit) {
+// `want_color`: compute `hit.color_index` (else it stays 0): callers whose albedo does not read
+// it (no colours, a uniform albedo, shadow rays) skip its loads and, for S+A+T, the walk of the
+// translated cell.
+bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool want_color,
+                       out Hit hit) {
     hit.t = 0.0;
     hit.voxel = uvec3(0u);
     hit.normal = ivec3(0);
@@ -281,8 +283,9 @@ bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit)
     if (!(t_enter < t_far && t_enter < t_max)) {
         return false;
     }
-    // Frame d below the current one: node handle and (aux word | ordinal visited << 16 |
-    // transform id << 19). The aux word is what the format's child fetch takes (svdag32: the
+    // Frame d below the current one: node handle and (aux word | ordinals left when it
+    // descended, the visited one included as the lowest bit, << 16 | transform id << 24).
+    // The aux word is what the format's child fetch takes (svdag32: the
     // child mask; SSVDAG/TSVDAG: the node header, so a descent does not load it again); leaf
     // and sub-block frames keep their world child mask there.
     uint stack_node[TRAVERSE_MAX_FRAMES];
@@ -304,130 +307,178 @@ bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit)
     uint hit_c = 0u;
     ivec3 hit_voxel = ivec3(0);
 #if defined(TSVDAG_TRANSLATIONS)
-    // The second stack: one entry per translated subtree on the path (its depth, the outer
-    // base and cursor to restore, the outer clip box, its own origin); voxels outside the clip
-    // box (the translated cells) are dropped, as the destructive translation says.
+    // The second stack: one entry per translated subtree on the path: the depth of its root
+    // frame, its cell (world) and the outer base. Voxels outside the clip box (the
+    // intersection of the cells) are dropped, as the destructive translation says. A pop
+    // derives the rest: the outer cursor is cell - outer base, the outer clip box the
+    // intersection of the outer cells, the subtree's origin the next entry's outer base (or
+    // the current base). Its entries are three sets of registers (selects) rather than arrays
+    // (lavapipe turns a dynamically indexed array write into a scalar store per lane and
+    // field), kept to 7 values each: every value live across the loop costs on every
+    // iteration (spills).
     ivec3 base = ivec3(0);
     ivec3 clip_lo = ivec3(0);
     ivec3 clip_hi = ivec3(n);
-    // Its entries are three sets of registers (selects) rather than arrays: lavapipe turns a
-    // dynamically indexed array write into a scalar store per lane and field, on every iteration.
     uint shifts = 0u;
-    TraverseShift sh0;
-    TraverseShift sh1;
-    TraverseShift sh2;
-    sh0.depth = 0u;
-    sh1.depth = 0u;
-    sh2.depth = 0u;
+    uint sh_depth0 = 0u;
+    uint sh_depth1 = 0u;
+    uint sh_depth2 = 0u;
+    ivec3 sh_cell0 = ivec3(0);
+    ivec3 sh_cell1 = ivec3(0);
+    ivec3 sh_cell2 = ivec3(0);
+    ivec3 sh_base0 = ivec3(0);
+    ivec3 sh_base1 = ivec3(0);
+    ivec3 sh_base2 = ivec3(0);
 #else
     const ivec3 base = ivec3(0);
 #endif
+    // Two nested loops: the inner one advances (pops, slab tests, descents into the cheap
+    // sub-block levels) until a lane needs a child fetch, has found its voxel or is done; the
+    // outer one then runs the format's child fetch once. lavapipe runs every part of a loop
+    // body on every iteration (masked), so the fetch, the format's costly part, now runs once
+    // per descent instead of once per iteration of the advance.
+    bool fetch = false;
+    uint fetch_c = 0u;
+    ivec3 fetch_child = ivec3(0);
     for (;;) {
-        if (todo == 0u) {
-            if (depth == 0u) {
+        for (;;) {
+            if (todo == 0u) {
+                if (depth == 0u) {
+                    break;
+                }
+#if defined(TSVDAG_TRANSLATIONS)
+                uint top_depth = shifts == 1u ? sh_depth0 : (shifts == 2u ? sh_depth1 : sh_depth2);
+                if (shifts > 0u && top_depth == depth) {
+                    ivec3 cell = shifts == 1u ? sh_cell0 : (shifts == 2u ? sh_cell1 : sh_cell2);
+                    base = shifts == 1u ? sh_base0 : (shifts == 2u ? sh_base1 : sh_base2);
+                    cursor = uvec3(cell - base);
+                    shifts -= 1u;
+                    clip_lo = ivec3(0);
+                    clip_hi = ivec3(n);
+                    if (shifts >= 1u) {
+                        clip_lo = max(clip_lo, sh_cell0);
+                        clip_hi = min(clip_hi, sh_cell0 + ivec3(n >> sh_depth0));
+                    }
+                    if (shifts >= 2u) {
+                        clip_lo = max(clip_lo, sh_cell1);
+                        clip_hi = min(clip_hi, sh_cell1 + ivec3(n >> sh_depth1));
+                    }
+                }
+#endif
+                depth -= 1u;
+                node = stack_node[depth];
+                uint st = stack_state[depth];
+                aux = st & 0xffffu;
+                xform = (st >> 24u) & 63u;
+                // The frame keeps the ordinals it had left when it descended, the one it
+                // descended into included (its lowest bit: the colour index reads it).
+                uint left = (st >> 16u) & 0xffu;
+                todo = left & (left - 1u);
+            }
+            if (todo == 0u) {
+                continue;
+            }
+            uint i = uint(findLSB(todo));
+            uint ordinals = todo;
+            todo &= todo - 1u;
+            uint c = i ^ r.mirror;
+            uint size = n >> depth;
+            uint half_size = size >> 1u;
+            uvec3 child_local =
+                (cursor & ~uvec3(size - 1u)) + ((uvec3(c, c >> 1u, c >> 2u) & 1u) * half_size);
+            ivec3 child = base + ivec3(child_local);
+            ivec3 box_lo = child;
+            ivec3 box_hi = child + ivec3(half_size);
+#if defined(TSVDAG_TRANSLATIONS)
+            // Inside a translated subtree the ray is tested against the part of the child in
+            // the clip box: a child the ray crosses only outside it holds no visible voxel.
+            // Exact: a voxel lies wholly inside or outside the (cell-aligned) clip box, and a
+            // box containing the hit voxel passes the slab test whenever the voxel does
+            // ((x - o) * inv is monotonic in x).
+            if (shifts > 0u) {
+                box_lo = max(box_lo, clip_lo);
+                box_hi = min(box_hi, clip_hi);
+                if (any(greaterThanEqual(box_lo, box_hi))) {
+                    continue;
+                }
+            }
+#endif
+            traverse_slab_box(r, box_lo, box_hi, t_near, t_far, axis);
+            t_enter = max(t_near, 0.0);
+            if (!(t_enter < t_far && t_enter < t_max)) {
+                continue;
+            }
+            cursor = child_local;
+            if (depth + 1u == voxel_depth) {
+                found = true;
+                hit_t_near = t_near;
+                hit_axis = axis;
+                hit_c = c;
+                hit_voxel = child;
                 break;
             }
-#if defined(TSVDAG_TRANSLATIONS)
-            TraverseShift top = shifts == 1u ? sh0 : (shifts == 2u ? sh1 : sh2);
-            if (shifts > 0u && top.depth == depth) {
-                shifts -= 1u;
-                base = top.base;
-                cursor = top.cursor;
-                clip_lo = top.lo;
-                clip_hi = top.hi;
+            stack_node[depth] = node;
+            stack_state[depth] = aux | (ordinals << 16u) | (xform << 24u);
+            if (depth + 1u <= leaf_depth) {
+                // Inner or leaf child: its pointer is followed by the outer loop.
+                fetch = true;
+                fetch_c = c;
+                fetch_child = child;
+                break;
             }
-#endif
-            depth -= 1u;
-            node = stack_node[depth];
-            uint st = stack_state[depth];
-            aux = st & 0xffffu;
-            xform = (st >> 19u) & 63u;
-            mask = depth >= leaf_depth ? aux : dag_frame_mask(aux, xform);
-            todo = traverse_order(mask, r.mirror) & (0xfeu << ((st >> 16u) & 7u)) & 0xffu;
+            // Sub-block c of the leaf in leaf_bits.
+            uint block = (((c & 4u) != 0u ? leaf_bits.y : leaf_bits.x) >> (8u * (c & 3u))) & 0xffu;
+            depth += 1u;
+            aux = block;
+            todo = traverse_order(block, r.mirror);
         }
-        if (todo == 0u) {
-            continue;
-        }
-        uint i = uint(findLSB(todo));
-        todo &= todo - 1u;
-        uint c = i ^ r.mirror;
-        uint size = n >> depth;
-        uint half_size = size >> 1u;
-        uvec3 child_local =
-            (cursor & ~uvec3(size - 1u)) + ((uvec3(c, c >> 1u, c >> 2u) & 1u) * half_size);
-        ivec3 child = base + ivec3(child_local);
-#if defined(TSVDAG_TRANSLATIONS)
-        if (shifts > 0u && any(greaterThanEqual(max(clip_lo, child),
-                                                min(clip_hi, child + ivec3(half_size))))) {
-            continue;
-        }
-#endif
-        traverse_slab(r, child, half_size, t_near, t_far, axis);
-        t_enter = max(t_near, 0.0);
-        if (!(t_enter < t_far && t_enter < t_max)) {
-            continue;
-        }
-        cursor = child_local;
-        if (depth + 1u == voxel_depth) {
-            found = true;
-            hit_t_near = t_near;
-            hit_axis = axis;
-            hit_c = c;
-            hit_voxel = child;
+        if (!fetch) {
             break;
         }
-        stack_node[depth] = node;
-        stack_state[depth] = aux | (i << 16u) | (xform << 19u);
+        fetch = false;
+        // Follow the pointer of world octant fetch_c of the frame at `depth`.
         uint child_node = node;
         uint child_xform = xform;
         uint child_mask;
         uint child_aux;
         ivec3 shift = ivec3(0);
-        if (depth + 1u <= leaf_depth) {
-            // Inner or leaf child: follow the pointer of world octant c.
-            uint at;
-            uint level = root_level - depth;
-            dag_child(node, xform, aux, level, c, child_node, child_xform, shift, at);
-            uvec2 bits;
-            dag_child_masks(child_node, child_xform, level - 1u, child_mask, bits, child_aux);
-            if (depth + 1u == leaf_depth) {
-                leaf_bits = bits;
-                child_mask = traverse_block_mask(bits);
-                child_aux = child_mask;
-            }
-        } else {
-            // Sub-block c of the leaf in leaf_bits.
-            child_mask = (leaf_bits[c >> 2u] >> (8u * (c & 3u))) & 0xffu;
+        uint at;
+        uint level = root_level - depth;
+        dag_child(node, xform, aux, level, fetch_c, child_node, child_xform, shift, at);
+        uvec2 bits;
+        dag_child_masks(child_node, child_xform, level - 1u, child_mask, bits, child_aux);
+        if (depth + 1u == leaf_depth) {
+            leaf_bits = bits;
+            child_mask = traverse_block_mask(bits);
             child_aux = child_mask;
         }
         depth += 1u;
         node = child_node;
         xform = child_xform;
         aux = child_aux;
-        mask = child_mask;
         todo = traverse_order(child_mask, r.mirror);
 #if defined(TSVDAG_TRANSLATIONS)
         if (any(notEqual(shift, ivec3(0)))) {
             // Enter a translated subtree: its frames start at its translated origin; only
             // the voxels inside the cell (and any outer translated cell) count.
-            TraverseShift e;
-            e.depth = depth;
-            e.base = base;
-            e.cursor = child_local;
-            e.lo = clip_lo;
-            e.hi = clip_hi;
-            clip_lo = max(clip_lo, child);
-            clip_hi = min(clip_hi, child + ivec3(half_size));
-            base = child + shift;
-            e.origin = base;
-            cursor = uvec3(0u);
+            uint half_size = n >> depth;
             if (shifts == 0u) {
-                sh0 = e;
+                sh_depth0 = depth;
+                sh_cell0 = fetch_child;
+                sh_base0 = base;
             } else if (shifts == 1u) {
-                sh1 = e;
+                sh_depth1 = depth;
+                sh_cell1 = fetch_child;
+                sh_base1 = base;
             } else {
-                sh2 = e;
+                sh_depth2 = depth;
+                sh_cell2 = fetch_child;
+                sh_base2 = base;
             }
+            clip_lo = max(clip_lo, fetch_child);
+            clip_hi = min(clip_hi, fetch_child + ivec3(half_size));
+            base = fetch_child + shift;
+            cursor = uvec3(0u);
             shifts += 1u;
         }
 #endif
@@ -438,40 +489,43 @@ bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit)
     hit.t = max(hit_t_near, 0.0);
     hit.voxel = uvec3(hit_voxel);
     hit.normal = traverse_normal(dir, hit_t_near, hit_axis);
+    if (!want_color) {
+        return true;
+    }
     // Colour index: voxels of the preceding siblings (world order) on the path, then the rank
     // inside the leaf (or inside the outermost translated subtree).
     uint64_t color = 0ul;
     uint ranked_depth = leaf_depth;
 #if defined(TSVDAG_TRANSLATIONS)
     if (shifts > 0u) {
-        ranked_depth = sh0.depth;
+        ranked_depth = sh_depth0;
     }
 #endif
     for (uint d = 0u; d < ranked_depth; d++) {
         uint st = stack_state[d];
-        uint cd = ((st >> 16u) & 7u) ^ r.mirror;
-        color += dag_voxels_before(stack_node[d], (st >> 19u) & 63u, st & 0xffffu, root_level - d,
+        uint cd = uint(findLSB((st >> 16u) & 0xffu)) ^ r.mirror;
+        color += dag_voxels_before(stack_node[d], (st >> 24u) & 63u, st & 0xffffu, root_level - d,
                                    cd);
     }
 #if defined(TSVDAG_TRANSLATIONS)
     if (shifts > 0u) {
         // The siblings before the translated cell are counted; add the voxel's rank among the
         // voxels the translated subtree leaves in its cell.
-        uint d0 = sh0.depth;
+        uint d0 = sh_depth0;
         uint side = n >> d0;
-        ivec3 cell = sh0.base + ivec3(sh0.cursor);
+        ivec3 origin0 = shifts == 1u ? base : sh_base1;
         color += uint64_t(traverse_shifted_rank(
-            stack_node[d0], (stack_state[d0] >> 19u) & 63u, root_level - d0,
-            sh0.origin, cell, side, hit_voxel));
+            stack_node[d0], (stack_state[d0] >> 24u) & 63u, root_level - d0,
+            origin0, sh_cell0, side, hit_voxel));
         hit.color_index = color;
         return true;
     }
 #endif
     // Rank inside the leaf: its voxels before Morton code (sub-block << 3 | voxel).
-    uint code = ((((stack_state[leaf_depth] >> 16u) & 7u) ^ r.mirror) << 3u) | hit_c;
+    uint code = ((uint(findLSB((stack_state[leaf_depth] >> 16u) & 0xffu)) ^ r.mirror) << 3u) | hit_c;
 #if defined(DAG_HAS_LEAF_RANK)
     // The format's own index inside the leaf (hash DAG: the voxel's material).
-    uint rank = dag_leaf_rank(stack_node[leaf_depth], (stack_state[leaf_depth] >> 19u) & 63u, code);
+    uint rank = dag_leaf_rank(stack_node[leaf_depth], (stack_state[leaf_depth] >> 24u) & 63u, code);
 #else
     uint rank = code < 32u ? uint(bitCount(leaf_bits.x & ((1u << code) - 1u)))
                            : uint(bitCount(leaf_bits.x)) +
@@ -479,6 +533,11 @@ bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit)
 #endif
     hit.color_index = color + uint64_t(rank);
     return true;
+}
+
+// `trace_ray_indexed` with the colour index.
+bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit) {
+    return trace_ray_indexed(origin, dir, t_max, root_level, true, hit);
 }
 
 #endif
