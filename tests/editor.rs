@@ -466,7 +466,9 @@ fn path_tracing_accumulates_and_restarts_after_an_edit() {
         samples(s) > samples(&restarted)
     });
     assert_eq!(again["voxels"], restarted["voxels"], "{again}");
-    wait_status(&path, &mut editor, "all samples again", |s| samples(s) == max);
+    wait_status(&path, &mut editor, "all samples again", |s| {
+        samples(s) == max
+    });
     close(&x, &id, editor);
 }
 
@@ -521,5 +523,8 @@ fn path_traced_replay_screenshot_equals_render_pt() {
         .arg(&raster);
     run(cmd);
     let diff = compare(read(&raster).as_raw(), a.as_raw(), 8);
-    assert!(diff.differing > allowed, "the screenshot is the raster image");
+    assert!(
+        diff.differing > allowed,
+        "the screenshot is the raster image"
+    );
 }

@@ -186,7 +186,10 @@ fn brush_preview_tints_the_region_only() {
         assert_eq!(after.hits, before.hits);
         let mut tinted = 0;
         for (i, h) in hits.iter().enumerate() {
-            let (a, b) = (&after.rgba[4 * i..4 * i + 4], &before.rgba[4 * i..4 * i + 4]);
+            let (a, b) = (
+                &after.rgba[4 * i..4 * i + 4],
+                &before.rgba[4 * i..4 * i + 4],
+            );
             if h.hit == 1 && preview.contains(h.voxel) {
                 tinted += 1;
                 assert_ne!(a, b, "{shape:?}: pixel {i} in the region is not tinted");

@@ -1053,13 +1053,7 @@ impl Running {
             bounces: self.bounces,
         };
         let pt = self.pt.as_mut().expect("made above");
-        let samples = pt.prepare(
-            &self.ctx,
-            &self.doc.scene,
-            key,
-            self.spp,
-            self.max_samples,
-        )?;
+        let samples = pt.prepare(&self.ctx, &self.doc.scene, key, self.spp, self.max_samples)?;
         Ok(Some(samples))
     }
 
@@ -1212,9 +1206,11 @@ impl Running {
         self.apply_settings()?;
         let samples = self.pt_prepare(internal)?;
         let screenshot = shooting
-            && samples
-                .as_ref()
-                .is_none_or(|_| self.pt.as_ref().is_some_and(|p| p.samples >= self.max_samples));
+            && samples.as_ref().is_none_or(|_| {
+                self.pt
+                    .as_ref()
+                    .is_some_and(|p| p.samples >= self.max_samples)
+            });
         settings.preview = preview.filter(|_| samples.is_none());
 
         let slot = &mut self.slots[frame.index];

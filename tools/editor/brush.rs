@@ -271,7 +271,10 @@ mod tests {
         // The region is the tool's: the voxels the edit would touch.
         let ball = preview(ToolKind::SphereAdd, [4.5; 3], 2.0, material);
         assert!(ball.contains([4, 4, 4]) && ball.contains([6, 4, 4]));
-        assert!(!ball.contains([6, 6, 4]), "corner of the cube, outside the ball");
+        assert!(
+            !ball.contains([6, 6, 4]),
+            "corner of the cube, outside the ball"
+        );
         let cube = preview(ToolKind::CubeAdd, [4.5; 3], 2.0, material);
         assert!(cube.contains([6, 6, 6]) && !cube.contains([7, 4, 4]));
     }
