@@ -94,8 +94,9 @@ impl PtState {
             self.target = Some((key, target));
             self.samples = 0;
         }
+        // A limit lowered below the samples already in stops adding (the mean stays right).
         let start = self.samples;
-        self.samples = (start + spp).min(max.max(1));
+        self.samples = (start + spp).min(max.max(1)).max(start);
         Ok(start..self.samples)
     }
 
