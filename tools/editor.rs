@@ -1115,11 +1115,13 @@ impl Running {
             slot.profiler.clear();
             passes
         };
-        // The render passes of either mode: primary rays, or the path tracer's samples and
-        // display.
+        // The render passes of either mode: primary rays, or the path tracer's samples (a
+        // frame past --max-samples only displays: it says nothing of a moving frame's cost).
         let render_ms: Vec<f64> = passes
             .iter()
-            .filter(|p| p.name == "primary rays" || p.name.starts_with("pt "))
+            .filter(|p| {
+                p.name == "primary rays" || (p.name.starts_with("pt ") && p.name != "pt display")
+            })
             .map(|p| p.gpu_ms)
             .collect();
         if !render_ms.is_empty() {
