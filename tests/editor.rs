@@ -417,3 +417,114 @@ fn table_switch_keeps_the_scene_and_trace_records_frames() {
     });
     close(&x, &id, editor);
 }
+
+/// Path-tracing mode: `samples` grows frame by frame up to `--max-samples`; a click edit
+/// (`voxels` changes) restarts the accumulation, which then grows again.
+#[test]
+fn path_tracing_accumulates_and_restarts_after_an_edit() {
+    let dir = tempfile::tempdir().unwrap();
+    let vdag = scene(dir.path());
+    let x = Xvfb::start();
+    let path = dir.path().join("status.json");
+    let max = 40;
+    let (mut editor, id) = start_editor_with(
+        &x,
+        &vdag,
+        &path,
+        &[
+            "--tool",
+            "sphere-add",
+            "--radius",
+            "8",
+            "--render-mode",
+            "pt",
+            "--bounces",
+            "1",
+            "--max-samples",
+            &max.to_string(),
+        ],
+    );
+    let samples = |s: &serde_json::Value| s["samples"].as_u64().unwrap();
+    let first = wait_status(&path, &mut editor, "a first sample", |s| {
+        s["voxels"].as_u64().is_some() && samples(s) > 0
+    });
+    assert_eq!(first["render_mode"], "pt", "{first}");
+    let original = first["voxels"].as_u64().unwrap();
+    let full = wait_status(&path, &mut editor, "all samples", |s| samples(s) == max);
+    assert!(samples(&first) < max, "samples grow: {first}");
+    assert_eq!(full["voxels"].as_u64(), Some(original));
+    // The hover hit comes from the path tracer's first hits.
+    xdotool(&x.display, &["mousemove", "--window", &id, "400", "300"]);
+    wait_status(&path, &mut editor, "a hovered voxel", |s| {
+        s["hover"].is_array()
+    });
+    xdotool(&x.display, &["click", "1"]);
+    let restarted = wait_status(&path, &mut editor, "the edit, restarted", |s| {
+        s["voxels"].as_u64().unwrap_or(0) > original && samples(s) < max
+    });
+    let again = wait_status(&path, &mut editor, "samples growing again", |s| {
+        samples(s) > samples(&restarted)
+    });
+    assert_eq!(again["voxels"], restarted["voxels"], "{again}");
+    wait_status(&path, &mut editor, "all samples again", |s| {
+        samples(s) == max
+    });
+    close(&x, &id, editor);
+}
+
+/// A replay in path-tracing mode: the screenshot, taken once --max-samples samples are in,
+/// matches `voxdag render --pt` of the saved scene with the same camera, samples, bounces
+/// and seed within the golden tolerance (the editor's material 0 is sRGB 203, linear 0.597,
+/// against the headless grey 0.6; 2 bounces: no Russian roulette, so the paths are the same).
+#[test]
+fn path_traced_replay_screenshot_equals_render_pt() {
+    let dir = tempfile::tempdir().unwrap();
+    let vdag = scene(dir.path());
+    let replay = dir.path().join("session.csv");
+    std::fs::write(&replay, REPLAY).unwrap();
+    let x = Xvfb::start();
+    let (saved, shot) = (dir.path().join("editor.vdag"), dir.path().join("shot.png"));
+    let mut cmd = voxdag(Some(&x.display));
+    cmd.arg("editor")
+        .arg(&vdag)
+        .args(["--size", "200x150", "--render-mode", "pt", "--bounces", "2"])
+        .args(["--spp", "2", "--max-samples", "4", "--replay"])
+        .arg(&replay)
+        .arg("--exit-after-replay")
+        .arg("--save")
+        .arg(&saved)
+        .arg("--screenshot")
+        .arg(&shot);
+    run(cmd);
+    let headless = dir.path().join("headless.png");
+    let mut cmd = voxdag(None);
+    cmd.arg("render")
+        .arg(&saved)
+        .args(["--size", "200x150", "--pt", "--spp", "4", "--bounces", "2"])
+        .args(["--seed", "0", "--out"])
+        .arg(&headless);
+    run(cmd);
+    let read = |p: &Path| image::open(p).unwrap().to_rgba8();
+    let (a, b) = (read(&shot), read(&headless));
+    assert_eq!(a.dimensions(), b.dimensions());
+    let diff = compare(b.as_raw(), a.as_raw(), 8);
+    let allowed = (0.005 * (a.width() * a.height()) as f64) as usize;
+    assert!(
+        diff.differing <= allowed,
+        "the path-traced screenshot differs from `render --pt` in {} pixels (allowed {allowed})",
+        diff.differing
+    );
+    // Not the raster image: the same scene rendered without --pt differs.
+    let raster = dir.path().join("raster.png");
+    let mut cmd = voxdag(None);
+    cmd.arg("render")
+        .arg(&saved)
+        .args(["--size", "200x150", "--out"])
+        .arg(&raster);
+    run(cmd);
+    let diff = compare(read(&raster).as_raw(), a.as_raw(), 8);
+    assert!(
+        diff.differing > allowed,
+        "the screenshot is the raster image"
+    );
+}

@@ -692,3 +692,94 @@ fn matches_mitsuba() {
         assert!(mad < 0.02, "B={bounces}: mean abs difference {mad}");
     }
 }
+
+/// The editor's display pass (`PtView`, `render/accum_display.comp`): the accumulation's mean,
+/// tonemapped, with the brush preview on the first hits, equals its CPU twin `display_cpu`
+/// within one step per channel, and the first hits it copies are the tracer's exactly.
+#[test]
+fn display_pass_matches_cpu() {
+    use voxdag::edit::tool::Shape;
+    use voxdag::gpu::MemLocation;
+    use voxdag::render::params::BrushPreview;
+    use voxdag::render::pt_view::{display_cpu, PtView};
+    use voxdag::render::FirstHit;
+    let dag = sphere_scene(32);
+    let s = settings(&dag, 40);
+    let ctx = gpu();
+    let renderer = GpuRenderer::new(&ctx).unwrap();
+    let tracer = GpuPathTracer::new(&ctx).unwrap();
+    let view = PtView::new(&ctx).unwrap();
+    let scene = renderer.upload(&dag).unwrap();
+    let target = tracer
+        .create_target(&scene, &s, PtMode::Megakernel)
+        .unwrap();
+    // A larger image than the render: the pass writes its top-left corner.
+    let image = ctx.create_storage_image("display test", 48, 44).unwrap();
+    let size = 40 * 40 * std::mem::size_of::<FirstHit>() as u64;
+    let hits = ctx
+        .create_buffer("display hits", size, MemLocation::GpuToCpu)
+        .unwrap();
+    let spp = 3;
+    let mut preview = None;
+    for pass in 0..2 {
+        let mut cmd = ctx.begin_commands("display test").unwrap();
+        if pass == 0 {
+            for i in 0..spp {
+                tracer
+                    .record_sample(&mut cmd, &scene, &target, i, None)
+                    .unwrap();
+            }
+        }
+        view.record(
+            &mut cmd,
+            &target,
+            spp,
+            &image,
+            Some(&hits),
+            preview.as_ref(),
+            None,
+        )
+        .unwrap();
+        cmd.submit().unwrap();
+        let traced = target.read(&ctx, spp).unwrap();
+        let gpu_rgba = ctx.read_image(&image).unwrap();
+        let cpu_rgba = display_cpu(&traced, preview.as_ref());
+        for y in 0..40 {
+            for x in 0..40 {
+                let (g, c) = (
+                    &gpu_rgba[4 * (y * 48 + x)..][..4],
+                    &cpu_rgba[4 * (y * 40 + x)..][..4],
+                );
+                for k in 0..4 {
+                    assert!(
+                        g[k].abs_diff(c[k]) <= 1,
+                        "pass {pass}: pixel ({x}, {y}): GPU {g:?} vs CPU {c:?}"
+                    );
+                }
+            }
+        }
+        let copied: Vec<FirstHit> = ctx.read_buffer(&hits, 0, 40 * 40).unwrap();
+        assert_eq!(copied, traced.first_hits);
+        if pass == 0 {
+            assert_eq!(cpu_rgba, traced.to_rgba8(), "no preview: the plain tonemap");
+            // Then a preview around the middle pixel's voxel: some pixels change.
+            let centre = traced.first_hits[20 * 40 + 20];
+            assert_eq!(centre.hit, 1);
+            let p = BrushPreview {
+                shape: Shape::Sphere,
+                center: centre.voxel.map(|v| v as f32 + 0.5),
+                radius: 8.0,
+                color: [0.0, 1.0, 0.0],
+                strength: 0.5,
+            };
+            preview = Some(p);
+            let tinted = display_cpu(&traced, preview.as_ref());
+            let changed = (0..40 * 40)
+                .filter(|i| tinted[4 * i..4 * i + 4] != cpu_rgba[4 * i..4 * i + 4])
+                .count();
+            assert!(changed > 30, "only {changed} pixels tinted");
+        }
+    }
+    drop((target, scene, tracer, view));
+    assert_eq!(ctx.validation_errors(), 0);
+}

@@ -153,3 +153,55 @@ fn golden_sponza_crytek() {
     settings.shadows = false;
     golden_with_settings("sponza-crytek", &dag, settings);
 }
+
+/// The editor's brush preview (`RenderSettings::preview`): the pixels whose primary ray hits a
+/// voxel inside the region are tinted, as the CPU reference tints them; every other pixel is
+/// byte for byte the render without the preview.
+#[test]
+fn brush_preview_tints_the_region_only() {
+    use voxdag::edit::tool::Shape;
+    use voxdag::render::params::BrushPreview;
+    let dag = sphere_scene(64);
+    let plain = RenderSettings::new(96, 96, Camera::frame(&dag));
+    let context = gpu();
+    let renderer = GpuRenderer::new(&context).unwrap();
+    let scene = renderer.upload(&dag).unwrap();
+    let (before, hits) = renderer.render_first_hits(&scene, &plain).unwrap();
+    // Centred on the voxel seen at the middle of the image.
+    let centre = &hits[48 * 96 + 48];
+    assert_eq!(centre.hit, 1, "the middle pixel sees the sphere");
+    for shape in [Shape::Sphere, Shape::Cube] {
+        let preview = BrushPreview {
+            shape,
+            center: centre.voxel.map(|v| v as f32 + 0.5),
+            radius: 6.0,
+            color: [1.0, 0.0, 1.0],
+            strength: 0.5,
+        };
+        let settings = RenderSettings {
+            preview: Some(preview),
+            ..plain
+        };
+        let after = renderer.render(&scene, &settings, None).unwrap();
+        assert_eq!(after.hits, before.hits);
+        let mut tinted = 0;
+        for (i, h) in hits.iter().enumerate() {
+            let (a, b) = (
+                &after.rgba[4 * i..4 * i + 4],
+                &before.rgba[4 * i..4 * i + 4],
+            );
+            if h.hit == 1 && preview.contains(h.voxel) {
+                tinted += 1;
+                assert_ne!(a, b, "{shape:?}: pixel {i} in the region is not tinted");
+            } else {
+                assert_eq!(a, b, "{shape:?}: pixel {i} outside the region changed");
+            }
+        }
+        assert!(tinted > 50, "{shape:?}: only {tinted} pixels in the region");
+        let cpu = render_cpu(&dag, &VoxelIndex::new(&dag), &settings).unwrap();
+        common::assert_renders_match("brush preview", &after, &cpu);
+    }
+    drop(scene);
+    drop(renderer);
+    assert_eq!(context.validation_errors(), 0);
+}

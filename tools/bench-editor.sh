@@ -8,6 +8,7 @@
 # usage: tools/bench-editor.sh SCENE.vdag OUT.json [TOOL] [RADIUS] [SECONDS]
 #   TOOL: paint (default) | sphere-add | ... (`voxdag editor --tool`); RADIUS: 32; SECONDS: 20
 # env: VOXDAG (binary, default target/release/voxdag), BENCH_DISPLAY (default :71),
+#      EDITOR_ARGS (more editor flags, e.g. "--render-mode pt"),
 #      VK_ICD_FILENAMES (lavapipe: /usr/share/vulkan/icd.d/lvp_icd.x86_64.json)
 set -euo pipefail
 scene=${1:?usage: tools/bench-editor.sh SCENE.vdag OUT.json [TOOL] [RADIUS] [SECONDS]}
@@ -31,7 +32,7 @@ for _ in $(seq 1 100); do xdpyinfo >/dev/null 2>&1 && break; sleep 0.1; done
 
 status=$(mktemp -u /tmp/bench-editor-status.XXXXXX)
 "$bin" editor "$scene" --size 1280x720 --no-vsync --tool "$tool" --radius "$radius" \
-    --material 3 --stats-json "$out" --status-file "$status" &
+    --material 3 --stats-json "$out" --status-file "$status" ${EDITOR_ARGS:-} &
 editor=$!
 id=
 for _ in $(seq 1 1200); do

@@ -3,6 +3,7 @@
 //! and cube tools edit it under the cursor, with undo / redo, egui panels and headless hooks
 //! (status file, replays, save, screenshot) for the tests. See docs/editor.md.
 
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
@@ -23,6 +24,7 @@ use voxdag::gpu::{
 use voxdag::hash::HashVariant;
 use voxdag::render::gpu::{GpuRenderer, GpuScene, Palette, RenderFrame};
 use voxdag::render::hash_scene::buckets_for;
+use voxdag::render::pathtrace::DEFAULT_BOUNCES;
 use voxdag::render::{Camera, FirstHit, RenderOutput, RenderSettings};
 use voxdag::scene::{self, ImportOptions};
 use winit::application::ApplicationHandler;
@@ -41,10 +43,13 @@ use crate::window::{require_display, CameraInput, GpuWindow, MIN_SCALE};
 
 mod brush;
 mod panels;
+mod pt;
 
 use brush::CopyState;
 pub use brush::ToolKind;
 use panels::PanelState;
+pub use pt::RenderMode;
+use pt::{PtKey, PtState, MAX_EDITOR_BOUNCES, MAX_FRAME_SPP};
 
 /// Largest tool radius in voxels (slider and wheel).
 const MAX_RADIUS: f32 = 256.0;
@@ -83,6 +88,20 @@ pub struct EditorArgs {
     /// Internal resolution as a fraction of the window (0.1..=1).
     #[arg(long, default_value_t = 1.0)]
     render_scale: f32,
+    /// How the scene is drawn at start (Settings panel, P toggles): primary rays + shadows, or
+    /// progressive path tracing.
+    #[arg(long, value_enum, default_value_t = RenderMode::Raster)]
+    render_mode: RenderMode,
+    /// Path tracing: diffuse bounces per path.
+    #[arg(long, default_value_t = DEFAULT_BOUNCES, value_parser = clap::value_parser!(u32).range(0..=MAX_EDITOR_BOUNCES as i64))]
+    bounces: u32,
+    /// Path tracing: samples per pixel added each frame.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=MAX_FRAME_SPP as i64))]
+    spp: u32,
+    /// Path tracing: the accumulation stops at this many samples per pixel (a --screenshot is
+    /// taken once they are in).
+    #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(1..))]
+    max_samples: u32,
     /// Present without waiting for vertical blank.
     #[arg(long)]
     no_vsync: bool,
@@ -132,7 +151,8 @@ pub struct EditorArgs {
     /// replay with --exit-after-replay.
     #[arg(long)]
     save: Option<PathBuf>,
-    /// Save the first frame after the replay (render scale 1, no overlay) as a PNG.
+    /// Save the first frame after the replay (render scale 1, no overlay; path tracing: the
+    /// frame with --max-samples samples) as a PNG.
     #[arg(long, requires = "exit_after_replay")]
     screenshot: Option<PathBuf>,
     /// Autosave, recovery, recording and replay pace (tools/editor/files.rs).
@@ -387,6 +407,12 @@ impl App<'_> {
             frames: 0,
             steps: std::mem::take(&mut self.steps),
             replay_done: !replaying,
+            wrap_up: false,
+            render_mode: args.render_mode,
+            pt: None,
+            bounces: args.bounces,
+            spp: args.spp,
+            max_samples: args.max_samples,
             message: None,
             save_path: args
                 .save
@@ -423,6 +449,8 @@ fn scene_size(dag: &Svdag) -> f32 {
 struct Document {
     scene: GpuScene,
     dag: GpuHashDag,
+    /// Which binding `scene` is (`next_binding`): a new one restarts path tracing.
+    binding: u64,
     path: PathBuf,
     /// The colour of each material (the renderer's palette; edited in the Tools panel).
     palette: Palette,
@@ -485,6 +513,7 @@ impl Document {
         Ok(Document {
             scene,
             dag,
+            binding: next_binding(),
             path,
             palette,
             file_palette,
@@ -500,6 +529,7 @@ impl Document {
     /// caller waits for frames in flight, which read the old binding).
     fn rebind(&mut self, renderer: &GpuRenderer) -> Result<()> {
         self.scene = renderer.bind_hash_dag(&self.dag, Some(&self.palette))?;
+        self.binding = next_binding();
         Ok(())
     }
 
@@ -550,6 +580,12 @@ impl Document {
         self.unsaved = 0;
         Ok(())
     }
+}
+
+/// A new scene binding id (`Document::binding`).
+fn next_binding() -> u64 {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
 }
 
 /// The RGBA8 word (opaque) of an sRGB colour.
@@ -694,6 +730,13 @@ struct Status<'a> {
     present_mode: &'a str,
     /// Chrome traces written so far.
     traces_written: usize,
+    /// Raster or path tracing.
+    render_mode: RenderMode,
+    /// Path tracing: samples per pixel accumulated (0 in raster mode).
+    samples: u32,
+    /// Path tracing: bounces and samples added per frame.
+    bounces: u32,
+    spp: u32,
 }
 
 /// The open editor. The window (presenter: waits for the GPU) drops first.
@@ -734,6 +777,16 @@ struct Running {
     frames: usize,
     steps: record::Playlist,
     replay_done: bool,
+    /// The replay is done and --exit-after-replay was given: screenshot, save, exit.
+    wrap_up: bool,
+    /// Raster or path tracing (Settings panel, P).
+    render_mode: RenderMode,
+    /// The path tracer, made when first used.
+    pt: Option<PtState>,
+    /// Path tracing: bounces, samples per frame, samples at which accumulation stops.
+    bounces: u32,
+    spp: u32,
+    max_samples: u32,
     /// The last error or notice (shown in the Scene panel and the status file).
     message: Option<String>,
     save_path: String,
@@ -820,6 +873,12 @@ impl Running {
                     KeyCode::KeyT if !ctrl => {
                         self.ui.pending_variant =
                             Some(panels::next_variant(self.doc.dag.config().variant));
+                    }
+                    KeyCode::KeyP if !ctrl => {
+                        self.render_mode = match self.render_mode {
+                            RenderMode::Raster => RenderMode::Pt,
+                            RenderMode::Pt => RenderMode::Raster,
+                        };
                     }
                     KeyCode::KeyR if !ctrl => {
                         self.copy.quarter_turns = (self.copy.quarter_turns + 1) % 4;
@@ -969,6 +1028,43 @@ impl Running {
         scale.clamp(MIN_SCALE, self.user_scale)
     }
 
+    /// Path tracing: makes the tracer on first use and prepares this frame's accumulation,
+    /// returning the samples to record; `None` in raster mode (and when the tracer cannot be
+    /// made: the error is shown and the mode goes back to raster).
+    fn pt_prepare(&mut self, internal: [u32; 2]) -> Result<Option<Range<u32>>> {
+        if self.render_mode != RenderMode::Pt {
+            return Ok(None);
+        }
+        if self.pt.is_none() {
+            match PtState::new(&self.ctx) {
+                Ok(p) => self.pt = Some(p),
+                Err(e) => {
+                    self.message = Some(format!("path tracing unavailable: {e:#}"));
+                    self.render_mode = RenderMode::Raster;
+                    return Ok(None);
+                }
+            }
+        }
+        let key = PtKey {
+            camera: self.input.camera,
+            internal,
+            binding: self.doc.binding,
+            root: self.doc.dag.root(),
+            bounces: self.bounces,
+        };
+        let pt = self.pt.as_mut().expect("made above");
+        let samples = pt.prepare(&self.ctx, &self.doc.scene, key, self.spp, self.max_samples)?;
+        Ok(Some(samples))
+    }
+
+    /// Samples per pixel accumulated (0 in raster mode).
+    fn pt_samples(&self) -> u32 {
+        match (self.render_mode, &self.pt) {
+            (RenderMode::Pt, Some(p)) => p.samples,
+            _ => 0,
+        }
+    }
+
     /// The voxel under the cursor in the slot's last frame (its fence has signalled).
     fn read_hover(&self, slot: &Slot) -> Result<Option<FirstHit>> {
         let (Some(cursor), Some((internal, extent)), Some(hits)) =
@@ -1019,9 +1115,18 @@ impl Running {
             slot.profiler.clear();
             passes
         };
-        if let Some(p) = passes.iter().find(|p| p.name == "primary rays") {
+        // The render passes of either mode: primary rays, or the path tracer's samples (a
+        // frame past --max-samples only displays: it says nothing of a moving frame's cost).
+        let render_ms: Vec<f64> = passes
+            .iter()
+            .filter(|p| {
+                p.name == "primary rays" || (p.name.starts_with("pt ") && p.name != "pt display")
+            })
+            .map(|p| p.gpu_ms)
+            .collect();
+        if !render_ms.is_empty() {
             let pixels = (self.internal[0] as f64 * self.internal[1] as f64).max(1.0);
-            let sample = p.gpu_ms / pixels;
+            let sample = render_ms.iter().sum::<f64>() / pixels;
             self.ms_per_pixel = Some(self.ms_per_pixel.map_or(sample, |o| 0.8 * o + 0.2 * sample));
         }
         if !passes.is_empty() {
@@ -1048,7 +1153,11 @@ impl Running {
                 }
             }
         }
-        let screenshot = finishing && self.replay_done && args.screenshot.is_some();
+        if finishing && self.replay_done && args.exit_after_replay {
+            self.wrap_up = true;
+        }
+        // The screenshot is taken at scale 1 (path tracing: once --max-samples are in).
+        let shooting = self.wrap_up && args.screenshot.is_some();
         self.files_frame();
         self.doc
             .scene
@@ -1063,7 +1172,7 @@ impl Running {
 
         let extent = frame.extent;
         self.input.fly(dt);
-        let scale = if screenshot {
+        let scale = if shooting {
             1.0
         } else {
             self.frame_scale(extent)
@@ -1074,7 +1183,15 @@ impl Running {
         ];
         self.scale = scale;
         self.internal = internal;
-        let settings = RenderSettings::new(internal[0], internal[1], self.input.camera);
+        let mut settings = RenderSettings::new(internal[0], internal[1], self.input.camera);
+        // The brush preview, drawn by the renderer; never in replayed or screenshot frames.
+        let preview = self
+            .brush_center()
+            .filter(|_| self.replay_done && !self.wrap_up)
+            .map(|c| {
+                let material = self.doc.palette[self.material as usize];
+                brush::preview(self.tool, c, self.radius, material)
+            });
 
         let raw_input = self.win.egui_state.take_egui_input(&self.win.window);
         let egui = self.win.egui.clone();
@@ -1089,6 +1206,14 @@ impl Running {
             self.doc.rebind(&self.renderer)?;
         }
         self.apply_settings()?;
+        let samples = self.pt_prepare(internal)?;
+        let screenshot = shooting
+            && samples.as_ref().is_none_or(|_| {
+                self.pt
+                    .as_ref()
+                    .is_some_and(|p| p.samples >= self.max_samples)
+            });
+        settings.preview = preview.filter(|_| samples.is_none());
 
         let slot = &mut self.slots[frame.index];
         if slot
@@ -1118,15 +1243,26 @@ impl Running {
             None => &mut slot.profiler,
         };
         let mut cmd = self.ctx.begin_commands("editor frame")?;
-        self.renderer.record_with_first_hits(
-            &mut cmd,
-            &self.doc.scene,
-            &mut slot.frame,
-            &settings,
-            target,
-            hits,
-            Some(&mut *profiler),
-        )?;
+        match (samples, &self.pt) {
+            (Some(samples), Some(pt)) => pt.record(
+                &mut cmd,
+                &self.doc.scene,
+                samples,
+                target,
+                hits,
+                preview.as_ref(),
+                Some(&mut *profiler),
+            )?,
+            _ => self.renderer.record_with_first_hits(
+                &mut cmd,
+                &self.doc.scene,
+                &mut slot.frame,
+                &settings,
+                target,
+                hits,
+                Some(&mut *profiler),
+            )?,
+        }
         slot.view = Some((internal, extent));
         slot.edit_input = self.edit_input.take();
         self.win.presenter.end_frame(
@@ -1196,11 +1332,15 @@ impl Running {
                 vsync: self.ui.vsync,
                 present_mode: &self.win.presenter.stats().present_mode,
                 traces_written: self.traces_written,
+                render_mode: self.render_mode,
+                samples: self.pt_samples(),
+                bounces: self.bounces,
+                spp: self.spp,
             };
             write_json(path, &status)?;
         }
         self.record_frame();
-        if finishing && self.replay_done && args.exit_after_replay {
+        if self.wrap_up && (args.screenshot.is_none() || screenshot) {
             if let Some(path) = &args.save {
                 self.doc.save(path)?;
                 println!("{}: saved after the replay", path.display());
@@ -1210,10 +1350,12 @@ impl Running {
         Ok(())
     }
 
-    /// The egui panels: Tools, Scene, Profiler, Settings, and the brush outline.
+    /// The egui panels: Tools, Scene, Profiler, Settings, and the copy tool's source outline.
     fn panels(&mut self, ui: &mut egui::Ui, extent: [u32; 2]) {
         let ctx = ui.ctx().clone();
-        self.brush_outline(&ctx, extent);
+        if let (ToolKind::Copy, Some(source)) = (self.tool, self.copy.source) {
+            brush::draw_copy_source(&ctx, &self.input.camera, extent, source, self.radius);
+        }
         self.files_panel(&ctx);
         egui::Window::new("Tools")
             .default_pos([8.0, 8.0])
@@ -1240,6 +1382,13 @@ impl Running {
                         });
                     }
                 });
+                if self.render_mode == RenderMode::Pt {
+                    ui.label(format!(
+                        "path tracing: {} / {} samples (P: raster)",
+                        self.pt_samples(),
+                        self.max_samples
+                    ));
+                }
             });
         egui::Window::new("Scene")
             .default_pos([8.0, 330.0])
@@ -1346,25 +1495,6 @@ impl Running {
             "GC freed {} items ({} kept) in {:.1} ms",
             stats.freed, stats.live, stats.ms
         ))
-    }
-
-    /// The brush under the cursor, drawn on the overlay (`brush::draw_preview`).
-    fn brush_outline(&self, ctx: &egui::Context, extent: [u32; 2]) {
-        let Some(center) = self.brush_center() else {
-            return;
-        };
-        brush::draw_preview(
-            ctx,
-            &brush::Preview {
-                camera: &self.input.camera,
-                extent,
-                kind: self.tool,
-                center,
-                radius: self.radius,
-                material: self.doc.palette[self.material as usize],
-                copy_source: self.copy.source,
-            },
-        );
     }
 
     /// The tools, the radius slider, the copy source and rotation, the palette (16 swatches,

@@ -144,11 +144,12 @@ pub fn shade_pixel_with(
         }
     }
     let light_sum = AMBIENT * AMBIENT_AXIS[axis] + direct;
+    let c = p.preview_tint(hit.voxel, albedo.map(|a| a * light_sum));
     (
         [
-            linear_to_srgb(albedo[0] * light_sum),
-            linear_to_srgb(albedo[1] * light_sum),
-            linear_to_srgb(albedo[2] * light_sum),
+            linear_to_srgb(c[0]),
+            linear_to_srgb(c[1]),
+            linear_to_srgb(c[2]),
             1.0,
         ],
         true,

@@ -2,7 +2,7 @@
 // the engine expands this file into Rust structs, build.rs into `gen/render.glsl`.
 gpu_shared! {
     /// Frame constants shared by the CPU reference renderer and the GPU (`struct RenderParams`
-    /// in `render_params.h`): five `vec4`s, six `uint`s, a `uint64_t`: 112 bytes.
+    /// in `render_params.h`): seven `vec4`s, six `uint`s, a `uint64_t`: 144 bytes.
     #[derive(PartialEq)]
     pub struct RenderParams {
         /// xyz: eye position (grid coordinates); w: `tan(fov_y / 2)`.
@@ -15,6 +15,10 @@ gpu_shared! {
         pub forward: vec4,
         /// xyz: unit direction towards the light; w: 0 (reserved).
         pub light_dir: vec4,
+        /// Brush preview (the editor): xyz centre, w radius (voxels; `params::BrushPreview`).
+        pub preview: vec4,
+        /// Brush preview: rgb linear tint colour, w how much of it replaces the shaded colour.
+        pub preview_color: vec4,
         /// Image width in pixels.
         pub width: uint,
         /// Image height in pixels.
@@ -25,8 +29,8 @@ gpu_shared! {
         pub root_level: uint,
         /// `FLAG_HAS_COLORS | FLAG_SHADOWS`.
         pub flags: uint,
-        /// Explicit padding: `color_count` is 8-byte aligned.
-        pub _pad: uint,
+        /// Brush preview shape: 0 none, 1 sphere, 2 cube (`params::PREVIEW_*`).
+        pub preview_shape: uint,
         /// Colours stored (0 without colours; 64-bit: huge scenes exceed 2^32 voxels); larger
         /// colour indices shade white.
         pub color_count: uint64_t,
@@ -78,6 +82,31 @@ gpu_shared! {
         /// Depth-first Morton index of the voxel (index into the colours); hash DAG: the voxel's
         /// material (index into the palette).
         pub color_index: uint64_t,
+    }
+
+    /// Push constants of `render/accum_display.comp` (`render::pt_view`): the path tracer's
+    /// accumulation and first hits, the image's first hits, size, samples and brush preview.
+    pub(crate) struct PtDisplayPush {
+        /// `vec4` per pixel: summed radiance and sample count (`PtParams::accum`).
+        pub(crate) accum: uint64_t,
+        /// `FirstHit` per pixel of the accumulation (`PtParams::first_hits`).
+        pub(crate) first_hits: uint64_t,
+        /// Host-visible `FirstHit` per pixel the pass copies them to, or 0.
+        pub(crate) first_hits_out: uint64_t,
+        /// Image width in pixels.
+        pub(crate) width: uint,
+        /// Image height in pixels.
+        pub(crate) height: uint,
+        /// `RenderParams::preview`.
+        pub(crate) preview: vec4,
+        /// `RenderParams::preview_color`.
+        pub(crate) preview_color: vec4,
+        /// `RenderParams::preview_shape`.
+        pub(crate) preview_shape: uint,
+        /// Samples accumulated (the divisor).
+        pub(crate) spp: uint,
+        /// Explicit padding to 16 bytes.
+        pub(crate) _pad: [uint; 2],
     }
 
     /// Path-tracing constants of one render (`struct PtParams` in `render/pt_common.glsl`),

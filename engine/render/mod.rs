@@ -13,6 +13,7 @@ pub mod hash_scene;
 pub mod params;
 pub mod pathtrace;
 pub mod pathtrace_gpu;
+pub mod pt_view;
 
 use std::io;
 use std::path::{Path, PathBuf};
@@ -36,6 +37,8 @@ pub struct RenderSettings {
     pub light_dir: [f32; 3],
     /// Cast one shadow ray per hit.
     pub shadows: bool,
+    /// The editor's brush preview (tinted voxels); `None` everywhere else.
+    pub preview: Option<params::BrushPreview>,
 }
 
 impl RenderSettings {
@@ -47,6 +50,7 @@ impl RenderSettings {
             camera,
             light_dir: params::DEFAULT_LIGHT_DIR,
             shadows: true,
+            preview: None,
         }
     }
 }

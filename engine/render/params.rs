@@ -21,6 +21,64 @@ pub const MAX_GPU_FRAMES: u32 = MAX_GPU_RESOLUTION.trailing_zeros();
 pub const SHADOW_EPSILON_PER_VOXEL_SIDE: f32 = 1.0 / 262144.0;
 
 pub use super::gpu_shared::RenderParams;
+use crate::edit::tool::{in_cube, in_sphere, Shape};
+
+/// `preview_shape`: no brush preview.
+pub const PREVIEW_NONE: u32 = 0;
+/// `preview_shape`: a ball (`edit::tool::in_sphere`).
+pub const PREVIEW_SPHERE: u32 = 1;
+/// `preview_shape`: an axis-aligned cube (`edit::tool::in_cube`).
+pub const PREVIEW_CUBE: u32 = 2;
+
+/// The editor's brush preview: voxels seen by the primary ray that lie inside the tool's region
+/// (the edit tools' own inclusion rule) are tinted towards `color`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BrushPreview {
+    /// Ball or cube.
+    pub shape: Shape,
+    /// Centre (voxel coordinates, as the tool gets it).
+    pub center: [f32; 3],
+    /// Radius (voxels).
+    pub radius: f32,
+    /// Linear RGB tint.
+    pub color: [f32; 3],
+    /// Fraction of the shaded colour the tint replaces (0..=1).
+    pub strength: f32,
+}
+
+impl BrushPreview {
+    /// Whether voxel `v` (integer corner) lies in the region.
+    pub fn contains(&self, v: [u32; 3]) -> bool {
+        match self.shape {
+            Shape::Sphere => in_sphere(self.center, self.radius, v),
+            Shape::Cube => in_cube(self.center, self.radius, v),
+        }
+    }
+
+    /// The tinted linear colour (`preview_tint` in `render/preview.glsl`: same operations).
+    pub fn tint(&self, c: [f32; 3]) -> [f32; 3] {
+        [0, 1, 2].map(|k| c[k] + (self.color[k] - c[k]) * self.strength)
+    }
+}
+
+/// `(preview, preview_color, preview_shape)` of the params for `preview`.
+pub fn preview_fields(preview: Option<&BrushPreview>) -> ([f32; 4], [f32; 4], u32) {
+    match preview {
+        None => ([0.0; 4], [0.0; 4], PREVIEW_NONE),
+        Some(b) => {
+            let c = b.center;
+            let shape = match b.shape {
+                Shape::Sphere => PREVIEW_SPHERE,
+                Shape::Cube => PREVIEW_CUBE,
+            };
+            (
+                [c[0], c[1], c[2], b.radius],
+                [b.color[0], b.color[1], b.color[2], b.strength],
+                shape,
+            )
+        }
+    }
+}
 
 /// Default direction towards the light (normalised when used).
 pub const DEFAULT_LIGHT_DIR: [f32; 3] = [0.4, 1.0, 0.3];
@@ -65,19 +123,22 @@ impl RenderParams {
         if settings.shadows {
             flags |= FLAG_SHADOWS;
         }
+        let (preview, preview_color, preview_shape) = preview_fields(settings.preview.as_ref());
         Ok(RenderParams {
             eye: v4(cam.eye, tan),
             right: v4(b.right, pixel_scale(tan, settings.height)),
             up: v4(b.up, dag.resolution as f32 * SHADOW_EPSILON_PER_VOXEL_SIDE),
             forward: v4(b.forward, 0.0),
             light_dir: v4(light, 0.0),
+            preview,
+            preview_color,
             width: settings.width,
             height: settings.height,
             resolution: dag.resolution,
             root_level: dag.root_level(),
             flags,
+            preview_shape,
             color_count,
-            _pad: 0,
         })
     }
 
@@ -106,6 +167,29 @@ impl RenderParams {
     /// True when the scene has colours.
     pub fn has_colors(&self) -> bool {
         self.flags & FLAG_HAS_COLORS != 0
+    }
+
+    /// The brush preview tint of a hit on voxel `v`, if it lies in the preview region.
+    pub fn preview_tint(&self, v: [u32; 3], c: [f32; 3]) -> [f32; 3] {
+        let shape = match self.preview_shape {
+            PREVIEW_SPHERE => Shape::Sphere,
+            PREVIEW_CUBE => Shape::Cube,
+            _ => return c,
+        };
+        let [x, y, z, radius] = self.preview;
+        let [r, g, b, strength] = self.preview_color;
+        let preview = BrushPreview {
+            shape,
+            center: [x, y, z],
+            radius,
+            color: [r, g, b],
+            strength,
+        };
+        if preview.contains(v) {
+            preview.tint(c)
+        } else {
+            c
+        }
     }
 
     /// True when shadow rays are cast.

@@ -55,14 +55,15 @@ struct WaveBuffers {
 /// and the wavefront queues when the mode needs them.
 pub struct PtTarget {
     mode: PtMode,
-    width: u32,
-    height: u32,
+    pub(super) width: u32,
+    pub(super) height: u32,
     bounces: u32,
     render_params: Buffer,
     pt_params: Buffer,
     _lut: Buffer,
-    accum: Buffer,
-    first_hits: Buffer,
+    /// Read by `pt_view` too (the editor's display pass).
+    pub(super) accum: Buffer,
+    pub(super) first_hits: Buffer,
     wave: Option<WaveBuffers>,
 }
 

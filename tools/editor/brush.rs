@@ -1,10 +1,13 @@
 //! The editor's tools: which edit a click makes (sphere / cube add and remove, paint, fill, copy
-//! from a picked source with a quarter-turn rotation) and the brush preview drawn at the hit.
+//! from a picked source with a quarter-turn rotation) and the brush preview the renderer draws
+//! at the hit (the voxels in the tool's region tinted).
 
 use clap::ValueEnum;
 use glam::Vec3;
 use serde::Serialize;
+use voxdag::color::srgb_to_linear;
 use voxdag::edit::tool::{CopyParams, Shape, Tool};
+use voxdag::render::params::BrushPreview;
 use voxdag::render::Camera;
 
 /// The tools of the editor.
@@ -140,79 +143,64 @@ pub fn tool(
     })
 }
 
-/// What the brush preview draws.
-pub struct Preview<'a> {
-    /// The camera of the frame.
-    pub camera: &'a Camera,
-    /// Window size in pixels.
-    pub extent: [u32; 2],
-    /// The selected tool.
-    pub kind: ToolKind,
-    /// Tool centre under the cursor (voxels).
-    pub center: [f32; 3],
-    /// Tool radius (voxels).
-    pub radius: f32,
-    /// Colour of the selected material (paint shows it).
-    pub material: [u8; 3],
-    /// The copy tool's source, drawn too.
-    pub copy_source: Option<[f32; 3]>,
-}
+/// How much of the shaded colour the preview tint replaces.
+const PREVIEW_STRENGTH: f32 = 0.45;
 
-/// Draws the brush at the cursor's hit point on the overlay: the projected ball (circle) or
-/// cube (square), green for adding, red for removing, the material's colour for paint, and
-/// the copy source in yellow.
-pub fn draw_preview(ctx: &egui::Context, p: &Preview) {
-    let painter = ctx.layer_painter(egui::LayerId::background());
-    let colour = match p.kind {
-        ToolKind::SphereRemove | ToolKind::CubeRemove => egui::Color32::from_rgb(240, 90, 80),
-        ToolKind::Paint => {
-            let [r, g, b] = p.material;
-            egui::Color32::from_rgb(r, g, b)
-        }
-        _ => egui::Color32::from_rgb(80, 220, 120),
+/// The renderer's brush preview of `kind` at `center`: the tool's region (its own shape and
+/// inclusion rule) tinted green for adding, red for removing, the material's colour (`material`,
+/// sRGB) for paint.
+pub fn preview(kind: ToolKind, center: [f32; 3], radius: f32, material: [u8; 3]) -> BrushPreview {
+    let srgb = match kind {
+        ToolKind::SphereRemove | ToolKind::CubeRemove => [240, 90, 80],
+        ToolKind::Paint => material,
+        _ => [80, 220, 120],
     };
-    outline(ctx, &painter, p, p.center, colour);
-    if let (ToolKind::Copy, Some(source)) = (p.kind, p.copy_source) {
-        outline(ctx, &painter, p, source, egui::Color32::YELLOW);
+    BrushPreview {
+        shape: if kind.cube() {
+            Shape::Cube
+        } else {
+            Shape::Sphere
+        },
+        center,
+        radius,
+        color: srgb.map(|c| srgb_to_linear(c as f32 / 255.0)),
+        strength: PREVIEW_STRENGTH,
     }
 }
 
-/// One outline of the brush's shape at `center`, with a dot at the centre.
-fn outline(
+/// Outlines the copy tool's source cube (`radius` voxels around `source`) on the overlay in
+/// yellow: the renderer tints one region, the stamp's destination under the cursor.
+pub fn draw_copy_source(
     ctx: &egui::Context,
-    painter: &egui::Painter,
-    p: &Preview,
-    center: [f32; 3],
-    colour: egui::Color32,
+    camera: &Camera,
+    extent: [u32; 2],
+    source: [f32; 3],
+    radius: f32,
 ) {
-    let [w, h] = p.extent;
-    let Some(c) = p.camera.project(center, w, h) else {
+    let [w, h] = extent;
+    let Some(c) = camera.project(source, w, h) else {
         return;
     };
-    let up = Vec3::from(p.camera.basis().up);
-    let edge = (Vec3::from(center) + up * p.radius).to_array();
-    let Some(e) = p.camera.project(edge, w, h) else {
+    let up = Vec3::from(camera.basis().up);
+    let edge = (Vec3::from(source) + up * radius).to_array();
+    let Some(e) = camera.project(edge, w, h) else {
         return;
     };
+    let painter = ctx.layer_painter(egui::LayerId::background());
     let ppp = ctx.pixels_per_point();
     let to_points = |q: [f32; 2]| egui::pos2(q[0] / ppp, q[1] / ppp);
     let (c, e) = (to_points(c), to_points(e));
     // Dark under light: visible on bright and dark voxels.
-    let radius = c.distance(e).max(2.0);
-    for (width, col) in [(3.0, egui::Color32::BLACK), (1.5, colour)] {
-        let stroke = egui::Stroke::new(width, col);
-        if p.kind.cube() {
-            painter.rect_stroke(
-                egui::Rect::from_center_size(c, egui::vec2(2.0 * radius, 2.0 * radius)),
-                0.0,
-                stroke,
-                egui::StrokeKind::Middle,
-            );
-        } else {
-            painter.circle_stroke(c, radius, stroke);
-        }
+    let half = c.distance(e).max(2.0);
+    for (width, col) in [(3.0, egui::Color32::BLACK), (1.5, egui::Color32::YELLOW)] {
+        painter.rect_stroke(
+            egui::Rect::from_center_size(c, egui::vec2(2.0 * half, 2.0 * half)),
+            0.0,
+            egui::Stroke::new(width, col),
+            egui::StrokeKind::Middle,
+        );
     }
-    painter.circle_filled(c, 2.0, colour);
+    painter.circle_filled(c, 2.0, egui::Color32::YELLOW);
 }
 
 #[cfg(test)]
@@ -260,5 +248,34 @@ mod tests {
                 ..
             })
         ));
+    }
+
+    #[test]
+    fn the_preview_has_the_tools_shape_and_colour() {
+        let material = [10, 200, 30];
+        let p = preview(ToolKind::CubeRemove, [4.5; 3], 2.0, material);
+        assert_eq!((p.shape, p.center, p.radius), (Shape::Cube, [4.5; 3], 2.0));
+        assert!(p.color[0] > p.color[1], "remove is red");
+        let p = preview(ToolKind::SphereAdd, [4.5; 3], 2.0, material);
+        assert_eq!(p.shape, Shape::Sphere);
+        assert!(p.color[1] > p.color[0], "add is green");
+        let paint = preview(ToolKind::Paint, [4.5; 3], 2.0, material);
+        assert_eq!(paint.shape, Shape::Sphere);
+        assert_eq!(
+            paint.color,
+            material.map(|c| srgb_to_linear(c as f32 / 255.0))
+        );
+        for kind in [ToolKind::Fill, ToolKind::Copy] {
+            assert_eq!(preview(kind, [0.5; 3], 1.0, material).shape, Shape::Cube);
+        }
+        // The region is the tool's: the voxels the edit would touch.
+        let ball = preview(ToolKind::SphereAdd, [4.5; 3], 2.0, material);
+        assert!(ball.contains([4, 4, 4]) && ball.contains([6, 4, 4]));
+        assert!(
+            !ball.contains([6, 6, 4]),
+            "corner of the cube, outside the ball"
+        );
+        let cube = preview(ToolKind::CubeAdd, [4.5; 3], 2.0, material);
+        assert!(cube.contains([6, 6, 6]) && !cube.contains([7, 4, 4]));
     }
 }

@@ -1,5 +1,6 @@
-//! The editor's Settings and Profiler panels: the table variant switched at run time (the hash
-//! DAG rebuilt from the current scene), render scale, vsync; per-pass GPU times of the last
+//! The editor's Settings and Profiler panels: render mode (raster or path tracing, its
+//! bounces and samples), the table variant switched at run time (the hash DAG rebuilt from the
+//! current scene), render scale, vsync; per-pass GPU times of the last
 //! frame, a rolling graph of frame times, the last edit's kernels, and Chrome traces of the next
 //! N frames (`Profiler::write_chrome_trace`, as `--trace` of `voxdag render` / `edit`).
 
@@ -15,7 +16,7 @@ use voxdag::hash::HashVariant;
 use voxdag::render::gpu::GpuRenderer;
 use voxdag::render::hash_scene::buckets_for;
 
-use super::{pack_colour, Document, Running};
+use super::{pack_colour, Document, RenderMode, Running};
 use crate::edit::TableArg;
 use crate::view::MOTION_TARGET_MS;
 use crate::window::MIN_SCALE;
@@ -113,6 +114,7 @@ impl Document {
         // Frames in flight read the old tables and binding.
         ctx.wait_idle()?;
         self.scene = scene;
+        self.binding = super::next_binding();
         self.dag = dag;
         self.undo = 0;
         self.redo = 0;
@@ -124,8 +126,26 @@ impl Document {
 }
 
 impl Running {
-    /// Settings: table variant, render scale, dynamic scale, vsync.
+    /// Settings: render mode and path-tracing settings, table variant, render scale, dynamic
+    /// scale, vsync.
     pub(super) fn settings_panel(&mut self, ui: &mut egui::Ui, extent: [u32; 2]) {
+        ui.horizontal(|ui| {
+            ui.label("render mode (P)");
+            ui.radio_value(&mut self.render_mode, RenderMode::Raster, "raster");
+            ui.radio_value(&mut self.render_mode, RenderMode::Pt, "path tracing");
+        });
+        ui.add(egui::Slider::new(&mut self.bounces, 0..=16).text("bounces"));
+        ui.add(egui::Slider::new(&mut self.spp, 1..=16).text("samples per frame"));
+        ui.add(
+            egui::DragValue::new(&mut self.max_samples)
+                .range(1..=1 << 16)
+                .prefix("stop at ")
+                .suffix(" samples"),
+        );
+        if self.render_mode == RenderMode::Pt {
+            ui.label(format!("{} samples accumulated", self.pt_samples()));
+        }
+        ui.separator();
         let current = self.doc.dag.config().variant;
         egui::ComboBox::from_label("hash table variant (T)")
             .selected_text(current.name())

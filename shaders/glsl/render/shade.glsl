@@ -12,6 +12,8 @@
 
 #include "shared/render_params.h"
 #include "render/traverse.glsl"
+#include "render/preview.glsl"
+#include "render/srgb.glsl"
 
 // Constants of engine/render/cpu.rs.
 const float SHADE_AMBIENT = 0.25;
@@ -21,20 +23,6 @@ const float SHADE_GREY = 0.6;
 const vec3 SHADE_SKY_HORIZON = vec3(0.75, 0.82, 0.9);
 const vec3 SHADE_SKY_ZENITH = vec3(0.22, 0.42, 0.78);
 const vec3 SHADE_SKY_GROUND = vec3(0.32, 0.3, 0.28);
-
-float shade_srgb_to_linear(float c) {
-    return c <= 0.04045 ? c / 12.92 : pow((c + 0.055) / 1.055, 2.4);
-}
-
-float shade_linear_to_srgb(float l) {
-    l = clamp(l, 0.0, 1.0);
-    return l <= 0.0031308 ? l * 12.92 : 1.055 * pow(l, 1.0 / 2.4) - 0.055;
-}
-
-vec4 shade_encode(vec3 linear_rgb) {
-    return vec4(shade_linear_to_srgb(linear_rgb.r), shade_linear_to_srgb(linear_rgb.g),
-                shade_linear_to_srgb(linear_rgb.b), 1.0);
-}
 
 // Linear sky colour along `dir` (not necessarily normalised).
 vec3 shade_sky(vec3 dir) {
@@ -85,7 +73,11 @@ vec4 shade_pixel_hit(uvec2 pixel, RenderParams p, out bool hit, out Hit h) {
         }
     }
     precise float light_sum = SHADE_AMBIENT * SHADE_AMBIENT_AXIS[axis] + direct;
-    return shade_encode(albedo * light_sum);
+    vec3 c = albedo * light_sum;
+    if (p.preview_shape != 0u) {
+        c = preview_tint(c, h.voxel, p.preview, p.preview_color, p.preview_shape);
+    }
+    return shade_encode(c);
 }
 
 vec4 shade_pixel(uvec2 pixel, RenderParams p, out bool hit) {
