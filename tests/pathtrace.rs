@@ -291,12 +291,24 @@ fn megakernel_formats_match_svdag32() {
         has_translated_pointer(&sat),
         "S+A+T should use translations"
     );
+    // The full encoding: the Huffman and pointer-table decoders on the translated path.
+    let full = TsvdagOptions {
+        lut: true,
+        huffman: true,
+    };
+    let sat_full =
+        TsvdagEncoding::build_with_translations(&dag, TransformSet::All, true, full).unwrap();
+    assert!(
+        has_translated_pointer(&sat_full),
+        "S+A+T (full) should use translations"
+    );
     let encodings = [
         (
             "ssvdag",
             EncodedDag::Ssvdag(SsvdagEncoding::build(&dag).unwrap()),
         ),
         ("tsvdag sat", EncodedDag::Tsvdag(sat)),
+        ("tsvdag sat lut+huffman", EncodedDag::Tsvdag(sat_full)),
     ];
     for (name, encoded) in &encodings {
         let scene = renderer.upload_encoded(encoded, colors).unwrap();
