@@ -741,6 +741,9 @@ impl GpuHashDag {
             }
             let mut cmd = ctx.begin_commands("edit traverse")?;
             if level == top {
+                // A failed attempt before may have counted missing handles (its resolves ran
+                // with its inserts).
+                cmd.fill_buffer(&self.merge_errors, 0);
                 cmd.upload(param_buf, 0, params)?;
                 cmd.upload(&carry, 0, &[0u32, 0, 0, root_value][..])?;
                 cmd.upload(&blocks, 0, &blocks_init)?;
