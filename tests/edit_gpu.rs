@@ -836,6 +836,100 @@ fn fixed_tool_cases_match_the_cpu_editor_and_brute_force() {
     assert_clean(&ctx);
 }
 
+/// The edit's traversal runs its levels in one submission and its merge waits once per level
+/// (the size counters of the next level are read with the table passes of this one), and the
+/// auto-GC check reads no status (the pool use read with the previous root): one wait per
+/// level with temporary nodes, plus the traversal's, the first level's counters and the
+/// root's. Printed for docs/editing-gpu.md.
+#[test]
+fn an_edit_waits_once_per_level_plus_three() {
+    let ctx = common::gpu();
+    let dag = Svdag::from_voxels(&synthetic(64, 9)).unwrap();
+    let mut hd = GpuHashDag::load(
+        &ctx,
+        &GpuHashDagConfig::new(HashVariant::TicketBoard, 1024),
+        &dag,
+        None,
+    )
+    .unwrap();
+    for tool in [
+        shaped(Shape::Sphere, [40.0, 30.0, 31.0], 12.0, false),
+        shaped(Shape::Sphere, [40.0, 30.0, 31.0], 12.0, true),
+        shaped(Shape::Cube, [20.0, 40.0, 10.0], 6.0, false),
+    ] {
+        let before = ctx.stats();
+        let report = hd.edit(&tool, None).unwrap();
+        let stats = ctx.stats().since(before);
+        let levels = report.temporary_nodes.iter().filter(|&&n| n > 0).count() as u64;
+        println!(
+            "host waits: {} and submissions: {} for {levels} levels {:?}",
+            stats.host_waits, stats.submissions, report.items
+        );
+        assert_eq!(report.retried_rounds, 0);
+        assert!(
+            stats.host_waits <= levels + 3,
+            "{} host waits for {levels} levels",
+            stats.host_waits
+        );
+    }
+    drop(hd);
+    assert_clean(&ctx);
+}
+
+/// `edit_cube_all_outside` of `edit/common.glsl` in f32, the test the traverse pass
+/// subdivides by.
+fn all_outside(p: [u32; 3], side: u32, c: [f32; 3], r: f32, cube: bool) -> bool {
+    let r = r + 1.0;
+    let lo = p.map(|x| x as f32);
+    let hi = p.map(|x| (x + side) as f32);
+    if cube {
+        return (0..3).any(|a| hi[a] < c[a] - r || lo[a] > c[a] + r);
+    }
+    let d: f32 = (0..3)
+        .map(|a| (lo[a] - c[a]).max(c[a] - hi[a]).max(0.0))
+        .map(|d| d * d)
+        .sum();
+    d > r * r
+}
+
+/// Every cube the traverse pass can subdivide is counted by the bound, for spheres and
+/// cubes at assorted positions (inside, on the border, outside the grid) and radii.
+#[test]
+fn traversal_bounds_cover_every_cube_not_outside_the_region() {
+    let root_level = 4; // 64^3
+    let n = 4u32 << root_level;
+    let mut seed = 7u32;
+    let mut next = || {
+        seed ^= seed << 13;
+        seed ^= seed >> 17;
+        seed ^= seed << 5;
+        seed
+    };
+    for case in 0..200 {
+        let c = [0; 3].map(|_| (next() % (4 * (n + 16))) as f32 / 4.0 - 8.0);
+        let r = (next() % 320) as f32 / 8.0 + 0.125;
+        let cube = case % 2 == 0;
+        let bounds = voxdag::edit::gpu::traversal_bounds(c, r, root_level);
+        for (level, &bound) in bounds.iter().enumerate() {
+            let side = 4u32 << level;
+            let cells = n / side;
+            let mut reached = 0u64;
+            for z in 0..cells {
+                for y in 0..cells {
+                    for x in 0..cells {
+                        let p = [x, y, z].map(|k| k * side);
+                        reached += !all_outside(p, side, c, r, cube) as u64;
+                    }
+                }
+            }
+            assert!(
+                reached <= bound,
+                "level {level}: {reached} cubes > bound {bound} (centre {c:?}, radius {r})"
+            );
+        }
+    }
+}
+
 /// Host waits of one sphere edit on a 64^3 scene, per level touched: one for the traversal
 /// count, one for the size counters, one for the fused dedup + search + mark + insert of every
 /// size (batches of at most 1024 items); plus the auto-GC pool check and the root's readback

@@ -27,7 +27,7 @@ use super::tool::{self, CopyRegion, Shape, Tool};
 use crate::dag::{DagError, Svdag};
 use crate::gpu::{
     shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError,
-    MemLocation, Profiler,
+    MemLocation, Profiler, Readback,
 };
 use crate::hash::dedup::{DedupError, DedupResult, GpuDedup};
 use crate::hash::layout::SLABS_PER_SUPER_BLOCK;
@@ -61,8 +61,15 @@ const COUNTERS: usize = TABLE_COUNT as usize;
 /// Invocations per workgroup of every edit pass.
 const GROUP: u32 = 64;
 /// Largest batch whose dedup gets a pool that cannot run out (2 x count slabs), so that its
-/// dedup, search, mark and insert share one submission (`merge_level`).
+/// dedup, search, mark and insert share one submission (`merge_items`).
 const FUSED_DEDUP_MAX: u32 = 1024;
+
+/// Bytes of traversal buffers sized by the tool's bounds that one submission may hold
+/// (`GpuHashDag::traverse`); beyond, the count of the last level is read back first.
+const TRAVERSAL_BUDGET: u64 = 64 << 20;
+
+/// The temporary SVO of a traversal: nodes / leaves per level, entries per level.
+type Traversal = (Vec<Option<Buffer>>, Vec<u32>);
 
 /// Errors of the GPU hash DAG.
 #[derive(Debug, thiserror::Error)]
@@ -194,6 +201,23 @@ struct MergeLevel<'b> {
     results: &'b Buffer,
     /// Result index per node (load: the node's svdag word offset).
     result_index: Option<&'b Buffer>,
+}
+
+/// The buffers of one level's merge (`GpuHashDag::merge_buffers`).
+struct MergeBuffers {
+    /// Per size: the level's items, their dedup representatives, their handles.
+    items: Vec<Buffer>,
+    reps: Vec<Buffer>,
+    handles: Vec<Buffer>,
+    /// One slot per node (read by the passes through `addresses`).
+    _slots: Buffer,
+    /// Items per size (build_items' counters).
+    counters: Buffer,
+    /// The per-level address buffer and its contents (`EDIT_LEVEL_*`).
+    address_buf: Buffer,
+    addresses: [u64; LEVEL_ADDRESSES],
+    /// Push constants of build_items and resolve.
+    push: EditPush,
 }
 
 impl GpuHashDag {
@@ -339,15 +363,15 @@ impl GpuHashDag {
                 Some(nodes) => nodes.address(),
                 None => words.address() + 4 * range.start as u64,
             };
-            hd.merge_level(
-                &MergeLevel {
+            hd.merge(
+                &[MergeLevel {
                     input: level_input,
                     count,
                     leaves: level == 0,
                     below: results.address(),
                     results: &results,
                     result_index: Some(&offset_buf),
-                },
+                }],
                 profiler.as_deref_mut(),
             )?;
         }
@@ -411,6 +435,8 @@ impl GpuHashDag {
     /// The table of `words`-word items, mutable: for loaders that insert canonical items
     /// themselves (items of a CPU hash DAG with materials, say) and render a root they built.
     pub fn table_mut(&mut self, words: u32) -> Option<&mut GpuHashTable> {
+        // Inserts through it are not seen by the kept pool use.
+        self.gc_state.pool_use = None;
         self.tables
             .get_mut(words.checked_sub(MIN_ITEM_WORDS)? as usize)
     }
@@ -467,6 +493,8 @@ impl GpuHashDag {
         mut profiler: Option<&mut Profiler>,
     ) -> Result<EditReport, GpuDagError> {
         let ctx = Arc::clone(&self.ctx);
+        // Set again by the root's readback; an edit that fails may leave inserts unread.
+        let pool_use = self.gc_state.pool_use.take();
         let materials = self.with_materials;
         let material = |m: u8| if materials { m as u32 } else { 0 };
         let root_value = value_of_root(self.root());
@@ -531,6 +559,7 @@ impl GpuHashDag {
         let levels = self.root_level as usize + 1;
         let Some((kind, shape, center, radius, material)) = setup else {
             // The edit changes no voxel: the new root is the current one.
+            self.gc_state.pool_use = pool_use;
             self.push_root(self.root());
             return Ok(EditReport {
                 temporary_nodes: vec![0; levels],
@@ -568,122 +597,217 @@ impl GpuHashDag {
             items: vec![0; levels],
             retried_rounds: 0,
         };
-        // Top-down: entries[l] = the level-l cubes the tool may change; temp[l] = their
-        // temporary nodes (inner levels) or leaves (level 0).
-        let mut entries: Vec<Option<Buffer>> = (0..levels).map(|_| None).collect();
-        let mut temp: Vec<Option<Buffer>> = (0..levels).map(|_| None).collect();
-        let first = ctx.create_buffer("edit entries", 16, MemLocation::GpuOnly)?;
-        let first_entry = [0u32, 0, 0, root_value];
-        report.temporary_nodes[levels - 1] = 1;
-        let counter = ctx.create_buffer("edit traverse counter", 4, MemLocation::GpuOnly)?;
-        for level in (0..levels).rev() {
-            let count = report.temporary_nodes[level];
-            if count == 0 {
-                break;
-            }
-            let input = match &entries[level] {
-                Some(next) => next,
-                None => &first,
+        // Top-down: temp[l] = the temporary nodes (inner levels) or leaves (level 0) of the
+        // level-l cubes the tool may change. Levels share a submission while the buffers sized
+        // by the tool's bounds stay small; a bound that turns out wrong (checked after the
+        // submission) makes the traversal run again one level per submission.
+        let bounds = traversal_bounds(center, radius, self.root_level);
+        let traversal = (params.as_slice(), &param_buf, root_value);
+        let (temp, counts) =
+            match self.traverse(&base_push, traversal, Some(&bounds), &mut profiler)? {
+                Some(done) => done,
+                None => self
+                    .traverse(&base_push, traversal, None, &mut profiler)?
+                    .ok_or_else(|| {
+                        GpuDagError::Corrupt("traversal overflowed its exact capacity".into())
+                    })?,
             };
-            if level == 0 {
-                let record = if materials { 40 } else { 8 };
-                let leaves = ctx.create_buffer(
-                    "edit temporary leaves",
-                    record * count as u64,
-                    MemLocation::GpuOnly,
-                )?;
-                let mut cmd = ctx.begin_commands("edit leaves")?;
-                let push = EditPush {
-                    src: input.address(),
-                    dst: leaves.address(),
-                    count,
-                    ..base_push
-                };
-                cmd.begin_pass(&mut profiler, "edit leaves");
-                cmd.dispatch(&self.leaves, groups(count), bytemuck::bytes_of(&push), None)?;
-                cmd.end_pass(&mut profiler);
-                cmd.submit_async()?;
-                temp[0] = Some(leaves);
-                break;
-            }
-            let capacity = count.checked_mul(8).ok_or_else(|| {
-                GpuDagError::Invalid("temporary SVO larger than 2^32 entries".into())
-            })?;
-            let nodes = ctx.create_buffer(
-                "edit temporary nodes",
-                32 * count as u64,
-                MemLocation::GpuOnly,
-            )?;
-            let next =
-                ctx.create_buffer("edit entries", 16 * capacity as u64, MemLocation::GpuOnly)?;
-            let mut cmd = ctx.begin_commands("edit traverse")?;
-            if level == levels - 1 {
-                cmd.upload(&param_buf, 0, &params[..])?;
-                cmd.upload(&first, 0, &first_entry[..])?;
-            }
-            cmd.fill_buffer(&counter, 0);
-            let push = EditPush {
-                src: input.address(),
-                dst: nodes.address(),
-                dst2: next.address(),
-                counters: counter.address(),
-                count,
-                level: level as u32,
-                capacity,
-                ..base_push
-            };
-            cmd.begin_pass(&mut profiler, "edit traverse");
-            cmd.dispatch(
-                &self.traverse,
-                groups(count),
-                bytemuck::bytes_of(&push),
-                None,
-            )?;
-            cmd.end_pass(&mut profiler);
-            cmd.barrier();
-            let back = cmd.readback::<u32>(&counter, 0, 1)?;
-            cmd.submit_async()?;
-            let next_count = back.read()?[0];
-            if next_count > capacity || next_count >= 1 << 28 {
-                return Err(GpuDagError::Corrupt(format!(
-                    "traversal of level {level} made {next_count} entries (room for {capacity})"
-                )));
-            }
-            report.temporary_nodes[level - 1] = next_count;
-            entries[level - 1] = Some(next);
-            temp[level] = Some(nodes);
-        }
+        report.temporary_nodes = counts;
         // Bottom-up merge of the temporary SVO into the tables.
-        let mut below: Option<Buffer> = None;
+        let results = report
+            .temporary_nodes
+            .iter()
+            .map(|&n| ctx.create_buffer("edit results", 4 * n.max(1) as u64, MemLocation::GpuOnly))
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut merge_levels = Vec::new();
         for (level, input) in temp.iter().enumerate() {
-            let count = report.temporary_nodes[level];
             let Some(input) = input.as_ref() else {
                 continue;
             };
-            let results =
-                ctx.create_buffer("edit results", 4 * count as u64, MemLocation::GpuOnly)?;
-            let (items, retried) = self.merge_level(
-                &MergeLevel {
-                    input: input.address(),
-                    count,
-                    leaves: level == 0,
-                    below: below.as_ref().map_or(0, |b| b.address()),
-                    results: &results,
-                    result_index: None,
+            merge_levels.push(MergeLevel {
+                input: input.address(),
+                count: report.temporary_nodes[level],
+                leaves: level == 0,
+                below: match level {
+                    0 => 0,
+                    _ => results[level - 1].address(),
                 },
-                profiler.as_deref_mut(),
-            )?;
-            report.items[level] = items;
-            report.retried_rounds += retried;
-            below = Some(results);
+                results: &results[level],
+                result_index: None,
+            });
         }
-        let results = below.expect("the root level is always merged");
-        let root = self.read_root(&results)?;
+        let first = levels - merge_levels.len();
+        for (k, (items, retried)) in self
+            .merge(&merge_levels, profiler.as_deref_mut())?
+            .into_iter()
+            .enumerate()
+        {
+            report.items[first + k] = items;
+            report.retried_rounds += retried;
+        }
+        let root = self.read_root(&results[levels - 1])?;
         if let Some(p) = profiler {
             p.resolve()?;
         }
         self.push_root(root);
         Ok(report)
+    }
+
+    /// The top-down traversal of an edit: from the root entry (`root_value`, uploaded with
+    /// the tool parameters in the first submission) level by level down to the leaves. Every
+    /// pass reads its record count from the level's block `[count, x, 1, 1]` in one GPU buffer
+    /// (`count_at`) and is dispatched indirectly from it; the traverse pass of the level above
+    /// wrote it. Consecutive levels share one submission while their buffers, sized by
+    /// `bounds` (entries per level, [`traversal_bounds`]), fit [`TRAVERSAL_BUDGET`] bytes; the
+    /// count of the last level of a submission is read back and sizes the next (at most 8 x).
+    /// `bounds == None`: one level per submission, exact capacities. Returns the temporary
+    /// nodes / leaves per level (None where a level has no entry) and the entries per level,
+    /// or None when a level made more entries than its bound.
+    fn traverse(
+        &self,
+        base: &EditPush,
+        (params, param_buf, root_value): (&[u32], &Buffer, u32),
+        bounds: Option<&[u64]>,
+        profiler: &mut Option<&mut Profiler>,
+    ) -> Result<Option<Traversal>, GpuDagError> {
+        let ctx = &self.ctx;
+        let levels = self.root_level as usize + 1;
+        let top = levels - 1;
+        let record = if self.with_materials { 40 } else { 8 };
+        // Capacity of the entries the traverse pass of a level with `cap` entries appends.
+        let next_cap = |level: usize, cap: u64| match bounds {
+            Some(b) => b[level - 1].min(8 * cap),
+            None => 8 * cap,
+        };
+        let cost = |level: usize, cap: u64| match level {
+            0 => record * cap,
+            _ => 32 * cap + 16 * next_cap(level, cap),
+        };
+        let mut blocks_init = [0u32, 0, 1, 1].repeat(levels);
+        blocks_init[4 * top..4 * top + 2].copy_from_slice(&[1, 1]);
+        let blocks = ctx.create_buffer(
+            "edit traverse counts",
+            16 * levels as u64,
+            MemLocation::GpuOnly,
+        )?;
+        let block = |level: usize| blocks.address() + 16 * level as u64;
+        let mut carry = ctx.create_buffer("edit entries", 16, MemLocation::GpuOnly)?;
+        let mut temp: Vec<Option<Buffer>> = (0..levels).map(|_| None).collect();
+        let mut counts = vec![0u32; levels];
+        counts[top] = 1;
+        let mut level = top;
+        loop {
+            // This submission's levels and capacities: the first one's count is known.
+            let mut segment = vec![(level, counts[level] as u64)];
+            let mut bytes = cost(level, counts[level] as u64);
+            while let Some(&(l, cap)) = segment.last() {
+                if l == 0 || bounds.is_none() {
+                    break;
+                }
+                let next = next_cap(l, cap);
+                if bytes + cost(l - 1, next) > TRAVERSAL_BUDGET {
+                    break;
+                }
+                bytes += cost(l - 1, next);
+                segment.push((l - 1, next));
+            }
+            // Buffers first (the recording borrows them): per level its nodes or leaves, and
+            // for inner levels the next level's entries.
+            let mut buffers = Vec::new();
+            for &(l, cap) in &segment {
+                if l == 0 {
+                    let leaves = ctx.create_buffer(
+                        "edit temporary leaves",
+                        record * cap.max(1),
+                        MemLocation::GpuOnly,
+                    )?;
+                    buffers.push((leaves, None));
+                    continue;
+                }
+                let next = next_cap(l, cap);
+                if next > u32::MAX as u64 {
+                    return Err(GpuDagError::Invalid(
+                        "temporary SVO larger than 2^32 entries".into(),
+                    ));
+                }
+                let nodes = ctx.create_buffer(
+                    "edit temporary nodes",
+                    32 * cap.max(1),
+                    MemLocation::GpuOnly,
+                )?;
+                let entries =
+                    ctx.create_buffer("edit entries", 16 * next.max(1), MemLocation::GpuOnly)?;
+                buffers.push((nodes, Some(entries)));
+            }
+            let mut cmd = ctx.begin_commands("edit traverse")?;
+            if level == top {
+                // A failed attempt before may have counted missing handles (its resolves ran
+                // with its inserts).
+                cmd.fill_buffer(&self.merge_errors, 0);
+                cmd.upload(param_buf, 0, params)?;
+                cmd.upload(&carry, 0, &[0u32, 0, 0, root_value][..])?;
+                cmd.upload(&blocks, 0, &blocks_init)?;
+            }
+            let mut input = &carry;
+            for (&(l, cap), (out, next)) in segment.iter().zip(&buffers) {
+                let mut push = EditPush {
+                    src: input.address(),
+                    dst: out.address(),
+                    count_at: block(l),
+                    count: cap as u32,
+                    level: l as u32,
+                    ..*base
+                };
+                let (pipeline, name) = match next {
+                    Some(next) => {
+                        push.dst2 = next.address();
+                        push.counters = block(l - 1);
+                        push.capacity = next_cap(l, cap) as u32;
+                        input = next;
+                        (&self.traverse, "edit traverse")
+                    }
+                    None => (&self.leaves, "edit leaves"),
+                };
+                cmd.begin_pass(profiler, name);
+                cmd.dispatch_indirect(
+                    pipeline,
+                    &blocks,
+                    16 * l as u64 + 4,
+                    bytemuck::bytes_of(&push),
+                    None,
+                )?;
+                cmd.end_pass(profiler);
+                cmd.barrier();
+            }
+            let back = cmd.readback::<[u32; 4]>(&blocks, 0, levels)?;
+            cmd.submit_async()?;
+            let made = back.read()?;
+            let mut last = 0;
+            for (&(l, cap), (out, next)) in segment.iter().zip(buffers) {
+                if counts[l] > 0 {
+                    temp[l] = Some(out);
+                }
+                if let Some(next) = next {
+                    let n = made[l - 1][0];
+                    if n as u64 > next_cap(l, cap) || n >= 1 << 28 {
+                        if bounds.is_some() && n < 1 << 28 {
+                            return Ok(None);
+                        }
+                        return Err(GpuDagError::Corrupt(format!(
+                            "traversal of level {l} made {n} entries (room for {})",
+                            next_cap(l, cap)
+                        )));
+                    }
+                    counts[l - 1] = n;
+                    carry = next;
+                }
+                last = l;
+            }
+            if last == 0 || counts[last - 1] == 0 {
+                return Ok(Some((temp, counts)));
+            }
+            level = last - 1;
+        }
     }
 
     /// The fill's flood on the GPU (`tool.rs` `FillSet`): fills the box fields of `params`,
@@ -791,12 +915,18 @@ impl GpuHashDag {
         Ok(Some(flooded))
     }
 
-    /// Reads the root value a bottom-up merge left in `results[0]` and the merges' missing
-    /// handle count in one submission (one wait), and clears the count for the next merge.
-    fn read_root(&self, results: &Buffer) -> Result<Root, GpuDagError> {
+    /// Reads the root value a bottom-up merge left in `results[0]`, the merges' missing
+    /// handle count and the tables' pool use (kept for the next edit's auto-GC check) in one
+    /// submission (one wait), and clears the count for the next merge.
+    fn read_root(&mut self, results: &Buffer) -> Result<Root, GpuDagError> {
         let mut cmd = self.ctx.begin_commands("hash dag root")?;
         let root = cmd.readback::<u32>(results, 0, 1)?;
         let missing = cmd.readback::<u32>(&self.merge_errors, 0, 1)?;
+        let statuses = self
+            .tables
+            .iter()
+            .map(|t| t.record_status(&mut cmd))
+            .collect::<Result<Vec<_>, _>>()?;
         cmd.barrier();
         cmd.fill_buffer(&self.merge_errors, 0);
         cmd.submit_async()?;
@@ -806,7 +936,14 @@ impl GpuHashDag {
                 "{missing} nodes without a handle after the insert"
             )));
         }
-        root_from_value(root.read()?[0])
+        let root = root_from_value(root.read()?[0])?;
+        self.gc_state.pool_use = Some(
+            statuses
+                .into_iter()
+                .map(|s| Ok(s.read()?[0].allocated_slabs as u64))
+                .collect::<Result<_, GpuError>>()?,
+        );
+        Ok(root)
     }
 
     /// Makes `iota` hold at least `0..n` (uploaded only when it grows).
@@ -820,46 +957,46 @@ impl GpuHashDag {
         Ok(())
     }
 
-    /// Records the mark pass and the insert round of one size's batch (`s` = words - 2).
-    #[allow(clippy::too_many_arguments)]
+    /// Records the mark pass of every size of a level (one dispatch: sizes with more than one
+    /// item, counts read from the level's counters on the GPU) and the insert round of each
+    /// size in `sizes`.
     fn record_mark_insert<'a>(
         &'a self,
         cmd: &mut Commands<'a>,
-        s: usize,
-        count: u32,
-        reps: &'a Buffer,
-        items: &'a Buffer,
-        handles: &'a Buffer,
+        b: &'a MergeBuffers,
+        counts: &[u32],
+        sizes: &[usize],
         profiler: &mut Option<&mut Profiler>,
-    ) -> Result<PendingInsert, GpuDagError> {
-        if count > 1 {
+    ) -> Result<Vec<PendingInsert>, GpuDagError> {
+        let largest = sizes.iter().map(|&s| counts[s]).max().unwrap_or(0);
+        if largest > 1 {
             let mark = EditPush {
-                src: reps.address(),
-                dst: handles.address(),
-                count,
+                tables: b.address_buf.address(),
+                counters: b.counters.address(),
+                count: largest,
                 ..EditPush::default()
             };
             cmd.begin_pass(profiler, "edit mark");
-            cmd.dispatch(&self.mark, groups(count), bytemuck::bytes_of(&mark), None)?;
+            cmd.dispatch(&self.mark, groups(largest), bytemuck::bytes_of(&mark), None)?;
             cmd.end_pass(profiler);
             cmd.barrier();
         }
-        Ok(self.tables[s].record_insert_round(
-            cmd,
-            items,
-            handles,
-            count,
-            profiler.as_deref_mut(),
-        )?)
+        sizes
+            .iter()
+            .map(|&s| {
+                Ok(self.tables[s].record_insert_round(
+                    cmd,
+                    &b.items[s],
+                    &b.handles[s],
+                    counts[s],
+                    profiler.as_deref_mut(),
+                )?)
+            })
+            .collect()
     }
 
-    /// Merges one level (see the module docs); returns the items built and the extra insert
-    /// rounds run.
-    fn merge_level(
-        &mut self,
-        level: &MergeLevel<'_>,
-        mut profiler: Option<&mut Profiler>,
-    ) -> Result<(u32, u32), GpuDagError> {
+    /// The buffers of one level's merge (sized by its node count) and its push constants.
+    fn merge_buffers(&self, level: &MergeLevel<'_>) -> Result<MergeBuffers, GpuDagError> {
         let ctx = Arc::clone(&self.ctx);
         let n = level.count.max(1) as u64;
         let mut items = Vec::new();
@@ -919,167 +1056,245 @@ impl GpuHashDag {
             variant: self.config.variant.id(),
             ..EditPush::default()
         };
-        let counts = {
-            let mut cmd = ctx.begin_commands("edit build items")?;
-            cmd.upload(&address_buf, 0, &addresses)?;
-            cmd.fill_buffer(&counters, 0);
-            cmd.begin_pass(&mut profiler, "edit build items");
-            cmd.dispatch(
-                &self.build_items,
-                groups(level.count),
-                bytemuck::bytes_of(&push),
-                None,
-            )?;
-            cmd.end_pass(&mut profiler);
-            cmd.barrier();
-            let back = cmd.readback::<u32>(&counters, 0, COUNTERS)?;
-            cmd.submit_async()?;
-            back.read()?
+        Ok(MergeBuffers {
+            items,
+            reps,
+            handles,
+            _slots: slots,
+            counters,
+            address_buf,
+            addresses,
+            push,
+        })
+    }
+
+    /// Records `build_items` of one level and the readback of its nine size counters.
+    fn record_build_items<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        b: &'a MergeBuffers,
+        profiler: &mut Option<&mut Profiler>,
+    ) -> Result<Readback<u32>, GpuDagError> {
+        cmd.upload(&b.address_buf, 0, &b.addresses)?;
+        cmd.fill_buffer(&b.counters, 0);
+        cmd.begin_pass(profiler, "edit build items");
+        cmd.dispatch(
+            &self.build_items,
+            groups(b.push.count),
+            bytemuck::bytes_of(&b.push),
+            None,
+        )?;
+        cmd.end_pass(profiler);
+        cmd.barrier();
+        Ok(cmd.readback::<u32>(&b.counters, 0, COUNTERS)?)
+    }
+
+    /// Records the level's `resolve` (missing handles counted in `merge_errors`), then, when
+    /// there is a next level, its `build_items` with the counters' readback.
+    fn record_resolve_next<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        b: &'a MergeBuffers,
+        next: Option<&'a MergeBuffers>,
+        profiler: &mut Option<&mut Profiler>,
+    ) -> Result<Option<Readback<u32>>, GpuDagError> {
+        let resolve = EditPush {
+            counters: self.merge_errors.address(),
+            ..b.push
         };
-        let total: u32 = counts.iter().sum();
+        cmd.begin_pass(profiler, "edit resolve");
+        cmd.dispatch(
+            &self.resolve,
+            groups(b.push.count),
+            bytemuck::bytes_of(&resolve),
+            None,
+        )?;
+        cmd.end_pass(profiler);
+        cmd.barrier();
+        next.map(|n| self.record_build_items(cmd, n, profiler))
+            .transpose()
+    }
+
+    /// Merges `levels` bottom-up, each on the results of the one before (see the module
+    /// docs); returns per level the items built and the extra insert rounds run. The host waits
+    /// once per level for its size counters and, where it has items, once for the table
+    /// passes: the submission that ends with a level's inserts also holds its `resolve` and the
+    /// next level's `build_items`, whose counters the wait reads.
+    fn merge(
+        &mut self,
+        levels: &[MergeLevel<'_>],
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<Vec<(u32, u32)>, GpuDagError> {
+        let mut out = Vec::new();
+        let Some(first) = levels.first() else {
+            return Ok(out);
+        };
+        let mut current = self.merge_buffers(first)?;
+        let mut cmd = self.ctx.begin_commands("edit build items")?;
+        let mut counts = self.record_build_items(&mut cmd, &current, &mut profiler)?;
+        cmd.submit_async()?;
+        for at in 0..levels.len() {
+            let level_counts = counts.read()?;
+            let next = match levels.get(at + 1) {
+                Some(level) => Some(self.merge_buffers(level)?),
+                None => None,
+            };
+            let total: u32 = level_counts.iter().sum();
+            let (retried, next_counts) = if total > 0 {
+                self.merge_items(&current, &level_counts, next.as_ref(), &mut profiler)?
+            } else {
+                // Nothing to insert (every node uniform, written by build_items).
+                let mut cmd = self.ctx.begin_commands("edit build items")?;
+                let back = next
+                    .as_ref()
+                    .map(|n| self.record_build_items(&mut cmd, n, &mut profiler))
+                    .transpose()?;
+                cmd.submit_async()?;
+                (0, back)
+            };
+            out.push((total, retried));
+            match (next, next_counts) {
+                (Some(n), Some(c)) => {
+                    current = n;
+                    counts = c;
+                }
+                _ => break,
+            }
+        }
+        Ok(out)
+    }
+
+    /// The table passes of one level with items (`counts` per size), its resolve and the next
+    /// level's build_items; returns the extra insert rounds and the next level's counters.
+    fn merge_items(
+        &mut self,
+        b: &MergeBuffers,
+        counts: &[u32],
+        next: Option<&MergeBuffers>,
+        profiler: &mut Option<&mut Profiler>,
+    ) -> Result<(u32, Option<Readback<u32>>), GpuDagError> {
+        let ctx = Arc::clone(&self.ctx);
+        let (items, reps, handles) = (&b.items, &b.reps, &b.handles);
         let mut retried = 0;
-        if total > 0 {
-            let max = *counts.iter().max().unwrap_or(&0);
-            self.ensure_iota(max)?;
-            let values = self.iota.as_ref().expect("iota made above");
-            let sizes: Vec<usize> = (0..counts.len()).filter(|&s| counts[s] > 0).collect();
-            // A batch of one item is its own representative: no dedup, no mark.
-            let deduped: Vec<usize> = sizes.iter().copied().filter(|&s| counts[s] > 1).collect();
-            // Small batches get a dedup pool that cannot run out (2 x count slabs), so the
-            // dedup, search, mark and insert of every size share one submission and one wait.
-            let fused = deduped.iter().all(|&s| counts[s] <= FUSED_DEDUP_MAX);
-            let scratch = deduped
-                .iter()
-                .map(|&s| {
-                    let pool = fused.then(|| 2 * counts[s]);
-                    self.dedups[s].scratch(counts[s], pool)
-                })
-                .collect::<Result<Vec<_>, _>>()?;
-            if fused {
-                for &s in &sizes {
-                    if self.tables[s].config().grow_before_insert {
-                        self.tables[s].reserve(counts[s])?;
-                    }
-                }
-            }
-            // Dedup and search of every size (the search does not read the representatives),
-            // then in the same submission when fused the mark and insert round of every size.
-            let mut cmd = ctx.begin_commands("edit dedup and search")?;
-            let mut pending_dedup = Vec::new();
+        let max = *counts.iter().max().unwrap_or(&0);
+        self.ensure_iota(max)?;
+        let values = self.iota.as_ref().expect("iota made above");
+        let sizes: Vec<usize> = (0..counts.len()).filter(|&s| counts[s] > 0).collect();
+        // A batch of one item is its own representative: no dedup, no mark.
+        let deduped: Vec<usize> = sizes.iter().copied().filter(|&s| counts[s] > 1).collect();
+        // Small batches get a dedup pool that cannot run out (2 x count slabs), so the
+        // dedup, search, mark and insert of every size share one submission and one wait.
+        let fused = deduped.iter().all(|&s| counts[s] <= FUSED_DEDUP_MAX);
+        let scratch = deduped
+            .iter()
+            .map(|&s| {
+                let pool = fused.then(|| 2 * counts[s]);
+                self.dedups[s].scratch(counts[s], pool)
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        if fused {
             for &s in &sizes {
-                match deduped.iter().position(|&d| d == s) {
-                    Some(k) => {
-                        pending_dedup.push(self.dedups[s].record_dedup(
-                            &mut cmd,
-                            &items[s],
-                            values,
-                            counts[s],
-                            &reps[s],
-                            &scratch[k],
-                            profiler.as_deref_mut(),
-                        )?);
-                        cmd.barrier();
-                    }
-                    None => cmd.fill_buffer(&reps[s], 0),
+                if self.tables[s].config().grow_before_insert {
+                    self.tables[s].reserve(counts[s])?;
                 }
-                self.tables[s].record_search(
-                    &mut cmd,
-                    &items[s],
-                    &handles[s],
-                    counts[s],
-                    profiler.as_deref_mut(),
-                )?;
             }
-            let mut pending_insert = Vec::new();
-            if fused {
-                cmd.barrier();
-                for &s in &sizes {
-                    pending_insert.push(self.record_mark_insert(
+        }
+        // Dedup and search of every size (the search does not read the representatives),
+        // then in the same submission when fused the mark and insert round of every size.
+        let mut cmd = ctx.begin_commands("edit dedup and search")?;
+        let mut pending_dedup = Vec::new();
+        for &s in &sizes {
+            match deduped.iter().position(|&d| d == s) {
+                Some(k) => {
+                    pending_dedup.push(self.dedups[s].record_dedup(
                         &mut cmd,
-                        s,
-                        counts[s],
-                        &reps[s],
-                        &items[s],
-                        &handles[s],
-                        &mut profiler,
-                    )?);
-                }
-            }
-            cmd.submit_async()?;
-            for (pending, &s) in pending_dedup.into_iter().zip(&deduped) {
-                if let DedupResult::Retry { .. } =
-                    self.dedups[s].finish_dedup(pending, counts[s])?
-                {
-                    // Rare (never when fused: finish_dedup reports a fused pool running out as
-                    // an error): the overflow pool ran out; the batch runs again on its own,
-                    // before any representative is used.
-                    self.dedups[s].dedup_buffers(
                         &items[s],
                         values,
                         counts[s],
                         &reps[s],
+                        &scratch[k],
                         profiler.as_deref_mut(),
-                    )?;
-                }
-            }
-            if !fused {
-                for &s in &sizes {
-                    if self.tables[s].config().grow_before_insert {
-                        self.tables[s].reserve(counts[s])?;
-                    }
-                }
-                // One submission for the mark and the insert round of every size, one host
-                // wait (more only when a pool runs out: `finish_insert` grows it and runs more
-                // rounds).
-                let mut cmd = ctx.begin_commands("edit insert")?;
-                for &s in &sizes {
-                    pending_insert.push(self.record_mark_insert(
-                        &mut cmd,
-                        s,
-                        counts[s],
-                        &reps[s],
-                        &items[s],
-                        &handles[s],
-                        &mut profiler,
                     )?);
+                    cmd.barrier();
                 }
-                cmd.submit_async()?;
+                None => cmd.fill_buffer(&reps[s], 0),
             }
-            for (pending, &s) in pending_insert.into_iter().zip(&sizes) {
-                let report = self.tables[s].finish_insert(
-                    pending,
+            self.tables[s].record_search(
+                &mut cmd,
+                &items[s],
+                &handles[s],
+                counts[s],
+                profiler.as_deref_mut(),
+            )?;
+        }
+        let mut pending_insert = Vec::new();
+        let mut errors_before = None;
+        let mut next_counts = None;
+        if fused {
+            cmd.barrier();
+            pending_insert = self.record_mark_insert(&mut cmd, b, counts, &sizes, profiler)?;
+            errors_before = Some(cmd.readback::<u32>(&self.merge_errors, 0, 1)?);
+            next_counts = self.record_resolve_next(&mut cmd, b, next, profiler)?;
+        }
+        cmd.submit_async()?;
+        for (pending, &s) in pending_dedup.into_iter().zip(&deduped) {
+            if let DedupResult::Retry { .. } = self.dedups[s].finish_dedup(pending, counts[s])? {
+                // Rare (never when fused: finish_dedup reports a fused pool running out as
+                // an error): the overflow pool ran out; the batch runs again on its own,
+                // before any representative is used.
+                self.dedups[s].dedup_buffers(
                     &items[s],
-                    &handles[s],
+                    values,
                     counts[s],
+                    &reps[s],
                     profiler.as_deref_mut(),
                 )?;
-                retried += report.rounds - 1;
-                if report.invalid_items != 0 {
-                    return Err(GpuDagError::Corrupt(format!(
-                        "{} items of {} words rejected by the table layout",
-                        report.invalid_items,
-                        s as u32 + MIN_ITEM_WORDS
-                    )));
+            }
+        }
+        if !fused {
+            for &s in &sizes {
+                if self.tables[s].config().grow_before_insert {
+                    self.tables[s].reserve(counts[s])?;
                 }
             }
-            // Nodes left without a handle are counted in `merge_errors`, read with the root
-            // (`read_root`): no wait here.
-            let mut cmd = ctx.begin_commands("edit resolve")?;
-            let resolve = EditPush {
-                counters: self.merge_errors.address(),
-                ..push
-            };
-            cmd.begin_pass(&mut profiler, "edit resolve");
-            cmd.dispatch(
-                &self.resolve,
-                groups(level.count),
-                bytemuck::bytes_of(&resolve),
-                None,
-            )?;
-            cmd.end_pass(&mut profiler);
+            // One submission for the mark and the insert round of every size, one host
+            // wait (more only when a pool runs out: `finish_insert` grows it and runs more
+            // rounds).
+            let mut cmd = ctx.begin_commands("edit insert")?;
+            pending_insert = self.record_mark_insert(&mut cmd, b, counts, &sizes, profiler)?;
+            errors_before = Some(cmd.readback::<u32>(&self.merge_errors, 0, 1)?);
+            next_counts = self.record_resolve_next(&mut cmd, b, next, profiler)?;
             cmd.submit_async()?;
         }
-        Ok((total, retried))
+        for (pending, &s) in pending_insert.into_iter().zip(&sizes) {
+            let report = self.tables[s].finish_insert(
+                pending,
+                &items[s],
+                &handles[s],
+                counts[s],
+                profiler.as_deref_mut(),
+            )?;
+            retried += report.rounds - 1;
+            if report.invalid_items != 0 {
+                return Err(GpuDagError::Corrupt(format!(
+                    "{} items of {} words rejected by the table layout",
+                    report.invalid_items,
+                    s as u32 + MIN_ITEM_WORDS
+                )));
+            }
+        }
+        // Nodes left without a handle are counted in `merge_errors`, read with the root
+        // (`read_root`). When a pool ran out, the resolve recorded with the inserts saw
+        // the items of the extra rounds missing (they stay pending): the count goes back to
+        // its value before, and resolve and the next build_items run again.
+        let before = errors_before.expect("recorded with the inserts").read()?[0];
+        if retried > 0 {
+            let mut cmd = ctx.begin_commands("edit resolve")?;
+            cmd.fill_buffer(&self.merge_errors, before);
+            next_counts = self.record_resolve_next(&mut cmd, b, next, profiler)?;
+            cmd.submit_async()?;
+        }
+        Ok((retried, next_counts))
     }
 }
 
@@ -1096,6 +1311,34 @@ enum ToolKind {
 /// Workgroups for one invocation per record (grid-stride beyond 65 535 groups).
 fn groups(count: u32) -> [u32; 3] {
     [count.div_ceil(GROUP).clamp(1, 65_535), 1, 1]
+}
+
+/// Most entries the traversal can make per level (index = level): the level's cubes (side
+/// `4 << level`) that are not entirely outside the tool's region grown by the traverse pass's
+/// one-voxel margin (`edit_cube_all_outside`; one more voxel here for f32 rounding). A sphere
+/// is bounded by its box.
+pub fn traversal_bounds(center: [f32; 3], radius: f32, root_level: u32) -> Vec<u64> {
+    let n = 4u64 << root_level;
+    let r = radius as f64 + 2.0;
+    (0..=root_level)
+        .map(|level| {
+            let side = (4u64 << level) as f64;
+            let cells = (n >> (level + 2)) as f64;
+            center
+                .iter()
+                .map(|&c| {
+                    // Cube k is outside when (k + 1) * side < c - r or k * side > c + r.
+                    let lo = ((c as f64 - r) / side - 1.0).floor().max(0.0);
+                    let hi = ((c as f64 + r) / side).floor().min(cells - 1.0);
+                    if hi >= lo {
+                        (hi - lo) as u64 + 1
+                    } else {
+                        0
+                    }
+                })
+                .product()
+        })
+        .collect()
 }
 
 /// The child value of a root.

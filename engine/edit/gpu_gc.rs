@@ -86,6 +86,10 @@ pub struct GcState {
     collectors: Vec<GpuGarbageCollector>,
     /// Statistics of automatic collections not yet taken by [`GpuHashDag::take_auto_gc`].
     auto_runs: Vec<GcStats>,
+    /// Allocated slabs per table, read with the last root (`read_root`) or after the last GC:
+    /// at least the current use (only inserts allocate, and every path that inserts outside a
+    /// finished edit or load clears it), so the check before an edit needs no readback.
+    pub(super) pool_use: Option<Vec<u64>>,
 }
 
 impl GpuHashDag {
@@ -156,10 +160,12 @@ impl GpuHashDag {
         let Some(threshold) = self.config.auto_gc_threshold else {
             return Ok(false);
         };
-        let over = self
-            .pool_use()?
-            .iter()
-            .any(|&(used, max)| used as f64 > threshold as f64 * max as f64);
+        let used = match &self.gc_state.pool_use {
+            Some(used) => used.clone(),
+            None => self.pool_use()?.iter().map(|&(used, _)| used).collect(),
+        };
+        let max = self.config.max_super_blocks as f64 * SLABS_PER_SUPER_BLOCK as f64;
+        let over = used.iter().any(|&u| u as f64 > threshold as f64 * max);
         if !over {
             return Ok(false);
         }
@@ -322,7 +328,9 @@ impl GpuHashDag {
         stats.live_per_table = marked;
         stats.live = stats.live_per_table.iter().sum();
         stats.freed = stats.freed_per_table.iter().sum();
-        stats.slab_bytes_after = self.slab_bytes(&self.pool_use()?);
+        let after = self.pool_use()?;
+        stats.slab_bytes_after = self.slab_bytes(&after);
+        self.gc_state.pool_use = Some(after.iter().map(|&(used, _)| used).collect());
         stats.ms = start.elapsed().as_secs_f64() * 1e3;
         Ok(stats)
     }

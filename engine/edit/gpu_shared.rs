@@ -36,5 +36,10 @@ gpu_shared! {
         pub(crate) material: uint,
         /// The pre-edit root's child value (fill and copy read the scene before the edit).
         pub(crate) root: uint,
+        /// Where a count computed on the GPU lies (a `u32`; 0: none): the pass then processes
+        /// `min(that, count)` records (`edit_count()`), `count` being the buffers' capacity.
+        pub(crate) count_at: uint64_t,
+        /// Padding to the std430 size (a multiple of the `vec4`'s 16 bytes).
+        pub(crate) pad: uint64_t,
     }
 }

@@ -106,6 +106,9 @@ struct ReplayRow {
     dag_bytes_after: u64,
     /// This engine's total edit time over the CPU reference's on the same replay.
     vs_cpu: Option<f64>,
+    /// GPU runs, per edit on average: queue submissions, host waits and profiled passes
+    /// (dispatches), from `GpuContext::stats` and the profiler; None for the CPU.
+    per_edit: Option<[f64; 3]>,
 }
 
 /// The bytes target.
@@ -245,6 +248,7 @@ fn run_cpu(scene: &str, svdag: &Svdag, replay: &Replay) -> Result<ReplayRow> {
         dag_bytes_before: before,
         dag_bytes_after: editor.dag().item_bytes(),
         vs_cpu: Some(1.0),
+        per_edit: None,
     })
 }
 
@@ -273,7 +277,10 @@ fn run_gpu(
         dag_bytes_before: before,
         dag_bytes_after: 0,
         vs_cpu: None,
+        per_edit: None,
     };
+    let stats = ctx.stats();
+    let mut passes = 0;
     for tool in &replay.tools {
         let from = profiler.passes().len();
         let start = Instant::now();
@@ -292,6 +299,7 @@ fn run_gpu(
         for p in &profiler.passes()[from..] {
             *row.kernels_ms.entry(group_of(&p.name)).or_insert(0.0) += p.gpu_ms;
         }
+        passes += profiler.passes().len() - from;
         let temp: u64 = report
             .temporary_nodes
             .iter()
@@ -300,6 +308,13 @@ fn run_gpu(
             .sum();
         row.temp_svo_bytes_max = row.temp_svo_bytes_max.max(temp);
     }
+    let stats = ctx.stats().since(stats);
+    let edits = row.edits.max(1) as f64;
+    row.per_edit = Some([
+        stats.submissions as f64 / edits,
+        stats.host_waits as f64 / edits,
+        passes as f64 / edits,
+    ]);
     row.dag_bytes_after = live_bytes(&hd.gc(None)?.live_per_table);
     Ok(row)
 }
@@ -424,7 +439,7 @@ pub fn bench_edit(args: &BenchEditArgs) -> Result<()> {
 
 fn markdown(report: &Report) -> String {
     let mut md = format!(
-        "GPU: {}; CPU reference editor on {} threads; resolution {}^3.\n\n| scene | replay | engine | edits | edit ms total | max | {} | temp SVO max KiB | DAG KiB before | after | / CPU |\n|---|---|---|---|---|---|{}---|---|---|---|\n",
+        "GPU: {}; CPU reference editor on {} threads; resolution {}^3.\n\n| scene | replay | engine | edits | edit ms total | max | {} | temp SVO max KiB | DAG KiB before | after | / CPU | per edit: submits / waits / passes |\n|---|---|---|---|---|---|{}---|---|---|---|---|\n",
         report.device,
         report.cpu_threads,
         report.resolution,
@@ -440,7 +455,7 @@ fn markdown(report: &Report) -> String {
                 r.engine,
                 r.edits,
                 r.status,
-                " |".repeat(GROUPS.len() + 5)
+                " |".repeat(GROUPS.len() + 6)
             );
             continue;
         }
@@ -453,7 +468,7 @@ fn markdown(report: &Report) -> String {
             })
             .collect();
         md += &format!(
-            "| {} | {} | {} | {} | {:.1} | {:.1} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {} | {} | {:.1} | {:.1} | {} | {} | {} | {} | {} | {} |\n",
             r.scene,
             r.replay,
             r.engine,
@@ -468,7 +483,9 @@ fn markdown(report: &Report) -> String {
             },
             r.dag_bytes_before / 1024,
             r.dag_bytes_after / 1024,
-            r.vs_cpu.map_or("-".into(), |x| format!("{x:.2}x"))
+            r.vs_cpu.map_or("-".into(), |x| format!("{x:.2}x")),
+            r.per_edit
+                .map_or("-".into(), |[s, w, p]| format!("{s:.1} / {w:.1} / {p:.0}"))
         );
     }
     if let Some(b) = &report.bytes {

@@ -156,15 +156,15 @@ impl GpuHashDag {
                 4 * count as u64,
                 MemLocation::GpuOnly,
             )?;
-            hd.merge_level(
-                &MergeLevel {
+            hd.merge(
+                &[MergeLevel {
                     input: input.address(),
                     count,
                     leaves: level == 0,
                     below: below.as_ref().map_or(0, |b| b.address()),
                     results: &results,
                     result_index: None,
-                },
+                }],
                 profiler.as_deref_mut(),
             )?;
             below = Some(results);

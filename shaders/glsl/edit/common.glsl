@@ -130,6 +130,13 @@ void edit_children(uint v, out uint children[8]) {
 
 // ---- tools (voxel-centre inclusion, exactly as engine/edit/tool.rs's `in_sphere` / `in_cube`) ----
 
+// Records of the pass: push.count, or the count an earlier pass left at push.count_at (bounded by
+// push.count, the capacity the host sized the buffers for).
+uint edit_count() {
+    if (push.count_at == 0ul) return push.count;
+    return min(Words(push.count_at).w[0], push.count);
+}
+
 uint edit_tool() {
     return push.flags >> EDIT_TOOL_SHIFT & 7u;
 }

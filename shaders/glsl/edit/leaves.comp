@@ -17,7 +17,8 @@ void main() {
     bool materials = (push.flags & EDIT_FLAG_MATERIALS) != 0u;
     uint rec = materials ? 10u : 2u;
     uint stride = gl_NumWorkGroups.x * 64u;
-    for (uint i = gl_GlobalInvocationID.x; i < push.count; i += stride) {
+    uint count = edit_count();
+    for (uint i = gl_GlobalInvocationID.x; i < count; i += stride) {
         uvec4 e = entries.e[i];
         bool stored = edit_is_ptr(e.w);
         // The stored leaf's masks (edit_lookup at level 0, read once for the 64 voxels).

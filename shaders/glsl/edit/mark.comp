@@ -1,15 +1,25 @@
 #version 460
-// Before the insert round of one size's batch: items that are not their dedup representative
-// and were not found get HASH_INVALID, so only one copy of each new item is inserted.
-//   src = representatives (smallest equal index), dst = handles.
+// Before the insert rounds of a level, every size in one pass: items that are not their dedup
+// representative and were not found get HASH_INVALID, so only one copy of each new item is
+// inserted. Sizes with fewer than two items are skipped (a single item is its own
+// representative).
+//   tables   the level's buffer addresses (EDIT_LEVEL_REPS: smallest equal index per item,
+//            EDIT_LEVEL_HANDLES)
+//   counters the level's 9 per-size item counts (build_items)
 #include "edit/common.glsl"
 layout(local_size_x = 64) in;
 
 void main() {
-    Words reps = Words(push.src);
-    Words handles = Words(push.dst);
+    Addresses tables = Addresses(push.tables);
+    Words counters = Words(push.counters);
     uint stride = gl_NumWorkGroups.x * 64u;
-    for (uint i = gl_GlobalInvocationID.x; i < push.count; i += stride) {
-        if (reps.w[i] != i && handles.w[i] == HASH_MISS) handles.w[i] = HASH_INVALID;
+    for (uint s = 0u; s < 9u; ++s) {
+        uint n = counters.w[s];
+        if (n < 2u) continue;
+        Words reps = Words(tables.a[EDIT_LEVEL_REPS + s]);
+        Words handles = Words(tables.a[EDIT_LEVEL_HANDLES + s]);
+        for (uint i = gl_GlobalInvocationID.x; i < n; i += stride) {
+            if (reps.w[i] != i && handles.w[i] == HASH_MISS) handles.w[i] = HASH_INVALID;
+        }
     }
 }

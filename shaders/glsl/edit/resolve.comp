@@ -1,7 +1,9 @@
 #version 460
 // After the level's inserts: every EDIT_PENDING result becomes the NodePtr of its item's
 // representative. dst = results, dst2 = result index (EDIT_FLAG_RESULT_INDEX),
-// tables = the level's address buffer, counters[0] counts items left without a handle.
+// tables = the level's address buffer, counters[0] counts items left without a handle (their
+// results stay EDIT_PENDING, so that the pass can run again once a later insert round placed
+// them).
 #include "edit/common.glsl"
 layout(local_size_x = 64) in;
 
@@ -19,7 +21,7 @@ void main() {
         uint handle = Words(tables.a[EDIT_LEVEL_HANDLES + s]).w[rep];
         if (handle >= (1u << 28u)) {
             atomicAdd(Words(push.counters).w[0], 1u);
-            handle = 0u;
+            continue;
         }
         results.w[at] = s << 28u | handle;
     }

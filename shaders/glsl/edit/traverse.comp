@@ -9,7 +9,10 @@
 // the next level's entries).
 //   src      entries (uvec4: min corner xyz in voxels, the existing value there)
 //   dst      temporary nodes (8 child values; EDIT_TEMP | j names next entry j)
-//   dst2     next level's entries; counters[0] = their count
+//   dst2     next level's entries; counters[0..4] = their count and the indirect dispatch
+//            arguments of the next level's pass (x = its workgroups of 64, y = z = 1: the host
+//            sets them to 1), so that the levels can be recorded into one submission
+//   count_at this level's count (counters of the level above) when recorded that way
 #include "edit/common.glsl"
 layout(local_size_x = 64) in;
 
@@ -22,7 +25,8 @@ void main() {
     uint full = EDIT_FULL | push.material;
     uint child_side = 2u << push.level;
     uint stride = gl_NumWorkGroups.x * 64u;
-    for (uint i = gl_GlobalInvocationID.x; i < push.count; i += stride) {
+    uint count = edit_count();
+    for (uint i = gl_GlobalInvocationID.x; i < count; i += stride) {
         uvec4 e = entries.e[i];
         uint children[8];
         edit_children(e.w, children);
@@ -47,7 +51,10 @@ void main() {
                 value = tool == EDIT_TOOL_REMOVE ? EDIT_EMPTY : full;
             } else {
                 uint j = atomicAdd(counters.w[0], 1u);
-                if (j < push.capacity) next.e[j] = uvec4(p, c);
+                if (j < push.capacity) {
+                    next.e[j] = uvec4(p, c);
+                    atomicMax(counters.w[1], min(j / 64u + 1u, 65535u));
+                }
                 value = EDIT_TEMP | j;
             }
             nodes.w[i * 8u + o] = value;
