@@ -269,11 +269,21 @@ fn load_reads_back_every_scene_for_every_variant() {
 /// Random sphere / cube add / remove sequences: after every edit the voxels equal the
 /// brute-force grid and the unique nodes per level equal a from-scratch canonical build.
 fn random_edits(ctx: &Arc<GpuContext>, variant: HashVariant, resolution: u32, edits: usize) {
+    random_edits_with(ctx, GpuHashDagConfig::new(variant, 4096), resolution, edits);
+}
+
+fn random_edits_with(
+    ctx: &Arc<GpuContext>,
+    config: GpuHashDagConfig,
+    resolution: u32,
+    edits: usize,
+) {
+    let variant = config.variant;
     let seed = resolution as u64 * 31 + variant.id() as u64;
     let voxels = synthetic(resolution, seed);
     let dag = Svdag::from_voxels(&voxels).unwrap();
     let mut grid = Grid::from_codes(resolution, &voxels.codes);
-    let mut hd = GpuHashDag::load(ctx, &GpuHashDagConfig::new(variant, 4096), &dag, None).unwrap();
+    let mut hd = GpuHashDag::load(ctx, &config, &dag, None).unwrap();
     let mut rng = common::Rng(seed ^ 0xed17);
     let n = resolution as f32;
     for step in 0..edits {
@@ -311,6 +321,20 @@ fn random_edits_match_brute_force_for_every_variant() {
     }
     random_edits(&ctx, HashVariant::AccelHash8, 128, 4);
     random_edits(&ctx, HashVariant::TicketBoard, 256, 2);
+    assert_clean(&ctx);
+}
+
+/// The traversal's other submission plans give the same edits: one level per submission with
+/// exact capacities (budget 0, also the fallback after a wrong bound) and levels split over
+/// several submissions by a tiny budget (the last level's count read back between them).
+#[test]
+fn random_edits_match_brute_force_with_every_traversal_budget() {
+    let ctx = common::gpu();
+    for budget in [0, 4 << 10] {
+        let mut config = GpuHashDagConfig::new(HashVariant::AccelHash32, 4096);
+        config.traversal_budget = budget;
+        random_edits_with(&ctx, config, 128, 6);
+    }
     assert_clean(&ctx);
 }
 

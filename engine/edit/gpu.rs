@@ -64,8 +64,7 @@ const GROUP: u32 = 64;
 /// dedup, search, mark and insert share one submission (`merge_items`).
 const FUSED_DEDUP_MAX: u32 = 1024;
 
-/// Bytes of traversal buffers sized by the tool's bounds that one submission may hold
-/// (`GpuHashDag::traverse`); beyond, the count of the last level is read back first.
+/// Default [`GpuHashDagConfig::traversal_budget`].
 const TRAVERSAL_BUDGET: u64 = 64 << 20;
 
 /// The temporary SVO of a traversal: nodes / leaves per level, entries per level.
@@ -122,6 +121,10 @@ pub struct GpuHashDagConfig {
     /// largest pool (`max_super_blocks`), and after an edit that ran a pool out (which then
     /// runs once more); `None`: only on request. See `edit::gpu_gc`.
     pub auto_gc_threshold: Option<f32>,
+    /// Bytes of traversal buffers, sized by the tool's bounds, that one submission may hold
+    /// (`GpuHashDag::traverse`); beyond, the count of the last level is read back first.
+    /// 0: one level per submission with exact capacities (the path a wrong bound falls back to).
+    pub traversal_budget: u64,
 }
 
 /// Super blocks that keep every handle below 2^28 ([`MAX_TABLE_SLABS`] slabs).
@@ -142,6 +145,7 @@ impl GpuHashDagConfig {
             max_insert_rounds: 8,
             undo_depth: gpu_gc::DEFAULT_UNDO_DEPTH,
             auto_gc_threshold: Some(gpu_gc::DEFAULT_AUTO_GC_THRESHOLD),
+            traversal_budget: TRAVERSAL_BUDGET,
         }
     }
 }
@@ -601,10 +605,11 @@ impl GpuHashDag {
         // level-l cubes the tool may change. Levels share a submission while the buffers sized
         // by the tool's bounds stay small; a bound that turns out wrong (checked after the
         // submission) makes the traversal run again one level per submission.
-        let bounds = traversal_bounds(center, radius, self.root_level);
+        let bounds = (self.config.traversal_budget > 0)
+            .then(|| traversal_bounds(center, radius, self.root_level));
         let traversal = (params.as_slice(), &param_buf, root_value);
         let (temp, counts) =
-            match self.traverse(&base_push, traversal, Some(&bounds), &mut profiler)? {
+            match self.traverse(&base_push, traversal, bounds.as_deref(), &mut profiler)? {
                 Some(done) => done,
                 None => self
                     .traverse(&base_push, traversal, None, &mut profiler)?
@@ -658,7 +663,7 @@ impl GpuHashDag {
     /// pass reads its record count from the level's block `[count, x, 1, 1]` in one GPU buffer
     /// (`count_at`) and is dispatched indirectly from it; the traverse pass of the level above
     /// wrote it. Consecutive levels share one submission while their buffers, sized by
-    /// `bounds` (entries per level, [`traversal_bounds`]), fit [`TRAVERSAL_BUDGET`] bytes; the
+    /// `bounds` (entries per level, [`traversal_bounds`]), fit the configured traversal budget; the
     /// count of the last level of a submission is read back and sizes the next (at most 8 x).
     /// `bounds == None`: one level per submission, exact capacities. Returns the temporary
     /// nodes / leaves per level (None where a level has no entry) and the entries per level,
@@ -705,7 +710,7 @@ impl GpuHashDag {
                     break;
                 }
                 let next = next_cap(l, cap);
-                if bytes + cost(l - 1, next) > TRAVERSAL_BUDGET {
+                if bytes + cost(l - 1, next) > self.config.traversal_budget {
                     break;
                 }
                 bytes += cost(l - 1, next);
