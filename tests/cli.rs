@@ -510,3 +510,81 @@ fn build_colors_flags() {
     ]);
     assert!(!out.status.success());
 }
+
+/// `voxdag build SCENE.vdag` re-encodes a built scene: the same voxels and colours (verify
+/// checks them against the stored digest, export gives the same bytes), no voxelization, and
+/// the options that only apply to a model are refused.
+#[test]
+fn build_from_a_vdag_re_encodes_the_same_voxels() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/avocado/Avocado.gltf");
+    let svdag = dir.path().join("a.vdag");
+    let ok = |out: Output| {
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        out
+    };
+    ok(voxdag(&[
+        "-q",
+        "build",
+        s(&model),
+        "-r",
+        "64",
+        "-o",
+        s(&svdag),
+    ]));
+    let export = |vdag: &Path, name: &str| {
+        let path = dir.path().join(name);
+        ok(voxdag(&[
+            "export-voxels",
+            s(vdag),
+            "--format",
+            "xyz-u32",
+            "-o",
+            s(&path),
+        ]));
+        std::fs::read(path).unwrap()
+    };
+    let original = export(&svdag, "a.xyz");
+    for (name, extra) in [
+        (
+            "sat.vdag",
+            &["--encoding", "tsvdag", "--transforms", "sat"][..],
+        ),
+        ("ssvdag.vdag", &["--encoding", "ssvdag"][..]),
+    ] {
+        let out_path = dir.path().join(name);
+        let mut args = vec!["-q", "build", s(&svdag), "-o", s(&out_path)];
+        args.extend_from_slice(extra);
+        let out = ok(voxdag(&args));
+        assert!(
+            String::from_utf8_lossy(&out.stdout).contains("loaded and decoded"),
+            "{}",
+            String::from_utf8_lossy(&out.stdout)
+        );
+        let verify = ok(voxdag(&["verify", s(&out_path)]));
+        assert!(
+            String::from_utf8_lossy(&verify.stdout).contains("matching the content digest"),
+            "{name}: {}",
+            String::from_utf8_lossy(&verify.stdout)
+        );
+        assert_eq!(
+            export(&out_path, &format!("{name}.xyz")),
+            original,
+            "{name}"
+        );
+    }
+    let refused = dir.path().join("refused.vdag");
+    assert_clean_error(
+        &voxdag(&["-q", "build", s(&svdag), "-r", "128", "-o", s(&refused)]),
+        &["--resolution 128", "64^3"],
+    );
+    assert_clean_error(
+        &voxdag(&["-q", "build", s(&svdag), "--part", "1/2", "-o", s(&refused)]),
+        &["--part", "already a built scene"],
+    );
+    assert!(!refused.exists());
+}

@@ -303,6 +303,9 @@ pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
     if let Some(report) = &args.report {
         check_output(report)?;
     }
+    if is_vdag(&args.input) {
+        return transcode(args, quiet);
+    }
     if let Some(part) = args.part {
         return crate::partition::build_part(args, part, quiet);
     }
@@ -340,6 +343,81 @@ pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
         "voxelize {:.2} s, build {:.2} s",
         report.voxelize_s, report.build_s
     );
+    summary.finish(args, &report, &timing, encode_time)
+}
+
+/// Whether `path` names a saved scene (`.vdag`) rather than a model to voxelize.
+fn is_vdag(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("vdag"))
+}
+
+/// `voxdag build SCENE.vdag`: re-encodes a saved scene (any encoding, decoded on the CPU) with
+/// `--encoding` / `--transforms`, keeping its colours or materials as they are stored (the
+/// voxels and their Morton order do not change); nothing is voxelized. This is how a scene
+/// built once at a high resolution (a streamed 64K^3 svdag32) is compressed afterwards.
+fn transcode(args: &BuildArgs, quiet: bool) -> Result<()> {
+    if args.part.is_some() {
+        bail!(
+            "--part splits the build of a model; {} is already a built scene",
+            args.input.display()
+        );
+    }
+    if args.materials.is_some() {
+        bail!(
+            "--materials quantizes a model's colours when it is built; {} is already built",
+            args.input.display()
+        );
+    }
+    let start = Instant::now();
+    let mut file = VdagFile::load(&args.input)?;
+    let materials = file.materials.take();
+    let stored_colors = file.stored_colors.take();
+    let digest = file.digest;
+    let mut dag = file.into_svdag(&args.input)?;
+    if let Some(r) = args.resolution.filter(|&r| r != dag.resolution) {
+        bail!(
+            "--resolution {r}: {} is a {}^3 scene (a built scene keeps its resolution)",
+            args.input.display(),
+            dag.resolution
+        );
+    }
+    let (colors, stored_colors) = if args.no_colors || args.colors.0.is_none() {
+        (Vec::new(), None)
+    } else {
+        (std::mem::take(&mut dag.colors), stored_colors)
+    };
+    let load_time = start.elapsed();
+    let stats = dag.stats();
+    let start = Instant::now();
+    let encoded = encode_dag(
+        &dag,
+        args.encoding,
+        args.transforms,
+        &tsvdag_modes(args),
+        quiet,
+    )?;
+    let encode_time = start.elapsed();
+    drop(dag);
+    let summary = EncodedSummary::of(&encoded);
+    let file = VdagFile {
+        encoded,
+        colors,
+        digest,
+        stored_colors,
+        materials,
+    };
+    file.save(&args.output)?;
+    let report = BuildReport {
+        input: args.input.clone(),
+        resolution: stats.resolution,
+        voxels: stats.voxels,
+        voxelize_s: 0.0,
+        build_s: load_time.as_secs_f64(),
+        peak_rss_bytes: peak_rss_bytes(),
+        stats,
+    };
+    let timing = format!("loaded and decoded in {}", seconds(load_time));
     summary.finish(args, &report, &timing, encode_time)
 }
 

@@ -35,7 +35,7 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Import a mesh (.obj/.gltf/.glb) or MagicaVoxel file (.vox), voxelize it and save an SVDAG.
+    /// Import a mesh (.obj/.gltf/.glb) or MagicaVoxel file (.vox), voxelize it and save an SVDAG (or re-encode a .vdag).
     Build(BuildArgs),
     /// Print resolution, voxel count, bytes per encoding and per-level node counts of a .vdag file.
     Stats(StatsArgs),
@@ -66,7 +66,7 @@ enum Command {
 /// Arguments of `voxdag build`.
 #[derive(Args)]
 pub struct BuildArgs {
-    /// Input scene: .obj, .gltf, .glb or .vox.
+    /// Input scene: .obj, .gltf, .glb or .vox; or a built .vdag to re-encode (no voxelization).
     input: PathBuf,
     /// Grid resolution N (power of two, 8..=65536). Default: 1024 for meshes, the model's size for .vox.
     #[arg(long, short)]
