@@ -424,6 +424,7 @@ impl App<'_> {
             exit: false,
             clicks: 0,
             ui_clicks: 0,
+            ui_keys: 0,
             ui: PanelState::new(!args.no_vsync),
             traces_written: 0,
             stats: FrameStats::default(),
@@ -724,6 +725,8 @@ struct Status<'a> {
     clicks: usize,
     /// Presses a panel took.
     ui_clicks: usize,
+    /// Key presses egui took (a focused widget): the shortcuts did not see them.
+    ui_keys: usize,
     /// Hash table variant.
     table: &'a str,
     vsync: bool,
@@ -796,6 +799,8 @@ struct Running {
     /// Left-button presses on the scene and on the panels.
     clicks: usize,
     ui_clicks: usize,
+    /// Key presses egui took.
+    ui_keys: usize,
     /// Settings and Profiler panel state (`panels`).
     ui: PanelState,
     /// Chrome traces written so far.
@@ -846,6 +851,11 @@ impl Running {
                 button: MouseButton::Left,
                 ..
             } if consumed => self.ui_clicks += 1,
+            WindowEvent::KeyboardInput { event, .. }
+                if consumed && event.state == ElementState::Pressed =>
+            {
+                self.ui_keys += 1
+            }
             _ if consumed => {}
             WindowEvent::KeyboardInput { event, .. } => {
                 let PhysicalKey::Code(code) = event.physical_key else {
@@ -1327,6 +1337,7 @@ impl Running {
                 message: self.message.as_deref(),
                 clicks: self.clicks,
                 ui_clicks: self.ui_clicks,
+                ui_keys: self.ui_keys,
                 files: self.file_status(),
                 table: self.doc.dag.config().variant.name(),
                 vsync: self.ui.vsync,
