@@ -182,6 +182,18 @@ pub fn find_window(x: &Xvfb, name: &str, viewer: &mut Child) -> String {
     }
 }
 
+/// Whether `child` exits within `limit` (it is not reaped: `wait_exit` still collects it).
+pub fn exits_within(child: &mut Child, limit: Duration) -> bool {
+    let start = Instant::now();
+    while start.elapsed() < limit {
+        if child.try_wait().unwrap().is_some() {
+            return true;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    false
+}
+
 /// Waits (up to 60 s) for the viewer to exit.
 pub fn wait_exit(viewer: Child) -> Output {
     let start = Instant::now();
