@@ -82,6 +82,17 @@ fn start_editor_with(x: &Xvfb, vdag: &Path, status: &Path, tool: &[&str]) -> (Ch
     (editor, id)
 }
 
+/// Pixels of two same-sized PNGs that differ by more than 8/255, and how many the golden
+/// tolerance (tests/render_gpu.rs) allows: 0.5% of the pixels.
+fn golden_diff(shot: &Path, other: &Path) -> (usize, usize) {
+    let read = |p: &Path| image::open(p).unwrap().to_rgba8();
+    let (a, b) = (read(shot), read(other));
+    assert_eq!(a.dimensions(), b.dimensions());
+    let diff = compare(b.as_raw(), a.as_raw(), 8);
+    let allowed = (0.005 * (a.width() * a.height()) as f64) as usize;
+    (diff.differing, allowed)
+}
+
 /// Closes the editor with Esc (then D: discard, should it ask about unsaved edits) and checks it
 /// exits cleanly (no validation messages).
 fn close(x: &Xvfb, id: &str, mut editor: Child) {
@@ -206,16 +217,10 @@ fn replay_save_equals_voxdag_edit_and_the_headless_render() {
         .args(["--size", "200x150", "--out"])
         .arg(&headless);
     run(cmd);
-    let read = |p: &Path| image::open(p).unwrap().to_rgba8();
-    let (a, b) = (read(&shot), read(&headless));
-    assert_eq!(a.dimensions(), b.dimensions());
-    // Golden tolerance (tests/render_gpu.rs): at most 0.5% of pixels off by more than 8/255.
-    let diff = compare(b.as_raw(), a.as_raw(), 8);
-    let allowed = (0.005 * (a.width() * a.height()) as f64) as usize;
+    let (differing, allowed) = golden_diff(&shot, &headless);
     assert!(
-        diff.differing <= allowed,
-        "the screenshot differs from the headless render in {} pixels (allowed {allowed})",
-        diff.differing
+        differing <= allowed,
+        "the screenshot differs from the headless render in {differing} pixels (allowed {allowed})"
     );
 }
 
@@ -519,15 +524,10 @@ fn path_traced_replay_screenshot_equals_render_pt() {
         .args(["--seed", "0", "--out"])
         .arg(&headless);
     run(cmd);
-    let read = |p: &Path| image::open(p).unwrap().to_rgba8();
-    let (a, b) = (read(&shot), read(&headless));
-    assert_eq!(a.dimensions(), b.dimensions());
-    let diff = compare(b.as_raw(), a.as_raw(), 8);
-    let allowed = (0.005 * (a.width() * a.height()) as f64) as usize;
+    let (differing, allowed) = golden_diff(&shot, &headless);
     assert!(
-        diff.differing <= allowed,
-        "the path-traced screenshot differs from `render --pt` in {} pixels (allowed {allowed})",
-        diff.differing
+        differing <= allowed,
+        "the path-traced screenshot differs from `render --pt` in {differing} pixels (allowed {allowed})"
     );
     // Not the raster image: the same scene rendered without --pt differs.
     let raster = dir.path().join("raster.png");
@@ -537,9 +537,6 @@ fn path_traced_replay_screenshot_equals_render_pt() {
         .args(["--size", "200x150", "--out"])
         .arg(&raster);
     run(cmd);
-    let diff = compare(read(&raster).as_raw(), a.as_raw(), 8);
-    assert!(
-        diff.differing > allowed,
-        "the screenshot is the raster image"
-    );
+    let (differing, allowed) = golden_diff(&shot, &raster);
+    assert!(differing > allowed, "the screenshot is the raster image");
 }

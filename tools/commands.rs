@@ -268,6 +268,19 @@ pub fn encode_dag(
     })
 }
 
+/// [`encode_dag`] with `voxdag build`'s encoding options, and the time it took.
+fn encode_as_asked(dag: &Svdag, args: &BuildArgs, quiet: bool) -> Result<(EncodedDag, Duration)> {
+    let start = Instant::now();
+    let encoded = encode_dag(
+        dag,
+        args.encoding,
+        args.transforms,
+        &tsvdag_modes(args),
+        quiet,
+    )?;
+    Ok((encoded, start.elapsed()))
+}
+
 /// Loads a `.vdag` file of any encoding as an SVDAG, decoding compact encodings on the CPU.
 pub fn load_svdag(path: &Path) -> Result<Svdag> {
     Ok(load_svdag_stored(path)?.0)
@@ -314,15 +327,7 @@ pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
         return crate::stream::build_streaming(args, quiet);
     }
     let (dag, report, digest) = build_scene_digest(args, quiet)?;
-    let start = Instant::now();
-    let encoded = encode_dag(
-        &dag,
-        args.encoding,
-        args.transforms,
-        &tsvdag_modes(args),
-        quiet,
-    )?;
-    let encode_time = start.elapsed();
+    let (encoded, encode_time) = encode_as_asked(&dag, args, quiet)?;
     let summary = EncodedSummary::of(&encoded);
     let (colors, stored_colors, materials) = match args.materials {
         Some(k) => (Vec::new(), None, Some(quantize_materials(&dag, k)?)),
@@ -389,15 +394,7 @@ fn transcode(args: &BuildArgs, quiet: bool) -> Result<()> {
     };
     let load_time = start.elapsed();
     let stats = dag.stats();
-    let start = Instant::now();
-    let encoded = encode_dag(
-        &dag,
-        args.encoding,
-        args.transforms,
-        &tsvdag_modes(args),
-        quiet,
-    )?;
-    let encode_time = start.elapsed();
+    let (encoded, encode_time) = encode_as_asked(&dag, args, quiet)?;
     drop(dag);
     let summary = EncodedSummary::of(&encoded);
     let file = VdagFile {
