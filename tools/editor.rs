@@ -39,6 +39,11 @@ mod record;
 use crate::commands::{check_output, progress_bar, write_json};
 use crate::edit::TableArg;
 use crate::view::MOTION_TARGET_MS;
+
+/// Wall time per frame the dynamic scale aims at while the button edits (12.5 frames/s).
+const EDIT_FRAME_TARGET_MS: f64 = 80.0;
+/// Least render time the dynamic scale gives an editing frame (the scale's floor may be above).
+const EDIT_RENDER_MIN_MS: f64 = 5.0;
 use crate::window::{require_display, CameraInput, GpuWindow, MIN_SCALE};
 
 mod brush;
@@ -404,6 +409,7 @@ impl App<'_> {
             edit_input: None,
             last_frame: None,
             frame_ms: 0.0,
+            frame_rest_ms: None,
             frames: 0,
             steps: std::mem::take(&mut self.steps),
             replay_done: !replaying,
@@ -429,6 +435,7 @@ impl App<'_> {
             traces_written: 0,
             stats: FrameStats::default(),
             last_pointer: None,
+            redraw_start: None,
         };
         if let Some(path) = &args.trace {
             running.start_trace(path.clone(), args.trace_frames)?;
@@ -644,8 +651,32 @@ struct Slot {
     profiler: Profiler,
     /// The internal size and window size of the frame last recorded with this slot.
     view: Option<([u32; 2], [u32; 2])>,
-    /// Input time of the edit that frame is the first to show.
-    edit_input: Option<Instant>,
+    /// Input of the edit that frame is the first to show.
+    edit_input: Option<EditInput>,
+}
+
+/// What an edit answered, for its latency.
+#[derive(Clone, Copy, Debug)]
+struct EditInput {
+    /// When: the input event's delivery to the editor, else the start of the edit's frame.
+    at: Instant,
+    /// The earliest the event can have arrived: winit reads the window system's events between
+    /// frames, so an event delivered after a frame may have arrived when that frame started
+    /// (`at` for anything but an event).
+    earliest: Instant,
+    /// A press or pointer motion (not a held button's next frame, nor a replay line).
+    event: bool,
+}
+
+impl EditInput {
+    /// An edit of the frame that starts at `at` without new input (held button, replay).
+    fn frame(at: Instant) -> EditInput {
+        EditInput {
+            at,
+            earliest: at,
+            event: false,
+        }
+    }
 }
 
 /// Frame and edit-latency statistics for `--stats-json` (the benchmark, docs/editor.md).
@@ -658,8 +689,14 @@ struct FrameStats {
     edit_frames: usize,
     first_edit: Option<Instant>,
     last_edit: Option<Instant>,
-    /// Input event to the end of the first frame showing the edit, per edit (ms).
+    /// Input event to the end of the first frame showing the edit, per edit answering an
+    /// event (a press or pointer motion), ms: from the event's delivery, and from the earliest
+    /// moment it can have arrived.
     latencies: Vec<f64>,
+    latency_bounds: Vec<f64>,
+    /// The same for every edit, those of a held button without new input and replayed ones
+    /// (from the start of their frame) included, ms.
+    all_latencies: Vec<f64>,
     /// CPU wall time of each edit (ms).
     edit_ms: Vec<f64>,
     /// Render scale of each frame between the first and the last edit.
@@ -763,7 +800,7 @@ struct Running {
     painting: bool,
     /// A press not yet turned into an edit, with its time (so a click shorter than a frame
     /// still edits).
-    click: Option<Instant>,
+    click: Option<EditInput>,
     /// The voxel under the cursor and its entry normal (last completed frame).
     hover: Option<FirstHit>,
     user_scale: f32,
@@ -773,10 +810,13 @@ struct Running {
     scale: f32,
     last_passes: Vec<PassTiming>,
     last_edit: Option<LastEdit>,
-    /// Input time of an edit not yet shown in a presented frame.
-    edit_input: Option<Instant>,
+    /// Input of an edit not yet shown in a presented frame.
+    edit_input: Option<EditInput>,
     last_frame: Option<Instant>,
     frame_ms: f64,
+    /// Wall time of an editing frame outside its render (edit, panels, present; moving
+    /// average): the dynamic scale leaves it out of the editing frame's budget.
+    frame_rest_ms: Option<f64>,
     frames: usize,
     steps: record::Playlist,
     replay_done: bool,
@@ -807,8 +847,10 @@ struct Running {
     traces_written: usize,
     /// `--stats-json` statistics.
     stats: FrameStats,
-    /// Time of the last pointer motion (the input of an edit while the button is held).
-    last_pointer: Option<Instant>,
+    /// The last pointer motion (the input of an edit while the button is held).
+    last_pointer: Option<EditInput>,
+    /// When the last frame started (the bound on an event's arrival, [`EditInput::earliest`]).
+    redraw_start: Option<Instant>,
 }
 
 impl Running {
@@ -844,7 +886,7 @@ impl Running {
                 _ => {}
             },
             WindowEvent::CursorMoved { position, .. } => {
-                self.last_pointer = Some(Instant::now());
+                self.last_pointer = Some(self.event_input());
                 self.input.cursor_moved(*position)
             }
             WindowEvent::MouseInput {
@@ -915,7 +957,7 @@ impl Running {
                 MouseButton::Left => {
                     self.clicks += 1;
                     self.painting = true;
-                    self.click = Some(Instant::now());
+                    self.click = Some(self.event_input());
                 }
                 MouseButton::Middle => self.input.orbit_drag = true,
                 MouseButton::Right => self.input.look_drag = true,
@@ -958,7 +1000,7 @@ impl Running {
 
     /// Applies `tool`; the result becomes the current root. Errors (pool full, bad tool) are
     /// shown and leave the scene as it was.
-    fn apply(&mut self, tool: &Tool, input: Instant) -> Result<()> {
+    fn apply(&mut self, tool: &Tool, input: EditInput) -> Result<()> {
         let Some(tool) = self.recordable(tool) else {
             return Ok(());
         };
@@ -966,6 +1008,8 @@ impl Running {
         // GC (automatic, inside `edit`) may free nodes of roots that left the history while
         // frames in flight still read them.
         self.ctx.wait_idle()?;
+        // The wait finished the frames in flight: the last edit's first frame among them.
+        self.observe_shown_edits()?;
         // While a trace records, the edit's kernels go into it too.
         let tracing = self.ui.trace.is_some();
         let (profiler, before) = match &mut self.ui.trace {
@@ -1025,7 +1069,44 @@ impl Running {
 }
 
 impl Running {
-    /// The render scale of this frame: the user's, or lower while the camera moves.
+    /// An input event delivered now.
+    fn event_input(&self) -> EditInput {
+        let at = Instant::now();
+        EditInput {
+            at,
+            earliest: self.redraw_start.map_or(at, |s| s.min(at)),
+            event: true,
+        }
+    }
+
+    /// Records the latency of every edit whose first frame the GPU has finished: that frame's
+    /// image is complete and handed to the presentation engine. Polled (it never waits) at the
+    /// start of a frame and right after an edit's wait for the frames in flight, so the time is
+    /// the first moment the CPU sees it: an upper bound of the true latency.
+    fn observe_shown_edits(&mut self) -> Result<()> {
+        for index in 0..self.slots.len() {
+            if self.slots[index].edit_input.is_none() || !self.win.presenter.slot_finished(index)? {
+                continue;
+            }
+            let input = self.slots[index].edit_input.take().expect("checked above");
+            let latency = input.at.elapsed().as_secs_f64() * 1e3;
+            self.stats.all_latencies.push(latency);
+            if input.event {
+                self.stats.latencies.push(latency);
+                let bound = input.earliest.elapsed().as_secs_f64() * 1e3;
+                self.stats.latency_bounds.push(bound);
+            }
+            if let Some(edit) = &mut self.last_edit {
+                edit.latency_ms = Some(latency);
+            }
+        }
+        Ok(())
+    }
+
+    /// The render scale of this frame: the user's, or lower while the camera moves or the
+    /// button edits. Moving, the render aims at [`MOTION_TARGET_MS`]; editing, the whole frame
+    /// aims at [`EDIT_FRAME_TARGET_MS`]: the render gets what the edit and the rest of the
+    /// frame (measured, [`Running::frame_rest_ms`]) leave, at least [`EDIT_RENDER_MIN_MS`].
     fn frame_scale(&self, extent: [u32; 2]) -> f32 {
         if !self.dynamic_scale || !(self.input.moving() || self.painting) {
             return self.user_scale;
@@ -1033,9 +1114,26 @@ impl Running {
         let Some(ms_per_pixel) = self.ms_per_pixel else {
             return self.user_scale;
         };
+        let target = match (self.painting, self.frame_rest_ms) {
+            (true, Some(rest)) => {
+                (EDIT_FRAME_TARGET_MS - rest).clamp(EDIT_RENDER_MIN_MS, MOTION_TARGET_MS)
+            }
+            _ => MOTION_TARGET_MS,
+        };
         let full = ms_per_pixel * extent[0] as f64 * extent[1] as f64;
-        let scale = (MOTION_TARGET_MS / full.max(1e-9)).sqrt() as f32;
+        let scale = (target / full.max(1e-9)).sqrt() as f32;
         scale.clamp(MIN_SCALE, self.user_scale)
+    }
+
+    /// Updates [`Running::frame_rest_ms`] with a frame of `frame_ms` whose render at `internal`
+    /// is estimated from the measured cost per pixel; only frames that edited count.
+    fn measure_frame_rest(&mut self, frame_ms: f64, internal: [u32; 2], edited: bool) {
+        let (Some(ms_per_pixel), true) = (self.ms_per_pixel, edited) else {
+            return;
+        };
+        let render = ms_per_pixel * internal[0] as f64 * internal[1] as f64;
+        let rest = (frame_ms - render).max(0.0);
+        self.frame_rest_ms = Some(self.frame_rest_ms.map_or(rest, |o| 0.8 * o + 0.2 * rest));
     }
 
     /// Path tracing: makes the tracer on first use and prepares this frame's accumulation,
@@ -1103,24 +1201,18 @@ impl Running {
 
     /// One frame: hover hit, edits, panels, render, present, status file.
     fn redraw(&mut self, args: &EditorArgs) -> Result<()> {
+        self.redraw_start = Some(Instant::now());
         let dt = self
             .last_frame
             .map_or(0.0, |t| t.elapsed().as_secs_f32().min(0.1));
         let Some(frame) = self.win.presenter.begin_frame()? else {
             return Ok(());
         };
+        // The slot's last frame has finished (and maybe others): their edits are shown.
+        self.observe_shown_edits()?;
         let frame_start = Instant::now();
         let passes = {
             let slot = &mut self.slots[frame.index];
-            // The slot's last frame has finished: an edit it was the first to show is on
-            // screen now.
-            if let Some(input) = slot.edit_input.take() {
-                let latency = (frame_start - input).as_secs_f64() * 1e3;
-                self.stats.latencies.push(latency);
-                if let Some(edit) = &mut self.last_edit {
-                    edit.latency_ms = Some(latency);
-                }
-            }
             let passes = slot.profiler.resolve()?;
             slot.profiler.clear();
             passes
@@ -1152,8 +1244,12 @@ impl Running {
         } else if self.click.is_some() || self.painting {
             // A press, else (button held) the last pointer motion not yet edited for, else now.
             let since = self.stats.last_edit;
-            let moved = self.last_pointer.filter(|&t| since.is_none_or(|e| t > e));
-            let input = self.click.take().or(moved).unwrap_or(frame_start);
+            let moved = self.last_pointer.filter(|p| since.is_none_or(|e| p.at > e));
+            let input = self
+                .click
+                .take()
+                .or(moved)
+                .unwrap_or(EditInput::frame(frame_start));
             if let Some(center) = self.brush_center() {
                 match brush::tool(self.tool, center, self.radius, self.material, &self.copy) {
                     Some(tool) => self.apply(&tool, input)?,
@@ -1275,6 +1371,7 @@ impl Running {
         }
         slot.view = Some((internal, extent));
         slot.edit_input = self.edit_input.take();
+        let edited = slot.edit_input.is_some();
         self.win.presenter.end_frame(
             cmd,
             target,
@@ -1296,6 +1393,7 @@ impl Running {
         if let Some(prev) = self.last_frame {
             self.frame_ms = (now - prev).as_secs_f64() * 1e3;
             self.ui.push_frame_time(self.frame_ms as f32);
+            self.measure_frame_rest(self.frame_ms, internal, edited);
         }
         self.last_frame = Some(now);
         self.count_frame(now);
@@ -1494,6 +1592,8 @@ impl Running {
             "editing_fps": if editing > 0.0 { s.edit_frames as f64 / editing } else { 0.0 },
             "editing_render_scale": summary(&scales),
             "edit_latency_ms": summary(&s.latencies),
+            "edit_latency_bound_ms": summary(&s.latency_bounds),
+            "edit_latency_all_ms": summary(&s.all_latencies),
             "edit_ms": summary(&s.edit_ms),
         })
     }

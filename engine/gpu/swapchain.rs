@@ -301,6 +301,15 @@ impl Presenter {
         self.slots.len()
     }
 
+    /// Whether the GPU has finished slot `index`'s last submitted frame (asks the timeline,
+    /// never waits; true for a slot with nothing in flight).
+    pub fn slot_finished(&self, index: usize) -> Result<bool, GpuError> {
+        match self.slots.get(index).and_then(|s| s.in_flight.as_ref()) {
+            Some(submission) => submission.is_done(),
+            None => Ok(true),
+        }
+    }
+
     /// Current swapchain size (`[0, 0]` before the first frame).
     pub fn extent(&self) -> [u32; 2] {
         self.swapchain

@@ -16,7 +16,7 @@ use voxdag::edit::replay::{Action, Replay, Step};
 use voxdag::edit::tool::Tool;
 use voxdag::render::Camera;
 
-use super::Running;
+use super::{EditInput, Running};
 
 /// Edit time one frame of a `fast` replay may spend before the frame is drawn.
 const FAST_FRAME_BUDGET: Duration = Duration::from_millis(50);
@@ -289,7 +289,7 @@ impl Running {
                     self.doc.undo = (self.doc.undo + 1).min(self.doc.dag.undo_depth());
                     self.doc.redo = 0;
                     self.doc.unsaved += 1;
-                    self.edit_input = Some(Instant::now());
+                    self.edit_input = Some(EditInput::frame(Instant::now()));
                     self.record(action_of(&tool));
                     if pace == Pace::Fast && start.elapsed() >= FAST_FRAME_BUDGET {
                         return Ok(());
