@@ -128,7 +128,21 @@ fn click_adds_voxels_and_ctrl_z_takes_them_back() {
     let vdag = scene(dir.path());
     let x = Xvfb::start();
     let path = dir.path().join("status.json");
-    let (mut editor, id) = start_editor(&x, &vdag, &path);
+    let stats = dir.path().join("stats.json");
+    let stats_arg = stats.to_str().unwrap();
+    let (mut editor, id) = start_editor_with(
+        &x,
+        &vdag,
+        &path,
+        &[
+            "--tool",
+            "sphere-add",
+            "--radius",
+            "8",
+            "--stats-json",
+            stats_arg,
+        ],
+    );
     let first = wait_status(&path, &mut editor, "a voxel count", |s| {
         s["voxels"].as_u64().is_some()
     });
@@ -145,12 +159,28 @@ fn click_adds_voxels_and_ctrl_z_takes_them_back() {
     });
     assert_eq!(added["undo_depth"], 1, "{added}");
     assert_eq!(added["last_edit"]["radius"], 8.0, "{added}");
+    // The click's latency is known once the GPU has finished the first frame showing it.
+    let shown = wait_status(&path, &mut editor, "the edit's latency", |s| {
+        s["last_edit"]["latency_ms"].is_f64()
+    });
+    let latency = shown["last_edit"]["latency_ms"].as_f64().unwrap();
+    assert!(latency > 0.0, "{shown}");
     xdotool(&x.display, &["windowfocus", "--sync", &id]);
     xdotool(&x.display, &["key", "ctrl+z"]);
     let undone = wait_status(&path, &mut editor, "the undo", |s| s["undo_depth"] == 0);
     assert_eq!(undone["voxels"].as_u64(), Some(original), "{undone}");
     assert_eq!(undone["redo_depth"], 1, "{undone}");
     close(&x, &id, editor);
+    // --stats-json: the click is one edit answering an input event, its latency counted from
+    // the event's delivery and (an upper bound) from the start of the frame it arrived in.
+    let stats: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    let (delivered, bound) = (&stats["edit_latency_ms"], &stats["edit_latency_bound_ms"]);
+    assert_eq!(delivered["count"], 1, "{stats}");
+    assert_eq!(bound["count"], 1, "{stats}");
+    assert_eq!(stats["edit_latency_all_ms"]["count"], 1, "{stats}");
+    assert_eq!(delivered["p50"].as_f64(), Some(latency), "{stats}");
+    assert!(bound["p50"].as_f64().unwrap() >= latency, "{stats}");
 }
 
 /// Edits near the avocado's middle: they change neither its bounds nor the default camera.

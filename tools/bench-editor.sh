@@ -3,7 +3,8 @@
 # continuously with real input. Starts a private Xvfb, opens `voxdag editor SCENE` at 1280x720
 # without vsync (dynamic render scale on) with --stats-json OUT, holds the left button over the
 # middle of the window with xdotool while moving the pointer back and forth (one edit per frame),
-# releases, quits with Esc and prints the stats line.
+# releases, quits with Esc and prints the stats line. An autosave of SCENE left by an earlier run
+# is not offered (--recover no): its prompt would take the press.
 #
 # usage: tools/bench-editor.sh SCENE.vdag OUT.json [TOOL] [RADIUS] [SECONDS]
 #   TOOL: paint (default) | sphere-add | ... (`voxdag editor --tool`); RADIUS: 32; SECONDS: 20
@@ -32,7 +33,7 @@ for _ in $(seq 1 100); do xdpyinfo >/dev/null 2>&1 && break; sleep 0.1; done
 
 status=$(mktemp -u /tmp/bench-editor-status.XXXXXX)
 "$bin" editor "$scene" --size 1280x720 --no-vsync --tool "$tool" --radius "$radius" \
-    --material 3 --stats-json "$out" --status-file "$status" ${EDITOR_ARGS:-} &
+    --material 3 --recover no --stats-json "$out" --status-file "$status" ${EDITOR_ARGS:-} &
 editor=$!
 id=
 for _ in $(seq 1 1200); do

@@ -13,7 +13,7 @@
 
 mod load;
 
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 use rustc_hash::FxHashSet;
 
@@ -173,8 +173,8 @@ pub struct GpuHashDag {
     build_items: ComputePipeline,
     mark: ComputePipeline,
     resolve: ComputePipeline,
-    traverse: ComputePipeline,
-    leaves: ComputePipeline,
+    traverse: ToolPipelines,
+    leaves: ToolPipelines,
     fill_init: ComputePipeline,
     fill_flood: ComputePipeline,
     /// `0..n` for the dedup values, kept between merges (grown by powers of two).
@@ -287,8 +287,8 @@ impl GpuHashDag {
             build_items: pipeline("edit build items", shaders::EDIT_BUILD_ITEMS)?,
             mark: pipeline("edit mark", shaders::EDIT_MARK)?,
             resolve: pipeline("edit resolve", shaders::EDIT_RESOLVE)?,
-            traverse: pipeline("edit traverse", shaders::EDIT_TRAVERSE)?,
-            leaves: pipeline("edit leaves", shaders::EDIT_LEAVES)?,
+            traverse: ToolPipelines::new("edit traverse", shaders::EDIT_TRAVERSE),
+            leaves: ToolPipelines::new("edit leaves", shaders::EDIT_LEAVES),
             fill_init: pipeline("edit fill init", shaders::EDIT_FILL_INIT)?,
             fill_flood: pipeline("edit fill flood", shaders::EDIT_FILL_FLOOD)?,
             iota: None,
@@ -769,9 +769,9 @@ impl GpuHashDag {
                         push.counters = block(l - 1);
                         push.capacity = next_cap(l, cap) as u32;
                         input = next;
-                        (&self.traverse, "edit traverse")
+                        (self.traverse.get(ctx, push.flags)?, "edit traverse")
                     }
-                    None => (&self.leaves, "edit leaves"),
+                    None => (self.leaves.get(ctx, push.flags)?, "edit leaves"),
                 };
                 cmd.begin_pass(profiler, name);
                 cmd.dispatch_indirect(
@@ -1311,6 +1311,48 @@ enum ToolKind {
     Paint = 2,
     Fill = 3,
     Copy = 4,
+}
+
+/// Number of [`ToolKind`]s.
+const TOOL_KINDS: usize = 5;
+
+/// One pipeline of a pass per tool, each made on the first edit with that tool: the tool is
+/// specialization constant 0 (`EDIT_SPEC_TOOL` in edit/common.glsl), so each pipeline leaves
+/// the other tools' code out, which lavapipe would otherwise run (masked) for every voxel.
+struct ToolPipelines {
+    name: &'static str,
+    spirv: &'static [u32],
+    made: [OnceLock<ComputePipeline>; TOOL_KINDS],
+}
+
+impl ToolPipelines {
+    /// The pass `name` of `spirv`, no pipeline made yet.
+    fn new(name: &'static str, spirv: &'static [u32]) -> ToolPipelines {
+        ToolPipelines {
+            name,
+            spirv,
+            made: Default::default(),
+        }
+    }
+
+    /// The pipeline of the tool in `flags` (`EditPush::flags`), made now if needed.
+    fn get(&self, ctx: &Arc<GpuContext>, flags: u32) -> Result<&ComputePipeline, GpuError> {
+        let tool = (flags >> TOOL_SHIFT & 7) as usize;
+        let cell = self.made.get(tool).ok_or_else(|| {
+            GpuError::InvalidArgument(format!("{}: tool kind {tool} out of range", self.name))
+        })?;
+        if let Some(pipeline) = cell.get() {
+            return Ok(pipeline);
+        }
+        let pipeline = ctx.create_compute_pipeline(&ComputePipelineDesc {
+            name: self.name,
+            spirv: self.spirv,
+            spec_constants: &[tool as u32],
+            push_constant_size: std::mem::size_of::<EditPush>() as u32,
+            storage_image: false,
+        })?;
+        Ok(cell.get_or_init(|| pipeline))
+    }
 }
 
 /// Workgroups for one invocation per record (grid-stride beyond 65 535 groups).

@@ -223,12 +223,19 @@ impl Running {
                     e.latency_ms
                         .map_or("-".to_string(), |l| format!("{l:.1} ms"))
                 ));
-                for (name, ms) in &e.kernels {
-                    ui.label(format!("  {name}: {ms:.3} ms"));
-                }
             }
             None => {
                 ui.label("no edit yet");
+            }
+        }
+        // At most one edit a second is profiled (profiling costs lavapipe about an edit).
+        if let Some(e) = &self.profiled_edit {
+            ui.label(format!(
+                "last profiled edit: {} r {:.1}, {:.2} ms",
+                e.tool, e.radius, e.ms
+            ));
+            for (name, ms) in &e.kernels {
+                ui.label(format!("  {name}: {ms:.3} ms"));
             }
         }
         ui.separator();

@@ -137,8 +137,15 @@ uint edit_count() {
     return min(Words(push.count_at).w[0], push.count);
 }
 
+// The traverse and leaves pipelines are made once per tool with the tool as specialization
+// constant 0 (engine/edit/gpu.rs `ToolPipelines`): lavapipe runs every branch of a shader,
+// masked, so a pipeline that knows its tool leaves the other tools' code out. Other passes keep
+// the default and read the tool from the flags.
+#define EDIT_TOOL_FROM_FLAGS 7u
+layout(constant_id = 0) const uint EDIT_SPEC_TOOL = EDIT_TOOL_FROM_FLAGS;
+
 uint edit_tool() {
-    return push.flags >> EDIT_TOOL_SHIFT & 7u;
+    return EDIT_SPEC_TOOL != EDIT_TOOL_FROM_FLAGS ? EDIT_SPEC_TOOL : push.flags >> EDIT_TOOL_SHIFT & 7u;
 }
 
 // `precise`: no fused multiply-add, so the CPU twin's f32 arithmetic gives the same answer bit
