@@ -149,3 +149,67 @@ fn gpu_edit_report_profile_trace_and_render() {
     ]);
     assert!(std::fs::read(&cpu).unwrap() == std::fs::read(&out).unwrap());
 }
+
+/// `voxdag bench edit` times every GPU replay without the profiler (whose timestamps cost
+/// lavapipe about an edit) and profiles a second run for the kernel groups: each GPU row has
+/// both totals, kernel times and a pass count, and its ratio to the CPU editor comes from the
+/// unprofiled total.
+#[test]
+fn bench_edit_times_unprofiled_and_profiles_a_second_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let teapot = common::repo().join("tests/data/teapot.obj");
+    let (json, md) = (dir.path().join("e.json"), dir.path().join("e.md"));
+    run(&[
+        "--quiet",
+        "bench",
+        "edit",
+        "--scenes",
+        path(&teapot),
+        "--resolution",
+        "64",
+        "--tables",
+        "accel32",
+        "--random-edits",
+        "0",
+        "--json",
+        path(&json),
+        "--markdown",
+        path(&md),
+    ]);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let rows = report["replays"].as_array().unwrap();
+    let cpu_total = |replay: &serde_json::Value| {
+        rows.iter()
+            .find(|r| r["engine"] == "cpu" && r["replay"] == *replay)
+            .unwrap()["edit_ms_total"]
+            .as_f64()
+            .unwrap()
+    };
+    // Paint changes nothing in a geometry-only scene: no passes to profile.
+    let gpu: Vec<_> = rows
+        .iter()
+        .filter(|r| r["engine"] != "cpu" && r["status"] == "ok" && r["replay"] != "paint")
+        .collect();
+    assert!(gpu.len() >= 2, "{report}");
+    for r in gpu {
+        assert!(r["edits"].as_u64().unwrap() > 0, "{r}");
+        let total = r["edit_ms_total"].as_f64().unwrap();
+        assert!(total > 0.0, "{r}");
+        assert!(r["profiled_ms_total"].as_f64().unwrap() > 0.0, "{r}");
+        let kernels: f64 = r["kernels_ms"]
+            .as_object()
+            .unwrap()
+            .values()
+            .map(|v| v.as_f64().unwrap())
+            .sum();
+        assert!(kernels > 0.0, "{r}");
+        assert!(r["per_edit"][2].as_f64().unwrap() >= 1.0, "{r}");
+        let ratio = r["vs_cpu"].as_f64().unwrap();
+        let expected = total / cpu_total(&r["replay"]).max(1e-9);
+        assert!((ratio - expected).abs() <= 1e-9 * expected.max(1.0), "{r}");
+    }
+    assert!(std::fs::read_to_string(&md)
+        .unwrap()
+        .contains("profiled ms total"));
+}

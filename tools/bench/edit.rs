@@ -95,8 +95,13 @@ struct ReplayRow {
     edits: usize,
     /// `ok`, or `n/a: <why>` (a tool not on the GPU yet).
     status: String,
+    /// Whole-edit wall time, summed and largest, timed without the profiler.
     edit_ms_total: f64,
     edit_ms_max: f64,
+    /// The same replay's wall time with every pass profiled (the run that gives `kernels_ms`):
+    /// on lavapipe the timestamps around ~100 passes per edit cost about an edit; None for the
+    /// CPU.
+    profiled_ms_total: Option<f64>,
     /// GPU ms per kernel group (Figure 4.8), summed over the replay.
     kernels_ms: BTreeMap<&'static str, f64>,
     /// Temporary SVO bytes (inner nodes 32 B, leaves 8 B), largest edit of the replay.
@@ -243,6 +248,7 @@ fn run_cpu(scene: &str, svdag: &Svdag, replay: &Replay) -> Result<ReplayRow> {
         status: "ok".into(),
         edit_ms_total: times.iter().sum(),
         edit_ms_max: times.iter().cloned().fold(0.0, f64::max),
+        profiled_ms_total: None,
         kernels_ms: BTreeMap::new(),
         temp_svo_bytes_max: 0,
         dag_bytes_before: before,
@@ -252,6 +258,8 @@ fn run_cpu(scene: &str, svdag: &Svdag, replay: &Replay) -> Result<ReplayRow> {
     })
 }
 
+/// `replay` on a fresh GPU hash DAG of `svdag` with `table` tables, twice: timed without the
+/// profiler, then on another fresh load with it for the kernel groups and pass counts.
 fn run_gpu(
     ctx: &Arc<GpuContext>,
     scene: &str,
@@ -259,10 +267,33 @@ fn run_gpu(
     table: TableArg,
     replay: &Replay,
 ) -> Result<ReplayRow> {
+    let mut row = replay_gpu(ctx, scene, svdag, table, replay, None)?;
+    if row.status != "ok" {
+        return Ok(row);
+    }
+    let mut profiler = Profiler::new(ctx)?;
+    let profiled = replay_gpu(ctx, scene, svdag, table, replay, Some(&mut profiler))?;
+    row.profiled_ms_total = Some(profiled.edit_ms_total);
+    row.kernels_ms = profiled.kernels_ms;
+    if let (Some(per_edit), Some(p)) = (&mut row.per_edit, profiled.per_edit) {
+        per_edit[2] = p[2];
+    }
+    Ok(row)
+}
+
+/// One run of `replay` on a fresh GPU hash DAG, profiled when `profiler` is given (else the
+/// kernel groups stay 0 and the pass count is 0).
+fn replay_gpu(
+    ctx: &Arc<GpuContext>,
+    scene: &str,
+    svdag: &Svdag,
+    table: TableArg,
+    replay: &Replay,
+    mut profiler: Option<&mut Profiler>,
+) -> Result<ReplayRow> {
     let config = GpuHashDagConfig::new(table.variant(), buckets_for(svdag));
     let mut hd = GpuHashDag::load(ctx, &config, svdag, None)?;
     let before = live_bytes(&hd.gc(None)?.live_per_table);
-    let mut profiler = Profiler::new(ctx)?;
     let mut row = ReplayRow {
         scene: scene.into(),
         resolution: svdag.resolution,
@@ -272,6 +303,7 @@ fn run_gpu(
         status: "ok".into(),
         edit_ms_total: 0.0,
         edit_ms_max: 0.0,
+        profiled_ms_total: None,
         kernels_ms: GROUPS.iter().map(|g| (*g, 0.0)).collect(),
         temp_svo_bytes_max: 0,
         dag_bytes_before: before,
@@ -282,9 +314,9 @@ fn run_gpu(
     let stats = ctx.stats();
     let mut passes = 0;
     for tool in &replay.tools {
-        let from = profiler.passes().len();
+        let from = profiler.as_ref().map_or(0, |p| p.passes().len());
         let start = Instant::now();
-        let report = match hd.edit(tool, Some(&mut profiler)) {
+        let report = match hd.edit(tool, profiler.as_deref_mut()) {
             Ok(r) => r,
             Err(GpuDagError::Invalid(why)) if why.contains("not on the GPU") => {
                 row.status = format!("n/a: {} not on the GPU yet", tool_name(tool));
@@ -296,10 +328,12 @@ fn run_gpu(
         row.edits += 1;
         row.edit_ms_total += ms;
         row.edit_ms_max = row.edit_ms_max.max(ms);
-        for p in &profiler.passes()[from..] {
-            *row.kernels_ms.entry(group_of(&p.name)).or_insert(0.0) += p.gpu_ms;
+        if let Some(profiler) = profiler.as_deref() {
+            for p in &profiler.passes()[from..] {
+                *row.kernels_ms.entry(group_of(&p.name)).or_insert(0.0) += p.gpu_ms;
+            }
+            passes += profiler.passes().len() - from;
         }
-        passes += profiler.passes().len() - from;
         let temp: u64 = report
             .temporary_nodes
             .iter()
@@ -439,7 +473,7 @@ pub fn bench_edit(args: &BenchEditArgs) -> Result<()> {
 
 fn markdown(report: &Report) -> String {
     let mut md = format!(
-        "GPU: {}; CPU reference editor on {} threads; resolution {}^3.\n\n| scene | replay | engine | edits | edit ms total | max | {} | temp SVO max KiB | DAG KiB before | after | / CPU | per edit: submits / waits / passes |\n|---|---|---|---|---|---|{}---|---|---|---|---|\n",
+        "GPU: {}; CPU reference editor on {} threads; resolution {}^3.\n\n| scene | replay | engine | edits | edit ms total | max | profiled ms total | {} | temp SVO max KiB | DAG KiB before | after | / CPU | per edit: submits / waits / passes |\n|---|---|---|---|---|---|---|{}---|---|---|---|---|\n",
         report.device,
         report.cpu_threads,
         report.resolution,
@@ -455,7 +489,7 @@ fn markdown(report: &Report) -> String {
                 r.engine,
                 r.edits,
                 r.status,
-                " |".repeat(GROUPS.len() + 6)
+                " |".repeat(GROUPS.len() + 7)
             );
             continue;
         }
@@ -468,13 +502,15 @@ fn markdown(report: &Report) -> String {
             })
             .collect();
         md += &format!(
-            "| {} | {} | {} | {} | {:.1} | {:.1} | {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {} | {} | {:.1} | {:.1} | {} | {} | {} | {} | {} | {} | {} |\n",
             r.scene,
             r.replay,
             r.engine,
             r.edits,
             r.edit_ms_total,
             r.edit_ms_max,
+            r.profiled_ms_total
+                .map_or("-".into(), |ms| format!("{ms:.1}")),
             kernels.join(" | "),
             if r.engine == "cpu" {
                 "-".into()
