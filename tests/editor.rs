@@ -60,10 +60,13 @@ fn wait_status(
     }
 }
 
+/// The tool of [`start_editor`]: sphere add, radius 8.
+const SPHERE_ADD_8: [&str; 4] = ["--tool", "sphere-add", "--radius", "8"];
+
 /// Starts the editor on `vdag` in an 800x600 window (internal scale 1/2) with a status file,
 /// the sphere-add tool of radius 8.
 fn start_editor(x: &Xvfb, vdag: &Path, status: &Path) -> (Child, String) {
-    start_editor_with(x, vdag, status, &["--tool", "sphere-add", "--radius", "8"])
+    start_editor_with(x, vdag, status, &SPHERE_ADD_8)
 }
 
 /// [`start_editor`] with the tool arguments `tool`.
@@ -130,19 +133,8 @@ fn click_adds_voxels_and_ctrl_z_takes_them_back() {
     let path = dir.path().join("status.json");
     let stats = dir.path().join("stats.json");
     let stats_arg = stats.to_str().unwrap();
-    let (mut editor, id) = start_editor_with(
-        &x,
-        &vdag,
-        &path,
-        &[
-            "--tool",
-            "sphere-add",
-            "--radius",
-            "8",
-            "--stats-json",
-            stats_arg,
-        ],
-    );
+    let args = [&SPHERE_ADD_8[..], &["--stats-json", stats_arg]].concat();
+    let (mut editor, id) = start_editor_with(&x, &vdag, &path, &args);
     let first = wait_status(&path, &mut editor, "a voxel count", |s| {
         s["voxels"].as_u64().is_some()
     });
@@ -477,23 +469,17 @@ fn path_tracing_accumulates_and_restarts_after_an_edit() {
     let x = Xvfb::start();
     let path = dir.path().join("status.json");
     let max = 40;
-    let (mut editor, id) = start_editor_with(
-        &x,
-        &vdag,
-        &path,
-        &[
-            "--tool",
-            "sphere-add",
-            "--radius",
-            "8",
-            "--render-mode",
-            "pt",
-            "--bounces",
-            "1",
-            "--max-samples",
-            &max.to_string(),
-        ],
-    );
+    let max_arg = max.to_string();
+    let pt = [
+        "--render-mode",
+        "pt",
+        "--bounces",
+        "1",
+        "--max-samples",
+        &max_arg,
+    ];
+    let args = [&SPHERE_ADD_8[..], &pt[..]].concat();
+    let (mut editor, id) = start_editor_with(&x, &vdag, &path, &args);
     let samples = |s: &serde_json::Value| s["samples"].as_u64().unwrap();
     let first = wait_status(&path, &mut editor, "a first sample", |s| {
         s["voxels"].as_u64().is_some() && samples(s) > 0
