@@ -162,6 +162,17 @@ fn click_adds_voxels_and_ctrl_z_takes_them_back() {
     let undone = wait_status(&path, &mut editor, "the undo", |s| s["undo_depth"] == 0);
     assert_eq!(undone["voxels"].as_u64(), Some(original), "{undone}");
     assert_eq!(undone["redo_depth"], 1, "{undone}");
+    // Shift + wheel up twice: the fly speed grows by 1.25 per notch.
+    assert_eq!(undone["fly_speed"], 1.0, "{undone}");
+    let wheel = [
+        "keydown", "shift", "click", "4", "click", "4", "keyup", "shift",
+    ];
+    xdotool(&x.display, &wheel);
+    let faster = wait_status(&path, &mut editor, "fly speed 1.25^2", |s| {
+        (s["fly_speed"].as_f64().unwrap_or(1.0) - 1.5625).abs() < 1e-4
+    });
+    // Shift + wheel is not Ctrl + wheel: the tool radius stays.
+    assert_eq!(faster["radius"], 8.0, "{faster}");
     close(&x, &id, editor);
     // --stats-json: the click is one edit answering an input event, its latency counted from
     // the event's delivery and (an upper bound) from the start of the frame it arrived in.

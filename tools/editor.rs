@@ -747,6 +747,8 @@ struct LastEdit {
 #[derive(Serialize)]
 struct Status<'a> {
     frame: usize,
+    /// Fly speed factor (Shift + wheel).
+    fly_speed: f32,
     voxels: Option<u64>,
     undo_depth: usize,
     redo_depth: usize,
@@ -984,6 +986,8 @@ impl Running {
                 };
                 if self.modifiers.control_key() {
                     self.radius = (self.radius * 1.1f32.powf(lines)).clamp(1.0, MAX_RADIUS);
+                } else if self.modifiers.shift_key() {
+                    self.input.scale_fly_speed(lines);
                 } else {
                     self.input.zoom(lines);
                 }
@@ -1442,6 +1446,7 @@ impl Running {
         if let Some(path) = &args.status_file {
             let status = Status {
                 frame: self.frames,
+                fly_speed: self.input.fly_speed,
                 voxels: counts.as_ref().map(|c| c.voxels),
                 undo_depth: self.doc.undo,
                 redo_depth: self.doc.redo,

@@ -95,6 +95,11 @@ impl GpuWindow {
     }
 }
 
+/// Slowest fly speed factor ([`CameraInput::fly_speed`]).
+pub const MIN_FLY_SPEED: f32 = 1.0 / 64.0;
+/// Fastest fly speed factor.
+pub const MAX_FLY_SPEED: f32 = 64.0;
+
 /// Orbit and fly camera state driven by input.
 pub struct CameraInput {
     /// The camera rendered this frame.
@@ -113,6 +118,8 @@ pub struct CameraInput {
     pub keys: HashSet<KeyCode>,
     /// Shift held: fly 4x faster.
     pub fast: bool,
+    /// Fly speed factor (the editor's Shift + wheel), [`MIN_FLY_SPEED`]..=[`MAX_FLY_SPEED`].
+    pub fly_speed: f32,
     last_input: Option<Instant>,
 }
 
@@ -128,6 +135,7 @@ impl CameraInput {
             cursor: None,
             keys: HashSet::new(),
             fast: false,
+            fly_speed: 1.0,
             last_input: None,
         }
     }
@@ -192,6 +200,11 @@ impl CameraInput {
         self.touch();
     }
 
+    /// Multiplies the fly speed by 1.25 per wheel line (`lines` < 0: slower), clamped.
+    pub fn scale_fly_speed(&mut self, lines: f32) {
+        self.fly_speed = (self.fly_speed * 1.25f32.powf(lines)).clamp(MIN_FLY_SPEED, MAX_FLY_SPEED);
+    }
+
     /// Fly with WASD (forward/left/back/right) and Q/E (down/up) for `dt` seconds.
     pub fn fly(&mut self, dt: f32) {
         let axis = |plus: KeyCode, minus: KeyCode| {
@@ -208,7 +221,7 @@ impl CameraInput {
         let (eye, target) = (Vec3::from(self.camera.eye), Vec3::from(self.camera.target));
         let forward = (target - eye).normalize_or_zero();
         let right = forward.cross(Vec3::Y).normalize_or_zero();
-        let speed = self.scene_size * 0.4 * if self.fast { 4.0 } else { 1.0 };
+        let speed = self.scene_size * 0.4 * self.fly_speed * if self.fast { 4.0 } else { 1.0 };
         let step = (forward * f + right * r + Vec3::Y * u) * speed * dt;
         self.camera.eye = (eye + step).to_array();
         self.camera.target = (target + step).to_array();

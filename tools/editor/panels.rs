@@ -19,7 +19,7 @@ use voxdag::render::hash_scene::buckets_for;
 use super::{pack_colour, Document, RenderMode, Running};
 use crate::edit::TableArg;
 use crate::view::MOTION_TARGET_MS;
-use crate::window::MIN_SCALE;
+use crate::window::{MAX_FLY_SPEED, MIN_FLY_SPEED, MIN_SCALE};
 
 /// Frame times kept for the Profiler's graph.
 pub const GRAPH_FRAMES: usize = 240;
@@ -158,6 +158,11 @@ impl Running {
                 }
             });
         ui.label("(a switch rebuilds the tables from the scene and drops the undo history)");
+        ui.add(
+            egui::Slider::new(&mut self.input.fly_speed, MIN_FLY_SPEED..=MAX_FLY_SPEED)
+                .logarithmic(true)
+                .text("fly speed (Shift + wheel)"),
+        );
         ui.add(egui::Slider::new(&mut self.user_scale, MIN_SCALE..=1.0).text("render scale"));
         ui.checkbox(
             &mut self.dynamic_scale,
