@@ -39,14 +39,6 @@ mod record;
 use crate::commands::{check_output, progress_bar, write_json};
 use crate::edit::TableArg;
 use crate::view::MOTION_TARGET_MS;
-
-/// Wall time per frame the dynamic scale aims at while the button edits (16.7 frames/s).
-const EDIT_FRAME_TARGET_MS: f64 = 60.0;
-/// Least time between two profiled edits (the Profiler panel's kernel breakdown) unless a trace
-/// records.
-const EDIT_PROFILE_INTERVAL: Duration = Duration::from_secs(1);
-/// Least render time the dynamic scale gives an editing frame (the scale's floor may be above).
-const EDIT_RENDER_MIN_MS: f64 = 5.0;
 use crate::window::{require_display, CameraInput, GpuWindow, MIN_SCALE};
 
 mod brush;
@@ -61,6 +53,13 @@ use pt::{PtKey, PtState, MAX_EDITOR_BOUNCES, MAX_FRAME_SPP};
 
 /// Largest tool radius in voxels (slider and wheel).
 const MAX_RADIUS: f32 = 256.0;
+/// Wall time per frame the dynamic scale aims at while the button edits (16.7 frames/s).
+const EDIT_FRAME_TARGET_MS: f64 = 60.0;
+/// Least time between two profiled edits (the Profiler panel's kernel breakdown) unless a trace
+/// records.
+const EDIT_PROFILE_INTERVAL: Duration = Duration::from_secs(1);
+/// Least render time the dynamic scale gives an editing frame (the scale's floor may be above).
+const EDIT_RENDER_MIN_MS: f64 = 5.0;
 /// Colours of the 16 materials (editable in the Tools panel) where the scene has no palette.
 /// Material 0 is the renderer's grey (linear 0.6) so a geometry-only scene looks as before.
 const DEFAULT_PALETTE: Palette = [
