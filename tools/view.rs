@@ -434,7 +434,12 @@ impl Running {
                     MouseScrollDelta::LineDelta(_, y) => *y,
                     MouseScrollDelta::PixelDelta(p) => p.y as f32 / 40.0,
                 };
-                self.input.zoom(lines);
+                // Shift + wheel: fly speed, as in the editor.
+                if self.input.fast {
+                    self.input.scale_fly_speed(lines);
+                } else {
+                    self.input.zoom(lines);
+                }
             }
             WindowEvent::Focused(false) => self.input.keys.clear(),
             _ => {}
@@ -667,7 +672,9 @@ impl Running {
                 }
                 ui.separator();
                 ui.label("drag L/M: orbit, wheel: zoom, drag R: look");
-                ui.label("WASD/QE: fly (Shift: fast), Home: frame scene, Esc: quit");
+                ui.label(
+                    "WASD/QE: fly (Shift: fast; Shift + wheel: speed), Home: frame, Esc: quit",
+                );
             });
     }
 
