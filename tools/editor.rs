@@ -413,7 +413,6 @@ impl App<'_> {
             last_passes: Vec::new(),
             last_edit: None,
             profiled_edit: None,
-            profiled_at: None,
             edit_input: None,
             last_frame: None,
             frame_ms: 0.0,
@@ -822,9 +821,9 @@ struct Running {
     scale: f32,
     last_passes: Vec<PassTiming>,
     last_edit: Option<LastEdit>,
-    /// The last edit that was profiled (its kernels), and when: the Profiler panel's breakdown.
-    profiled_edit: Option<LastEdit>,
-    profiled_at: Option<Instant>,
+    /// When the last profiled edit ended, and the edit with its kernels: the Profiler panel's
+    /// breakdown.
+    profiled_edit: Option<(Instant, LastEdit)>,
     /// Input of an edit not yet shown in a presented frame.
     edit_input: Option<EditInput>,
     last_frame: Option<Instant>,
@@ -1033,8 +1032,9 @@ impl Running {
         let tracing = self.ui.trace.is_some();
         let profile = tracing
             || self
-                .profiled_at
-                .is_none_or(|t| t.elapsed() >= EDIT_PROFILE_INTERVAL);
+                .profiled_edit
+                .as_ref()
+                .is_none_or(|(t, _)| t.elapsed() >= EDIT_PROFILE_INTERVAL);
         let (profiler, before) = match &mut self.ui.trace {
             Some(t) => {
                 let n = t.profiler.passes().len();
@@ -1087,8 +1087,7 @@ impl Running {
             kernels,
         };
         if profile {
-            self.profiled_at = Some(end);
-            self.profiled_edit = Some(edit.clone());
+            self.profiled_edit = Some((end, edit.clone()));
         }
         self.last_edit = Some(edit);
         self.edit_input = Some(input);
@@ -1156,7 +1155,10 @@ impl Running {
     /// Updates [`Running::frame_rest_ms`] with a frame of `frame_ms` whose render at `internal`
     /// is estimated from the measured cost per pixel; only frames that edited count.
     fn measure_frame_rest(&mut self, frame_ms: f64, internal: [u32; 2], edited: bool) {
-        let (Some(ms_per_pixel), true) = (self.ms_per_pixel, edited) else {
+        if !edited {
+            return;
+        }
+        let Some(ms_per_pixel) = self.ms_per_pixel else {
             return;
         };
         let render = ms_per_pixel * internal[0] as f64 * internal[1] as f64;
@@ -1461,7 +1463,7 @@ impl Running {
                 internal,
                 replay_done: self.replay_done,
                 last_edit: self.last_edit.as_ref(),
-                profiled_edit: self.profiled_edit.as_ref(),
+                profiled_edit: self.profiled_edit.as_ref().map(|(_, e)| e),
                 message: self.message.as_deref(),
                 clicks: self.clicks,
                 ui_clicks: self.ui_clicks,

@@ -234,7 +234,7 @@ impl Running {
             }
         }
         // At most one edit a second is profiled (profiling costs lavapipe about an edit).
-        if let Some(e) = &self.profiled_edit {
+        if let Some((_, e)) = &self.profiled_edit {
             ui.label(format!(
                 "last profiled edit: {} r {:.1}, {:.2} ms",
                 e.tool, e.radius, e.ms
