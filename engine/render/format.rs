@@ -7,13 +7,15 @@
 //! the other formats without decoding:
 //! - svdag32: `Svdag::words`, `VoxelIndex::node_voxels` plus the voxels before each child
 //!   pointer (at the pointer's word), a one-word info block (unused).
-//! - SSVDAG / TSVDAG: the words are the encoding's leaves (two words each), pointer tables
-//!   (TSVDAG with tables, two words per entry, child levels in order) and node streams (levels
-//!   1..=root concatenated, two u16 per word), unchanged; `node_voxels` has one `u64` per u16 of
-//!   the streams (`pointer_voxel_counts`: at every pointer the voxels it leads to; the colour
-//!   index sums them); the info block
-//!   ([`info`] offsets, mirrored by `DAG_INFO_*` in the GLSL) holds where each level starts,
-//!   the coding flags and the Huffman decoders (the transforms are computed in the shader).
+//! - SSVDAG / TSVDAG: the words are the encoding's leaves (two words each), then (TSVDAG) per
+//!   child level its Huffman decode table (one word per entry, Huffman modes) and pointer table
+//!   (two words per entry, modes with tables), then the node streams (levels 1..=root
+//!   concatenated, two u16 per word); leaves, tables and streams unchanged. `node_voxels` has
+//!   one `u64` per u16 of the streams (`pointer_voxel_counts`: at every pointer the voxels it
+//!   leads to; the colour index sums them); the info block ([`info`] offsets, mirrored by
+//!   `DAG_INFO_*` in the GLSL) holds the coding flags and one 64-bit record per level (where
+//!   its stream and its tables start), so a child fetch reads its level's constants with one
+//!   load (the transforms are computed in the shader).
 
 use crate::dag::encode::{EncodeError, EncodedDag, SsvdagEncoding, TsvdagEncoding};
 use crate::dag::transform::TransformSet;
@@ -30,23 +32,20 @@ pub mod info {
     pub const SET: usize = 1;
     /// Word offset of the node streams in the DAG words.
     pub const STREAM_BASE: usize = 2;
-    /// Word offset of the pointer tables in the DAG words.
-    pub const TABLE_BASE: usize = 3;
     /// The payload's coding word (mask-coded levels, tagged levels << 8).
-    pub const CODING: usize = 4;
-    /// Per level: u16 index of its stream in the streams (24 entries).
-    pub const LEVEL_START: usize = 8;
-    /// Per child level: first entry of its table in the tables (24 entries).
-    pub const TABLE_START: usize = 32;
-    /// Per child level: Huffman code kind | implied symbol << 16.
-    pub const HUFF_KIND: usize = 56;
-    /// Per child level: word offset of its Huffman decode table in this block | the table's
-    /// index bits << 24 (see [`super::huffman_decode_table`]).
-    pub const HUFF_LUT: usize = 80;
-    /// Words of the fixed part of the block; the Huffman decode tables follow it.
-    pub const LEN: usize = HUFF_LUT + 24;
-    /// Levels the per-level arrays hold (root levels up to 19 for 2^21 grids).
+    pub const CODING: usize = 3;
+    /// Per level l, a record of two words at `LEVELS + 2 l`, read with one 64-bit load per
+    /// child fetch: the u16 index of the level's stream in the streams (0 for the leaves, which
+    /// pointers index directly), and (TSVDAG) the word offset of the level's tables in the DAG
+    /// words | the index bits of its Huffman decode table << [`TABLE_BITS_SHIFT`]: the pointer
+    /// table starts there, the decode table fills the `1 << bits` words before it.
+    pub const LEVELS: usize = 8;
+    /// Words of the block (the Huffman decode tables live in the DAG words).
+    pub const LEN: usize = LEVELS + 2 * MAX_LEVELS;
+    /// Levels the per-level records hold (root levels up to 19 for 2^21 grids).
     pub const MAX_LEVELS: usize = 24;
+    /// Where a level record's table word keeps the Huffman index bits.
+    pub const TABLE_BITS_SHIFT: u32 = 28;
 }
 
 /// A DAG format as the traversal shaders see it: one compiled variant each.
@@ -193,8 +192,9 @@ fn ssvdag_data(e: &SsvdagEncoding) -> Result<GpuDagData, EncodeError> {
         .collect();
     let mut w = vec![0u32; info::LEN];
     w[info::STREAM_BASE] = words.len() as u32;
-    let starts = push_streams(&mut words, &e.levels);
-    w[info::LEVEL_START..info::LEVEL_START + starts.len()].copy_from_slice(&starts);
+    for (l, start) in push_streams(&mut words, &e.levels).into_iter().enumerate() {
+        w[info::LEVELS + 2 * l] = start;
+    }
     Ok(GpuDagData {
         format: TraversalFormat::Ssvdag,
         resolution: e.resolution,
@@ -220,12 +220,39 @@ fn tsvdag_data(e: &TsvdagEncoding) -> Result<GpuDagData, EncodeError> {
         TransformSet::All => 3,
     };
     w[info::SET] = set | (e.compact_translations() as u32) << 4;
-    w[info::TABLE_BASE] = words.len() as u32;
-    let mut table_start = 0u32;
-    for (l, t) in e.tables.iter().enumerate().take(e.levels.len()) {
-        w[info::TABLE_START + l] = table_start;
-        table_start += t.len() as u32;
-        words.extend(t.iter().flat_map(|&v| [v as u32, (v >> 32) as u32]));
+    // Per child level: its Huffman decode table (a one-entry table for a level with one
+    // implied symbol or none), then its pointer table.
+    let codes = if e.options.huffman {
+        e.huffman_tables()
+    } else {
+        Vec::new()
+    };
+    for l in 0..e.levels.len() {
+        let mut bits = 0;
+        if let Some((kind, count, symbols)) = codes.get(l) {
+            let table = match kind {
+                2 => {
+                    let (b, table) = huffman_decode_table(count, symbols);
+                    bits = b;
+                    table
+                }
+                1 => vec![symbols[0] as u32],
+                _ => vec![0],
+            };
+            words.extend(table);
+        }
+        if words.len() as u64 >= 1 << info::TABLE_BITS_SHIFT {
+            return Err(EncodeError::TooLarge(format!(
+                "the pointer tables of level {l} start at DAG word {}: the GPU traversal addresses \
+                 at most 2^{} words before the node streams",
+                words.len(),
+                info::TABLE_BITS_SHIFT
+            )));
+        }
+        w[info::LEVELS + 2 * l + 1] = words.len() as u32 | bits << info::TABLE_BITS_SHIFT;
+        if let Some(t) = e.tables.get(l) {
+            words.extend(t.iter().flat_map(|&v| [v as u32, (v >> 32) as u32]));
+        }
     }
     let mask_levels = e
         .translation_coding
@@ -241,18 +268,8 @@ fn tsvdag_data(e: &TsvdagEncoding) -> Result<GpuDagData, EncodeError> {
         .fold(0u32, |m, (l, _)| m | 1 << (8 + l));
     w[info::CODING] = mask_levels | tagged_levels;
     w[info::STREAM_BASE] = words.len() as u32;
-    let starts = push_streams(&mut words, &e.levels);
-    w[info::LEVEL_START..info::LEVEL_START + starts.len()].copy_from_slice(&starts);
-    if e.options.huffman {
-        for (l, (kind, count, symbols)) in e.huffman_tables().into_iter().enumerate() {
-            let single = if kind == 1 { symbols[0] as u32 } else { 0 };
-            w[info::HUFF_KIND + l] = kind | single << 16;
-            if kind == 2 {
-                let (bits, table) = huffman_decode_table(&count, &symbols);
-                w[info::HUFF_LUT + l] = w.len() as u32 | bits << 24;
-                w.extend(table);
-            }
-        }
+    for (l, start) in push_streams(&mut words, &e.levels).into_iter().enumerate() {
+        w[info::LEVELS + 2 * l] = start;
     }
     Ok(GpuDagData {
         format: TraversalFormat::Tsvdag {
@@ -332,6 +349,88 @@ impl GpuDagData {
             EncodedDag::Svdag32(d) => Ok(GpuDagData::svdag32(d)),
             EncodedDag::Ssvdag(e) => ssvdag_data(e),
             EncodedDag::Tsvdag(e) => tsvdag_data(e),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dag::encode::TsvdagOptions;
+    use crate::scene::{morton, Voxels};
+
+    /// A 64^3 scene whose pointers use many transforms and translations.
+    fn patterned_dag() -> Svdag {
+        let mut codes = Vec::new();
+        for z in 0..64u32 {
+            for y in 0..64u32 {
+                for x in 0..64u32 {
+                    let (dx, dy, dz) = (x as i32 - 32, y as i32 - 32, z as i32 - 32);
+                    if dx * dx + dy * dy + dz * dz < 900 && (x * 7 + y * 13 + z * z) % 11 < 3 {
+                        codes.push(morton::encode(x, y, z));
+                    }
+                }
+            }
+        }
+        codes.sort_unstable();
+        let voxels = Voxels {
+            resolution: 64,
+            codes,
+            colors: Vec::new(),
+        };
+        Svdag::from_voxels(&voxels).unwrap()
+    }
+
+    /// Every child level's record names its pointer table and, in the `1 << bits` words before
+    /// it, a decode table giving what `Huffman::decode` gives for every index (a level with
+    /// one implied symbol or none: one entry of length 0).
+    #[test]
+    fn level_records_name_decode_and_pointer_tables() {
+        let dag = patterned_dag();
+        for translations in [false, true] {
+            let options = TsvdagOptions {
+                lut: true,
+                huffman: true,
+            };
+            let e = TsvdagEncoding::build_with_translations(
+                &dag,
+                TransformSet::All,
+                translations,
+                options,
+            )
+            .unwrap();
+            let data = tsvdag_data(&e).unwrap();
+            let mut previous_end = 2 * e.leaves.len() as u32;
+            for l in 0..e.levels.len() - 1 {
+                let word = data.info[info::LEVELS + 2 * l + 1];
+                let bits = word >> info::TABLE_BITS_SHIFT;
+                let tables = word & ((1 << info::TABLE_BITS_SHIFT) - 1);
+                let start = tables - (1 << bits);
+                assert_eq!(
+                    start, previous_end,
+                    "level {l}: tables packed in level order"
+                );
+                let table = e.tables.get(l).map_or(&[][..], Vec::as_slice);
+                previous_end = tables + 2 * table.len() as u32;
+                let decode = &data.words[start as usize..tables as usize];
+                let pointers = &data.words[tables as usize..previous_end as usize];
+                let stored: Vec<u32> = table
+                    .iter()
+                    .flat_map(|&v| [v as u32, (v >> 32) as u32])
+                    .collect();
+                assert_eq!(pointers, &stored[..], "level {l}: pointer table");
+                for (x, &entry) in decode.iter().enumerate() {
+                    let expected = match &e.codes[l] {
+                        Some(code) => code
+                            .decode(x as u64)
+                            .map_or(0, |(s, len)| s as u32 | (len as u32) << 16),
+                        None => 0,
+                    };
+                    assert_eq!(entry, expected, "level {l}, index {x}");
+                }
+            }
+            assert_eq!(data.info[info::STREAM_BASE], previous_end);
+            assert!(e.codes.iter().flatten().any(|c| c.single().is_none()));
         }
     }
 }

@@ -17,7 +17,7 @@ use std::sync::{Arc, OnceLock};
 use super::format::TraversalFormat;
 use super::gpu::GpuScene;
 use super::gpu_shared::{FirstHit, PtPush};
-use super::params::RenderParams;
+use super::params::{RenderParams, FLAG_HAS_COLORS};
 use super::pathtrace::{srgb_lut, PathTraceError, PtImage, PtSettings};
 use crate::compute::{Primitives, ScanScratch, COUNT_ARGS_BYTES};
 use crate::dag::Svdag;
@@ -58,6 +58,9 @@ pub struct PtTarget {
     pub(super) width: u32,
     pub(super) height: u32,
     bounces: u32,
+    /// Whether every sample needs colour indices (the albedo reads voxel colours); else only
+    /// the first hits of sample 0 do.
+    needs_color_index: bool,
     render_params: Buffer,
     pt_params: Buffer,
     _lut: Buffer,
@@ -95,6 +98,10 @@ struct PtPipelines {
     shade: ComputePipeline,
     shadow: ComputePipeline,
     accumulate: ComputePipeline,
+    /// `mega` and `extend` without colour indices (specialization constant 2 false), made on
+    /// first use: for the samples that read none.
+    mega_plain: OnceLock<ComputePipeline>,
+    extend_plain: OnceLock<ComputePipeline>,
 }
 
 /// The GPU path tracers' pipelines, created per DAG format on first use.
@@ -132,15 +139,7 @@ impl GpuPathTracer {
             return Ok(p);
         }
         let i = format.index();
-        let make = |pass: &str, spirv, spec: &[u32]| {
-            self.ctx.create_compute_pipeline(&ComputePipelineDesc {
-                name: &format!("pt {pass} ({})", format.name()),
-                spirv,
-                spec_constants: spec,
-                push_constant_size: std::mem::size_of::<PtPush>() as u32,
-                storage_image: false,
-            })
-        };
+        let make = |pass, spirv, spec: &[u32]| self.make_pipeline(format, pass, spirv, spec);
         let made = PtPipelines {
             mega: make(
                 "megakernel",
@@ -156,9 +155,66 @@ impl GpuPathTracer {
                 shaders::RENDER_PT_ACCUMULATE_BY_FORMAT[i],
                 &[],
             )?,
+            mega_plain: OnceLock::new(),
+            extend_plain: OnceLock::new(),
         };
         // Another thread may have won the race: its pipelines are the same.
         Ok(slot.get_or_init(|| made))
+    }
+
+    /// A pipeline of pass `pass` of `format`'s traversal variant.
+    fn make_pipeline(
+        &self,
+        format: TraversalFormat,
+        pass: &str,
+        spirv: &[u32],
+        spec: &[u32],
+    ) -> Result<ComputePipeline, GpuError> {
+        self.ctx.create_compute_pipeline(&ComputePipelineDesc {
+            name: &format!("pt {pass} ({})", format.name()),
+            spirv,
+            spec_constants: spec,
+            push_constant_size: std::mem::size_of::<PtPush>() as u32,
+            storage_image: false,
+        })
+    }
+
+    /// The megakernel (`extend` false) or extend pass of `format` that computes colour indices
+    /// when `colors` says so, else the variant without them (made on first use).
+    fn traversing<'a>(
+        &'a self,
+        pipes: &'a PtPipelines,
+        format: TraversalFormat,
+        extend: bool,
+        colors: bool,
+    ) -> Result<&'a ComputePipeline, GpuError> {
+        let (full, plain) = match extend {
+            false => (&pipes.mega, &pipes.mega_plain),
+            true => (&pipes.extend, &pipes.extend_plain),
+        };
+        if colors {
+            return Ok(full);
+        }
+        if let Some(p) = plain.get() {
+            return Ok(p);
+        }
+        let i = format.index();
+        // Constant 2 = PT_COLOR_INDEX; the extend pass has no constants 0 and 1 (ignored).
+        let made = match extend {
+            false => self.make_pipeline(
+                format,
+                "megakernel, no colour index",
+                shaders::RENDER_PT_MEGA_BY_FORMAT[i],
+                &[WORKGROUP[0], WORKGROUP[1], 0],
+            )?,
+            true => self.make_pipeline(
+                format,
+                "extend, no colour index",
+                shaders::RENDER_PT_EXTEND_BY_FORMAT[i],
+                &[0, 0, 0],
+            )?,
+        };
+        Ok(plain.get_or_init(|| made))
     }
 
     /// Allocates the accumulation of a `settings`-sized render of `scene` for `mode` and writes
@@ -179,6 +235,8 @@ impl GpuPathTracer {
             colors: Vec::new(),
         };
         let params = RenderParams::with_colors(&settings.render, &header, scene.color_count())?;
+        // `pt_needs_color_index` in pt_common.glsl.
+        let needs_color_index = pt.env[3] < 0.0 && params.flags & FLAG_HAS_COLORS != 0;
         let pixels = pt.pixels as u64;
         let lut = ctx.upload("pt srgb lut", &srgb_lut())?;
         let accum = ctx.create_buffer("pt accumulation", pixels * 16, MemLocation::GpuOnly)?;
@@ -243,6 +301,7 @@ impl GpuPathTracer {
             width: settings.render.width,
             height: settings.render.height,
             bounces: settings.bounces,
+            needs_color_index,
             render_params,
             pt_params,
             _lut: lut,
@@ -264,7 +323,11 @@ impl GpuPathTracer {
         sample: u32,
         mut profiler: Option<&mut Profiler>,
     ) -> Result<(), GpuError> {
-        let pipes = self.pipelines(scene.format())?;
+        let format = scene.format();
+        let pipes = self.pipelines(format)?;
+        // Sample 0 fills the first-hit buffer (colour indices included) on its first bounce;
+        // the rest need colour indices only when the albedo reads voxel colours.
+        let colors = |bounce: u32| target.needs_color_index || (sample == 0 && bounce == 0);
         if sample == 0 {
             cmd.fill_buffer(&target.accum, 0);
         }
@@ -292,7 +355,8 @@ impl GpuPathTracer {
                 1,
             ];
             cmd.begin_pass(&mut profiler, "pt megakernel");
-            let r = cmd.dispatch(&pipes.mega, groups, bytemuck::bytes_of(&push), None);
+            let mega = self.traversing(pipes, format, false, colors(0))?;
+            let r = cmd.dispatch(mega, groups, bytemuck::bytes_of(&push), None);
             cmd.end_pass(&mut profiler);
             cmd.barrier();
             return r;
@@ -318,7 +382,8 @@ impl GpuPathTracer {
             cmd.fill_buffer(&w.flags, 0);
             cmd.fill_buffer(&w.shadow_count, 0);
             cmd.begin_pass(&mut profiler, "pt extend");
-            let r = cmd.dispatch_indirect(&pipes.extend, &w.ext_count, 4, push_bytes, None);
+            let extend = self.traversing(pipes, format, true, colors(k))?;
+            let r = cmd.dispatch_indirect(extend, &w.ext_count, 4, push_bytes, None);
             cmd.end_pass(&mut profiler);
             r?;
             cmd.barrier();

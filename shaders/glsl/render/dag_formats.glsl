@@ -17,6 +17,7 @@
 //                                     // stream index i (encoded; at a translated pointer's
 //                                     // first u16: the voxels of the translated subtree)
 //   uint dag_info(uint i);            // word i of the format info block (DAG_INFO_* below)
+//   uvec2 dag_info_pair(uint i);      // words i and i + 1 of the info block (one 64-bit load)
 // A node handle is (node, xform): svdag32 a word offset and 0; encoded formats a u16 index in
 // the streams (inner levels) or a leaf index (level 0), and the transform id (SSVDAG: the
 // mirror bits, which are the transform ids 0..7) the stored node is seen through.
@@ -39,14 +40,17 @@
 #define DAG_INFO_ROOT_XFORM 0u
 #define DAG_INFO_SET 1u
 #define DAG_INFO_STREAM_BASE 2u
-#define DAG_INFO_TABLE_BASE 3u
-#define DAG_INFO_CODING 4u
-#define DAG_INFO_LEVEL_START 8u
-#define DAG_INFO_TABLE_START 32u
-#define DAG_INFO_HUFF_KIND 56u
-#define DAG_INFO_HUFF_LUT 80u
-// Levels the per-level words hold (`info::MAX_LEVELS`).
-#define DAG_MAX_LEVELS 24u
+#define DAG_INFO_CODING 3u
+// Per level l, two words at DAG_INFO_LEVELS + 2 l (`info::LEVELS`): the u16 index of its
+// stream (0 for the leaves) and (TSVDAG) the word offset of its tables in the DAG words | the
+// Huffman index bits << DAG_TABLE_BITS_SHIFT.
+#define DAG_INFO_LEVELS 8u
+#define DAG_TABLE_BITS_SHIFT 28u
+
+// The record of level l: one load for everything a child fetch needs to know about its level.
+uvec2 dag_level(uint l) {
+    return dag_info_pair(DAG_INFO_LEVELS + 2u * l);
+}
 
 // Words i and i + 1 of the DAG. Includers that can load both at once (one 64-bit load, which
 // lavapipe executes as one per-lane loop instead of two) define DAG_HAS_WORD_PAIR and
@@ -185,9 +189,6 @@ uint g_dag_stream_base;
 #if defined(DAG_FORMAT_TSVDAG)
 uint g_dag_set;
 uint g_dag_coding;
-#if defined(TSVDAG_LUT)
-uint g_dag_table_base;
-#endif
 #endif
 
 #define DAG_HAS_BEGIN 1
@@ -196,9 +197,6 @@ void dag_begin(uint root_level) {
 #if defined(DAG_FORMAT_TSVDAG)
     g_dag_set = dag_info(DAG_INFO_SET);
     g_dag_coding = dag_info(DAG_INFO_CODING);
-#if defined(TSVDAG_LUT)
-    g_dag_table_base = dag_info(DAG_INFO_TABLE_BASE);
-#endif
 #endif
 }
 
@@ -301,7 +299,7 @@ uint64_t dag_voxels_before(uint node, uint xform, uint aux, uint level, uint c) 
 #if defined(DAG_FORMAT_SSVDAG)
 // The root handle: node 0 of the root level, identity.
 void dag_root(uint root_level, out uint node, out uint xform) {
-    node = dag_info(DAG_INFO_LEVEL_START + root_level);
+    node = dag_level(root_level).x;
     xform = 0u;
 }
 
@@ -313,7 +311,7 @@ void dag_child(uint node, uint xform, uint aux, uint level, uint c, out uint chi
     uint code;
     uint64_t v = dag_read_pointer(node, aux, c ^ xform, code, at);
     uint target = uint(v >> 3u);
-    child = level == 1u ? target : dag_info(DAG_INFO_LEVEL_START + level - 1u) + target;
+    child = dag_level(level - 1u).x + target;
     child_xform = xform ^ uint(v & 7ul);
     shift = ivec3(0);
 }
@@ -321,23 +319,19 @@ void dag_child(uint node, uint xform, uint aux, uint level, uint c, out uint chi
 
 #if defined(DAG_FORMAT_TSVDAG)
 void dag_root(uint root_level, out uint node, out uint xform) {
-    node = dag_info(DAG_INFO_LEVEL_START + root_level);
+    node = dag_level(root_level).x;
     xform = dag_info(DAG_INFO_ROOT_XFORM);
 }
 
 #if defined(TSVDAG_HUFFMAN)
-// Canonical Huffman decode (`Huffman::decode`) of the low bits of e with child level cl's code:
-// the symbol and its length, looked up in the level's decode table (`huffman_decode_table` in
-// engine/render/format.rs: one load instead of a bit-serial loop with a load per bit).
-uint tsvdag_huffman(uint cl, uint64_t e, out uint len) {
-    uint kind = dag_info(DAG_INFO_HUFF_KIND + cl);
-    len = 0u;
-    if ((kind & 0xffffu) == 1u) {
-        return kind >> 16u;
-    }
-    uint lut = dag_info(DAG_INFO_HUFF_LUT + cl);
-    uint entry = dag_info((lut & 0xffffffu) + (uint(e) & ((1u << (lut >> 24u)) - 1u)));
-    entry = (kind & 0xffffu) == 2u ? entry : 0u;
+// Canonical Huffman decode (`Huffman::decode`) of the low bits of e with the code of the child
+// level whose record's table word is `tables`: the symbol and its length, looked up in the
+// level's decode table (`huffman_decode_table` in engine/render/format.rs; a level with one
+// implied symbol has a one-entry table of length 0): one load, no branch.
+uint tsvdag_huffman(uint tables, uint64_t e, out uint len) {
+    uint bits = tables >> DAG_TABLE_BITS_SHIFT;
+    uint start = (tables & ((1u << DAG_TABLE_BITS_SHIFT) - 1u)) - (1u << bits);
+    uint entry = dag_word(start + (uint(e) & ((1u << bits) - 1u)));
     len = entry >> 16u;
     return entry & 0xffffu;
 }
@@ -360,6 +354,7 @@ void dag_child(uint node, uint xform, uint aux, uint level, uint c, out uint chi
     uint so = xform_stored_octant(xform, c);
     uint64_t v = dag_read_pointer(node, aux, so, code, at);
     uint cl = level - 1u;
+    uvec2 level_record = dag_level(cl);
     uint64_t e = v;
 #if defined(TSVDAG_LUT)
     bool tagged = ((g_dag_coding >> (8u + cl)) & 1u) != 0u;
@@ -371,7 +366,8 @@ void dag_child(uint node, uint xform, uint aux, uint level, uint c, out uint chi
         e = v >> 1u;
     }
     if (in_table) {
-        uint w = g_dag_table_base + 2u * (dag_info(DAG_INFO_TABLE_START + cl) + uint(index));
+        uint tables = level_record.y & ((1u << DAG_TABLE_BITS_SHIFT) - 1u);
+        uint w = tables + 2u * uint(index);
         e = packUint2x32(dag_word_pair(w));
     }
 #endif
@@ -384,7 +380,7 @@ void dag_child(uint node, uint xform, uint aux, uint level, uint c, out uint chi
 #endif
 #if defined(TSVDAG_HUFFMAN)
     uint len;
-    uint sym = tsvdag_huffman(cl, e, len);
+    uint sym = tsvdag_huffman(level_record.y, e, len);
     e >>= len;
     t = sym >> 3u;
 #if defined(TSVDAG_TRANSLATIONS)
@@ -438,7 +434,7 @@ void dag_child(uint node, uint xform, uint aux, uint level, uint c, out uint chi
     }
 #endif
     uint target = uint(e);
-    child = cl == 0u ? target : dag_info(DAG_INFO_LEVEL_START + cl) + target;
+    child = level_record.x + target;
     child_xform = xform_compose(xform, t);
     shift = xform_translation(xform, tr);
 }

@@ -59,6 +59,10 @@ uvec2 dag_word_pair(uint i) {
     return unpackUint2x32(WordPairRef(push.words + 4ul * uint64_t(i)).v);
 }
 
+uvec2 dag_info_pair(uint i) {
+    return unpackUint2x32(WordPairRef(push.dag_info + 4ul * uint64_t(i)).v);
+}
+
 uint64_t dag_node_voxels(uint i) {
     return Words64Ref(push.node_voxels).w[i];
 }

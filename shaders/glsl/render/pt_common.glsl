@@ -28,6 +28,13 @@ struct FirstHit {
 // Members: `PtPush` in engine/render/gpu_shared.rs.
 layout(push_constant, std430) uniform Push { PT_PUSH_MEMBERS } push;
 
+// Specialization constant 2: whether the pipeline computes colour indices at all. The host
+// dispatches a variant without them (`false`) for the samples and bounces that read none (no
+// first-hit buffer to fill, an albedo that does not read voxel colours): lavapipe runs the
+// colour-index code after every traversal, masked, even when no invocation wants it
+// (docs/pathtracing.md, "Where the time goes on lavapipe").
+layout(constant_id = 2) const bool PT_COLOR_INDEX = true;
+
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer PtRenderParamsRef {
     RenderParams params;
 };
@@ -67,6 +74,10 @@ layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer PtW
 #define DAG_HAS_WORD_PAIR 1
 uvec2 dag_word_pair(uint i) {
     return unpackUint2x32(PtWordPairRef(push.words + 4ul * uint64_t(i)).v);
+}
+
+uvec2 dag_info_pair(uint i) {
+    return unpackUint2x32(PtWordPairRef(push.dag_info + 4ul * uint64_t(i)).v);
 }
 
 uint64_t dag_node_voxels(uint i) {
@@ -168,9 +179,10 @@ void pt_camera_ray(uvec2 pixel, RenderParams p, float jx, float jy, out vec3 ori
     dir = d;
 }
 
-// Whether `pt_albedo` reads the hit's colour index (a coloured scene without a uniform albedo).
+// Whether `pt_albedo` reads the hit's colour index (a coloured scene without a uniform albedo;
+// `PtTarget::needs_color_index` on the host).
 bool pt_needs_color_index(RenderParams p, PtParams pt) {
-    return pt.env.w < 0.0 && (p.flags & RENDER_FLAG_HAS_COLORS) != 0u;
+    return PT_COLOR_INDEX && pt.env.w < 0.0 && (p.flags & RENDER_FLAG_HAS_COLORS) != 0u;
 }
 
 // Linear albedo of a hit: the uniform albedo (pt.env.w >= 0), the voxel's colour through the

@@ -23,7 +23,7 @@ void main() {
     Hit h;
     bool first = push.bounce == 0u && push.sample_index == 0u && pt.first_hits != 0ul;
     bool hit = trace_ray_indexed(origin, dir, TRAVERSE_T_UNBOUNDED, p.root_level,
-                                 first || pt_needs_color_index(p, pt), h);
+                                 PT_COLOR_INDEX && (first || pt_needs_color_index(p, pt)), h);
     if (first) {
         pt_write_first_hit(pt, index, hit, h);
     }

@@ -32,7 +32,7 @@ void main() {
         Hit h;
         bool first = k == 0u && push.sample_index == 0u && pt.first_hits != 0ul;
         bool hit = trace_ray_indexed(origin, dir, TRAVERSE_T_UNBOUNDED, p.root_level,
-                                     first || want_color, h);
+                                     PT_COLOR_INDEX && (first || want_color), h);
         if (first) {
             pt_write_first_hit(pt, index, hit, h);
         }

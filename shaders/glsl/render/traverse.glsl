@@ -320,6 +320,9 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     ivec3 clip_lo = ivec3(0);
     ivec3 clip_hi = ivec3(n);
     uint shifts = 0u;
+    // The root depth of the innermost translated subtree (none: never reached).
+    uint shift_depth = TRAVERSE_MAX_FRAMES;
+    bool leave_shift = false;
     uint sh_depth0 = 0u;
     uint sh_depth1 = 0u;
     uint sh_depth2 = 0u;
@@ -333,10 +336,12 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     const ivec3 base = ivec3(0);
 #endif
     // Two nested loops: the inner one advances (pops, slab tests, descents into the cheap
-    // sub-block levels) until a lane needs a child fetch, has found its voxel or is done; the
-    // outer one then runs the format's child fetch once. lavapipe runs every part of a loop
-    // body on every iteration (masked), so the fetch, the format's costly part, now runs once
-    // per descent instead of once per iteration of the advance.
+    // sub-block levels) until a lane needs a child fetch, has found its voxel or is done (or,
+    // S+A+T, leaves a translated subtree); the outer one then runs the format's child fetch
+    // (or the restore of the outer frame) once. lavapipe runs every part of a loop body on
+    // every iteration (masked), so the fetch, the format's costly part, runs once per descent
+    // instead of once per iteration of the advance, and the advance carries only the clip box
+    // and base of the translated-subtree state.
     bool fetch = false;
     uint fetch_c = 0u;
     ivec3 fetch_child = ivec3(0);
@@ -347,22 +352,10 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
                     break;
                 }
 #if defined(TSVDAG_TRANSLATIONS)
-                uint top_depth = shifts == 1u ? sh_depth0 : (shifts == 2u ? sh_depth1 : sh_depth2);
-                if (shifts > 0u && top_depth == depth) {
-                    ivec3 cell = shifts == 1u ? sh_cell0 : (shifts == 2u ? sh_cell1 : sh_cell2);
-                    base = shifts == 1u ? sh_base0 : (shifts == 2u ? sh_base1 : sh_base2);
-                    cursor = uvec3(cell - base);
-                    shifts -= 1u;
-                    clip_lo = ivec3(0);
-                    clip_hi = ivec3(n);
-                    if (shifts >= 1u) {
-                        clip_lo = max(clip_lo, sh_cell0);
-                        clip_hi = min(clip_hi, sh_cell0 + ivec3(n >> sh_depth0));
-                    }
-                    if (shifts >= 2u) {
-                        clip_lo = max(clip_lo, sh_cell1);
-                        clip_hi = min(clip_hi, sh_cell1 + ivec3(n >> sh_depth1));
-                    }
+                if (depth == shift_depth) {
+                    // Leaving a translated subtree: the outer loop restores the outer frame.
+                    leave_shift = true;
+                    break;
                 }
 #endif
                 depth -= 1u;
@@ -395,12 +388,11 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
             // Exact: a voxel lies wholly inside or outside the (cell-aligned) clip box, and a
             // box containing the hit voxel passes the slab test whenever the voxel does
             // ((x - o) * inv is monotonic in x).
-            if (shifts > 0u) {
-                box_lo = max(box_lo, clip_lo);
-                box_hi = min(box_hi, clip_hi);
-                if (any(greaterThanEqual(box_lo, box_hi))) {
-                    continue;
-                }
+            // (Outside translated subtrees the clip box is the grid: no branch needed.)
+            box_lo = max(box_lo, clip_lo);
+            box_hi = min(box_hi, clip_hi);
+            if (any(greaterThanEqual(box_lo, box_hi))) {
+                continue;
             }
 #endif
             traverse_slab_box(r, box_lo, box_hi, t_near, t_far, axis);
@@ -433,6 +425,32 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
             todo = traverse_order(block, r.mirror);
         }
         if (!fetch) {
+#if defined(TSVDAG_TRANSLATIONS)
+            if (leave_shift) {
+                // Back to the frame that holds the translated subtree's root: the outer
+                // cursor is its cell less the outer base, the clip box the intersection of
+                // the outer cells; the inner loop then pops that frame as usual.
+                leave_shift = false;
+                ivec3 cell = shifts == 1u ? sh_cell0 : (shifts == 2u ? sh_cell1 : sh_cell2);
+                base = shifts == 1u ? sh_base0 : (shifts == 2u ? sh_base1 : sh_base2);
+                cursor = uvec3(cell - base);
+                shifts -= 1u;
+                clip_lo = ivec3(0);
+                clip_hi = ivec3(n);
+                shift_depth = TRAVERSE_MAX_FRAMES;
+                if (shifts >= 1u) {
+                    clip_lo = max(clip_lo, sh_cell0);
+                    clip_hi = min(clip_hi, sh_cell0 + ivec3(n >> sh_depth0));
+                    shift_depth = sh_depth0;
+                }
+                if (shifts >= 2u) {
+                    clip_lo = max(clip_lo, sh_cell1);
+                    clip_hi = min(clip_hi, sh_cell1 + ivec3(n >> sh_depth1));
+                    shift_depth = sh_depth1;
+                }
+                continue;
+            }
+#endif
             break;
         }
         fetch = false;
@@ -480,6 +498,7 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
             base = fetch_child + shift;
             cursor = uvec3(0u);
             shifts += 1u;
+            shift_depth = depth;
         }
 #endif
     }
