@@ -122,9 +122,11 @@ uint traverse_morton16(uvec3 p) {
 // `target` of the cell starting at `cell`.
 uint traverse_leaf_before(uint leaf, uint xform, ivec3 org, ivec3 lo, ivec3 hi, ivec3 cell,
                           uint target) {
+    // The leaf's 64 bits in world order, loaded once (not once per sub-block).
+    uvec2 bits = dag_leaf_bits(leaf, xform);
     uint count = 0u;
     for (uint sb = 0u; sb < 8u; sb++) {
-        uint byte_mask = dag_leaf_byte(leaf, xform, sb);
+        uint byte_mask = ((sb < 4u ? bits.x : bits.y) >> (8u * (sb & 3u))) & 0xffu;
         while (byte_mask != 0u) {
             uint vb = uint(findLSB(byte_mask));
             byte_mask &= byte_mask - 1u;
