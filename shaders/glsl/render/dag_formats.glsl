@@ -17,7 +17,6 @@
 //                                     // stream index i (encoded; at a translated pointer's
 //                                     // first u16: the voxels of the translated subtree)
 //   uint dag_info(uint i);            // word i of the format info block (DAG_INFO_* below)
-//   uvec2 dag_info_pair(uint i);      // words i and i + 1 of the info block (one 64-bit load)
 // A node handle is (node, xform): svdag32 a word offset and 0; encoded formats a u16 index in
 // the streams (inner levels) or a leaf index (level 0), and the transform id (SSVDAG: the
 // mirror bits, which are the transform ids 0..7) the stored node is seen through.
@@ -47,11 +46,6 @@
 #define DAG_INFO_LEVELS 8u
 #define DAG_TABLE_BITS_SHIFT 28u
 
-// The record of level l: one load for everything a child fetch needs to know about its level.
-uvec2 dag_level(uint l) {
-    return dag_info_pair(DAG_INFO_LEVELS + 2u * l);
-}
-
 // Words i and i + 1 of the DAG. Includers that can load both at once (one 64-bit load, which
 // lavapipe executes as one per-lane loop instead of two) define DAG_HAS_WORD_PAIR and
 // `uvec2 dag_word_pair(uint i)` before including traverse.glsl.
@@ -60,6 +54,19 @@ uvec2 dag_word_pair(uint i) {
     return uvec2(dag_word(i), dag_word(i + 1u));
 }
 #endif
+
+// Words i and i + 1 of the info block; DAG_HAS_INFO_PAIR and `uvec2 dag_info_pair(uint i)`
+// likewise.
+#if !defined(DAG_HAS_INFO_PAIR)
+uvec2 dag_info_pair(uint i) {
+    return uvec2(dag_info(i), dag_info(i + 1u));
+}
+#endif
+
+// The record of level l: one load for everything a child fetch needs to know about its level.
+uvec2 dag_level(uint l) {
+    return dag_info_pair(DAG_INFO_LEVELS + 2u * l);
+}
 
 // Transform group (engine/dag/transform.rs) computed with integer arithmetic rather than the
 // info block's tables: on lavapipe every buffer load is a scalar loop over the 8 SIMD lanes that

@@ -76,6 +76,7 @@ uvec2 dag_word_pair(uint i) {
     return unpackUint2x32(PtWordPairRef(push.words + 4ul * uint64_t(i)).v);
 }
 
+#define DAG_HAS_INFO_PAIR 1
 uvec2 dag_info_pair(uint i) {
     return unpackUint2x32(PtWordPairRef(push.dag_info + 4ul * uint64_t(i)).v);
 }
