@@ -89,15 +89,19 @@ fn reachable_per_table(
         }
         stack.extend(children(ptr).into_iter().map(|c| (c, level - 1)));
     }
-    let per_table = |ptrs: &mut dyn Iterator<Item = NodePtr>| {
-        let mut counts = vec![0; TABLE_COUNT as usize];
-        ptrs.for_each(|p| counts[p.table()] += 1);
-        counts
-    };
     Reachable {
-        items: per_table(&mut seen.into_iter()),
-        uses: per_table(&mut uses.into_iter().map(|(p, _)| p)),
+        items: count_per_table(seen),
+        uses: count_per_table(uses.into_iter().map(|(p, _)| p)),
     }
+}
+
+/// How many of `ptrs` lie in each table.
+fn count_per_table(ptrs: impl IntoIterator<Item = NodePtr>) -> Vec<u64> {
+    let mut counts = vec![0; TABLE_COUNT as usize];
+    for p in ptrs {
+        counts[p.table()] += 1;
+    }
+    counts
 }
 
 fn node_children(node: &InnerNode) -> Vec<NodePtr> {

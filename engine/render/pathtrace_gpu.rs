@@ -188,9 +188,23 @@ impl GpuPathTracer {
         extend: bool,
         colors: bool,
     ) -> Result<&'a ComputePipeline, GpuError> {
-        let (full, plain) = match extend {
-            false => (&pipes.mega, &pipes.mega_plain),
-            true => (&pipes.extend, &pipes.extend_plain),
+        let i = format.index();
+        // Constant 2 = PT_COLOR_INDEX; the extend pass has no constants 0 and 1 (ignored).
+        let (full, plain, pass, spirv, spec) = match extend {
+            false => (
+                &pipes.mega,
+                &pipes.mega_plain,
+                "megakernel, no colour index",
+                shaders::RENDER_PT_MEGA_BY_FORMAT[i],
+                [WORKGROUP[0], WORKGROUP[1], 0],
+            ),
+            true => (
+                &pipes.extend,
+                &pipes.extend_plain,
+                "extend, no colour index",
+                shaders::RENDER_PT_EXTEND_BY_FORMAT[i],
+                [0, 0, 0],
+            ),
         };
         if colors {
             return Ok(full);
@@ -198,22 +212,7 @@ impl GpuPathTracer {
         if let Some(p) = plain.get() {
             return Ok(p);
         }
-        let i = format.index();
-        // Constant 2 = PT_COLOR_INDEX; the extend pass has no constants 0 and 1 (ignored).
-        let made = match extend {
-            false => self.make_pipeline(
-                format,
-                "megakernel, no colour index",
-                shaders::RENDER_PT_MEGA_BY_FORMAT[i],
-                &[WORKGROUP[0], WORKGROUP[1], 0],
-            )?,
-            true => self.make_pipeline(
-                format,
-                "extend, no colour index",
-                shaders::RENDER_PT_EXTEND_BY_FORMAT[i],
-                &[0, 0, 0],
-            )?,
-        };
+        let made = self.make_pipeline(format, pass, spirv, &spec)?;
         Ok(plain.get_or_init(|| made))
     }
 

@@ -68,6 +68,11 @@ uvec2 dag_level(uint l) {
     return dag_info_pair(DAG_INFO_LEVELS + 2u * l);
 }
 
+// Where a level's pointer table starts in the DAG words, from its record's second word.
+uint dag_level_tables(uint record_y) {
+    return record_y & ((1u << DAG_TABLE_BITS_SHIFT) - 1u);
+}
+
 // Transform group (engine/dag/transform.rs) computed with integer arithmetic rather than the
 // info block's tables: on lavapipe every buffer load is a scalar loop over the 8 SIMD lanes that
 // runs whether or not a lane needs it, while these few vector operations cost far less
@@ -337,7 +342,7 @@ void dag_root(uint root_level, out uint node, out uint xform) {
 // implied symbol has a one-entry table of length 0): one load, no branch.
 uint tsvdag_huffman(uint tables, uint64_t e, out uint len) {
     uint bits = tables >> DAG_TABLE_BITS_SHIFT;
-    uint start = (tables & ((1u << DAG_TABLE_BITS_SHIFT) - 1u)) - (1u << bits);
+    uint start = dag_level_tables(tables) - (1u << bits);
     uint entry = dag_word(start + (uint(e) & ((1u << bits) - 1u)));
     len = entry >> 16u;
     return entry & 0xffffu;
@@ -373,8 +378,7 @@ void dag_child(uint node, uint xform, uint aux, uint level, uint c, out uint chi
         e = v >> 1u;
     }
     if (in_table) {
-        uint tables = level_record.y & ((1u << DAG_TABLE_BITS_SHIFT) - 1u);
-        uint w = tables + 2u * uint(index);
+        uint w = dag_level_tables(level_record.y) + 2u * uint(index);
         e = packUint2x32(dag_word_pair(w));
     }
 #endif
