@@ -15,8 +15,8 @@ use voxdag::dag::encode::{
     TsvdagOptions, VoxelDigest,
 };
 use voxdag::dag::{
-    analyze_symmetry, build_transform_dag_with_progress, export_vox, export_xyz_u32_file, DagStats,
-    Svdag, SymmetryAnalysis, TransformSet, VdagFile, VoxelIndex,
+    analyze_symmetry, export_vox, export_xyz_u32_file, CanonicalDag, DagStats, Svdag,
+    SymmetryAnalysis, TransformDag, TransformSet, VdagFile, VoxelIndex,
 };
 use voxdag::gpu::{GpuContext, GpuOptions, Profiler};
 use voxdag::render::cpu::{render_cpu_with, ColorSource};
@@ -220,28 +220,30 @@ pub fn tsvdag_modes(args: &BuildArgs) -> Vec<TsvdagOptions> {
 
 /// Encodes a DAG as `voxdag build` asks; tsvdag: builds the transform DAG (the translation
 /// search of `--transforms sat` reports on a progress bar) and keeps the smallest of `modes`.
+/// Takes the DAG by value: each stage (SVDAG, canonical DAG, transform DAG, graph) is dropped
+/// as the next is made, so a 64K^3 scene holds one of them at a time.
 pub fn encode_dag(
-    dag: &Svdag,
+    dag: Svdag,
     encoding: EncodingArg,
     transforms: TransformsArg,
     modes: &[TsvdagOptions],
     quiet: bool,
 ) -> Result<EncodedDag> {
     Ok(match encoding {
-        EncodingArg::Svdag32 => EncodedDag::Svdag32(dag.clone()),
-        EncodingArg::Ssvdag => EncodedDag::Ssvdag(SsvdagEncoding::build(dag)?),
+        EncodingArg::Svdag32 => EncodedDag::Svdag32(dag),
+        EncodingArg::Ssvdag => EncodedDag::Ssvdag(SsvdagEncoding::build(&dag)?),
         EncodingArg::Tsvdag => {
             let bar = progress_bar(quiet);
+            bar.set_message("canonical");
+            let canonical =
+                CanonicalDag::build_with_progress(&dag, transform_set(transforms), &bar);
+            drop(dag);
+            bar.set_position(0);
             bar.set_message("translations");
-            let tdag = build_transform_dag_with_progress(
-                dag,
-                transform_set(transforms),
-                transforms == TransformsArg::Sat,
-                &bar,
-            );
+            let tdag =
+                TransformDag::from_canonical(canonical, transforms == TransformsArg::Sat, &bar);
             bar.finish_and_clear();
-            let graph = TransformGraph::from_transform_dag(&tdag);
-            drop(tdag);
+            let graph = TransformGraph::from_transform_dag(tdag);
             let mut best: Option<TsvdagEncoding> = None;
             let mut too_large = None;
             for &mode in modes {
@@ -269,7 +271,7 @@ pub fn encode_dag(
 }
 
 /// [`encode_dag`] with `voxdag build`'s encoding options, and the time it took.
-fn encode_as_asked(dag: &Svdag, args: &BuildArgs, quiet: bool) -> Result<(EncodedDag, Duration)> {
+fn encode_as_asked(dag: Svdag, args: &BuildArgs, quiet: bool) -> Result<(EncodedDag, Duration)> {
     let start = Instant::now();
     let encoded = encode_dag(
         dag,
@@ -327,8 +329,6 @@ pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
         return crate::stream::build_streaming(args, quiet);
     }
     let (dag, report, digest) = build_scene_digest(args, quiet)?;
-    let (encoded, encode_time) = encode_as_asked(&dag, args, quiet)?;
-    let summary = EncodedSummary::of(&encoded);
     let (colors, stored_colors, materials) = match args.materials {
         Some(k) => (Vec::new(), None, Some(quantize_materials(&dag, k)?)),
         None => {
@@ -336,6 +336,8 @@ pub fn build(args: &BuildArgs, quiet: bool) -> Result<()> {
             (colors, stored, None)
         }
     };
+    let (encoded, encode_time) = encode_as_asked(dag, args, quiet)?;
+    let summary = EncodedSummary::of(&encoded);
     let file = VdagFile {
         encoded,
         colors,
@@ -394,8 +396,7 @@ fn transcode(args: &BuildArgs, quiet: bool) -> Result<()> {
     };
     let load_time = start.elapsed();
     let stats = dag.stats();
-    let (encoded, encode_time) = encode_as_asked(&dag, args, quiet)?;
-    drop(dag);
+    let (encoded, encode_time) = encode_as_asked(dag, args, quiet)?;
     let summary = EncodedSummary::of(&encoded);
     let file = VdagFile {
         encoded,
@@ -609,8 +610,8 @@ fn describe(dag: &Svdag, quiet: bool) -> Result<(DagStats, Vec<(String, u64)>)> 
     bar.set_message("translations");
     let analysis = analyze_symmetry(dag, &bar);
     bar.finish_and_clear();
-    let bytes = encoded_bytes(dag, &analysis)?;
-    Ok((dag.stats().with_symmetry(&analysis.counts), bytes))
+    let stats = dag.stats().with_symmetry(&analysis.counts);
+    Ok((stats, encoded_bytes(dag, analysis)?))
 }
 
 /// The colour line of the stats table.
@@ -657,8 +658,8 @@ fn stats_json(
 
 /// Bytes of the DAG in each encoding: `ssvdag`, `tsvdag` (S+A+T, tables, Huffman) and the
 /// ablations `tsvdag_base` (neither) and `tsvdag_lut` (tables only).
-pub fn encoded_bytes(dag: &Svdag, analysis: &SymmetryAnalysis) -> Result<Vec<(String, u64)>> {
-    let graph = voxdag::dag::encode::TransformGraph::from_transform_dag(&analysis.sat);
+pub fn encoded_bytes(dag: &Svdag, analysis: SymmetryAnalysis) -> Result<Vec<(String, u64)>> {
+    let graph = voxdag::dag::encode::TransformGraph::from_transform_dag(analysis.sat);
     let mut out = vec![(
         "ssvdag".to_string(),
         SsvdagEncoding::encode(&analysis.ssvdag, dag.resolution)?.byte_size(),

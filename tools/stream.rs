@@ -6,7 +6,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use voxdag::dag::encode::{DigestBuilder, EncodedDag};
+use voxdag::dag::encode::DigestBuilder;
 use voxdag::dag::stream::{save_streamed, ColorStream, StreamBuilder};
 use voxdag::safety::human_bytes;
 use voxdag::scene::{self, voxelize, ImportOptions, Source};
@@ -14,7 +14,7 @@ use voxdag::scene::{self, voxelize, ImportOptions, Source};
 use crate::commands::{
     encode_dag, peak_rss_bytes, progress_bar, tsvdag_modes, BuildReport, EncodedSummary,
 };
-use crate::{BuildArgs, EncodingArg};
+use crate::BuildArgs;
 
 /// Voxels one brick (128^3) is assumed to hand over at most, for the working-set estimate: three
 /// full cross-sections (a surface crossing the brick, folded).
@@ -152,16 +152,13 @@ pub fn build_streaming(args: &BuildArgs, quiet: bool) -> Result<()> {
     let stats = built.dag.stats();
     let start = Instant::now();
     let dag_hash = built.dag_hash;
-    let encoded = match args.encoding {
-        EncodingArg::Svdag32 => EncodedDag::Svdag32(built.dag),
-        other => encode_dag(
-            &built.dag,
-            other,
-            args.transforms,
-            &tsvdag_modes(args),
-            quiet,
-        )?,
-    };
+    let encoded = encode_dag(
+        built.dag,
+        args.encoding,
+        args.transforms,
+        &tsvdag_modes(args),
+        quiet,
+    )?;
     let encode_time = start.elapsed();
     let summary = EncodedSummary::of(&encoded);
     if let Some(c) = &colors {

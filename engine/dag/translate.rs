@@ -144,11 +144,11 @@ pub fn build_transform_dag_with_progress(
     progress: &ProgressBar,
 ) -> TransformDag {
     let canonical = CanonicalDag::build(dag, set);
-    TransformDag::from_canonical(&canonical, translations, progress)
+    TransformDag::from_canonical(canonical, translations, progress)
 }
 
 /// `L(v)`: how transform `t` acts on a translation vector (`t(x + v) = t(x) + L(v)`).
-pub fn apply_to_vector(t: Transform, v: [i8; 3]) -> [i8; 3] {
+pub fn apply_to_vector<T: Copy + std::ops::Neg<Output = T>>(t: Transform, v: [T; 3]) -> [T; 3] {
     let perm = t.permutation();
     std::array::from_fn(|i| {
         let c = v[perm[i] as usize];
@@ -171,9 +171,10 @@ pub fn compose_pointer(outer: Transform, p: TPointer) -> TPointer {
 
 impl TransformDag {
     /// Builds the transform DAG from a canonical DAG (its transform set is kept); searches
-    /// translations when `translations`.
+    /// translations when `translations`. Consumes the canonical DAG level by level, so the two
+    /// are never both whole in memory.
     pub fn from_canonical(
-        c: &CanonicalDag,
+        c: CanonicalDag,
         translations: bool,
         progress: &ProgressBar,
     ) -> TransformDag {
@@ -207,7 +208,7 @@ impl TransformDag {
                     }
                     (0..count as u32).filter(|&i| seen[i as usize]).collect()
                 };
-                let parents = search_level(c, l, &items, progress);
+                let parents = search_level(&c, l, &items, progress);
                 let mut is_parent = vec![false; items.len()];
                 for p in &parents {
                     is_parent[p.0 as usize] = true;
@@ -246,13 +247,10 @@ impl TransformDag {
                     .collect();
             }
         }
+        let (resolution, set) = (c.resolution, c.set);
         let mut levels = Vec::with_capacity(nlev);
-        for l in 0..nlev {
-            let src = &c.levels[l];
-            let mut level = TLevel {
-                canonical: stored[l].clone(),
-                ..TLevel::default()
-            };
+        for (l, src) in c.levels.into_iter().enumerate() {
+            let mut level = TLevel::default();
             if l == 0 {
                 level.leaves = stored[l].iter().map(|&i| src.leaves[i as usize]).collect();
             } else {
@@ -264,13 +262,16 @@ impl TransformDag {
                         level.children.push(compose_pointer(ch.transform, below));
                     }
                 }
+                // Only the root reads the top level's map; this level's map is read next.
+                maps[l - 1] = Vec::new();
             }
+            level.canonical = std::mem::take(&mut stored[l]);
             levels.push(level);
         }
         let root = compose_pointer(root.transform, maps[top][root.node as usize]);
         TransformDag {
-            resolution: c.resolution,
-            set: c.set,
+            resolution,
+            set,
             translations,
             levels,
             root: Some(root),

@@ -153,7 +153,8 @@ fn measure(scene_name: &str, input: &std::path::Path, resolution: u32) -> Result
     let (tdag, sat_s) = timed(|| build_transform_dag(&dag, TransformSet::All, true));
     let (ssvdag_bytes, encode_ssvdag) =
         timed(|| SsvdagEncoding::build(&dag).map(|e| e.byte_size()));
-    let graph = TransformGraph::from_transform_dag(&tdag);
+    let sat = total(tdag.level_counts());
+    let graph = TransformGraph::from_transform_dag(tdag);
     let encode = |lut, huffman| {
         TsvdagEncoding::encode(&graph, TsvdagOptions { lut, huffman }).map(|e| e.byte_size())
     };
@@ -202,7 +203,7 @@ fn measure(scene_name: &str, input: &std::path::Path, resolution: u32) -> Result
             s,
             a,
             sa,
-            sat: total(tdag.level_counts()),
+            sat,
         },
         bytes: Bytes {
             svdag32: dag.bytes_svdag32(),

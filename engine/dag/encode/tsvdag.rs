@@ -29,7 +29,8 @@ use super::huffman::Huffman;
 use super::ssvdag::read_node;
 use super::traverse::{root_level, TreeView};
 use super::{corrupt, EncodeError};
-use crate::dag::transform::{Transform, TransformSet, PERMUTATIONS};
+use crate::dag::transform::{Transform, TransformSet};
+use crate::dag::translate::apply_to_vector;
 use crate::scene::morton;
 use rustc_hash::FxHashMap;
 
@@ -40,22 +41,15 @@ pub use crate::dag::translate::MAX_TRANSLATION_LEVEL;
 const SYMBOLS: usize = 48 * 8;
 
 /// (new target id, transform id, translation): a distinct pointer of a level.
-type PointerKey = (u64, u8, [i32; 3]);
+type PointerKey = (u64, u8, [i8; 3]);
 
 /// A child level's candidate layout: (cost in u16 words, translation coding, tagged, per
 /// distinct pointer its stored value and size, the table).
 type Candidate = (u64, TranslationCoding, bool, Vec<(u64, u16)>, Vec<u64>);
 
-/// A child pointer of a [`TransformGraph`] node.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
-pub struct GraphPointer {
-    /// Stored node (or leaf) index in the level below.
-    pub node: u32,
-    /// Transform applied to the stored node.
-    pub transform: Transform,
-    /// Translation applied after the transform, per axis in `(-side, side)`.
-    pub translation: [i32; 3],
-}
+/// A child pointer of a [`TransformGraph`] node: the transform DAG's pointer (translations
+/// per axis in `(-side, side)`, at most 16^3 subtrees: `i8`).
+pub type GraphPointer = crate::dag::TPointer;
 
 /// Stored nodes of one level of a [`TransformGraph`].
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -109,28 +103,24 @@ pub struct TransformGraph {
 }
 
 impl TransformGraph {
-    /// The graph of a transform DAG (S+A+T when it was built with translations).
-    pub fn from_transform_dag(dag: &crate::dag::TransformDag) -> TransformGraph {
-        let conv = |p: &crate::dag::TPointer| GraphPointer {
-            node: p.node,
-            transform: p.transform,
-            translation: p.translation.map(|t| t as i32),
-        };
+    /// The graph of a transform DAG (S+A+T when it was built with translations); moves its
+    /// arrays (no copy: at 64^3K the pointers alone are gigabytes).
+    pub fn from_transform_dag(dag: crate::dag::TransformDag) -> TransformGraph {
         TransformGraph {
             resolution: dag.resolution,
             set: dag.set,
             translations: dag.translations,
             levels: dag
                 .levels
-                .iter()
+                .into_iter()
                 .map(|l| GraphLevel {
-                    leaves: l.leaves.clone(),
-                    child_masks: l.child_masks.clone(),
-                    child_starts: l.child_starts.clone(),
-                    children: l.children.iter().map(conv).collect(),
+                    leaves: l.leaves,
+                    child_masks: l.child_masks,
+                    child_starts: l.child_starts,
+                    children: l.children,
                 })
                 .collect(),
-            root: dag.root.as_ref().map(conv),
+            root: dag.root,
         }
     }
 }
@@ -418,7 +408,7 @@ impl TsvdagEncoding {
         options: TsvdagOptions,
     ) -> Result<TsvdagEncoding, EncodeError> {
         let tdag = crate::dag::build_transform_dag(dag, set, translations);
-        Self::encode(&TransformGraph::from_transform_dag(&tdag), options)
+        Self::encode(&TransformGraph::from_transform_dag(tdag), options)
     }
 
     /// Encodes a graph. Without look-up tables every stored node is first re-oriented to the
@@ -1269,7 +1259,10 @@ fn check_graph(g: &TransformGraph) -> Result<(), EncodeError> {
                     "translation at level {cl}, where none is allowed"
                 )));
             }
-            if c.translation.iter().any(|&t| t <= -side || t >= side) {
+            if c.translation
+                .iter()
+                .any(|&t| i32::from(t) <= -side || i32::from(t) >= side)
+            {
                 return Err(EncodeError::InvalidInput(format!(
                     "translation {:?} out of range at level {cl}",
                     c.translation
@@ -1367,7 +1360,7 @@ pub fn reorient(g: &TransformGraph) -> TransformGraph {
                         slots[r.apply_octant(o)] = Some(GraphPointer {
                             node: c.node,
                             transform: r.compose(c.transform).compose(child_r.inverse()),
-                            translation: transform_translation(r, c.translation),
+                            translation: apply_to_vector(r, c.translation),
                         });
                     }
                 }
@@ -1434,21 +1427,8 @@ fn sort_nodes(
     order
 }
 
-fn nonzero_mask(t: &[i32; 3]) -> usize {
+fn nonzero_mask(t: &[i8; 3]) -> usize {
     (t[0] != 0) as usize | ((t[1] != 0) as usize) << 1 | ((t[2] != 0) as usize) << 2
-}
-
-/// `T(Shift_t(X)) = Shift_t'(T(X))`: the translation seen through `T`.
-fn transform_translation(t: Transform, tr: [i32; 3]) -> [i32; 3] {
-    let perm = PERMUTATIONS[t.permutation_index()];
-    std::array::from_fn(|i| {
-        let v = tr[perm[i] as usize];
-        if (t.mirror() >> i) & 1 == 1 {
-            -v
-        } else {
-            v
-        }
-    })
 }
 
 impl TreeView for TsvdagEncoding {
@@ -1501,7 +1481,7 @@ impl TreeView for TsvdagEncoding {
                         out[transform.apply_octant(o)] = Some(TNode::Stored {
                             index: target,
                             transform: transform.compose(t),
-                            translation: transform_translation(*transform, tr),
+                            translation: apply_to_vector(*transform, tr),
                         });
                     }
                 }
