@@ -353,7 +353,7 @@ fn translated_pointers_match_brute_force() {
 fn reorient_keeps_voxels_and_counts() {
     for seed in 1..40u64 {
         let g = random_graph(seed.wrapping_mul(0x2545_f491_4f6c_dd1d));
-        let r = reorient(&g);
+        let r = reorient(g.clone());
         let lens = |g: &TransformGraph| g.levels.iter().map(|l| l.len()).collect::<Vec<_>>();
         assert_eq!(lens(&r), lens(&g), "seed {seed}");
         assert_eq!(r.root.unwrap().transform, Transform::IDENTITY);

@@ -11,8 +11,8 @@ use voxdag::atomic_file::{check_output_path, write_atomic};
 use voxdag::attr::{ColorCodec, LosslessVariant, Materials, StoredColors};
 use voxdag::dag::digest::{attributes_hash, ContentDigest};
 use voxdag::dag::encode::{
-    DigestBuilder, EncodeError, EncodedDag, SsvdagEncoding, TransformGraph, TsvdagEncoding,
-    TsvdagOptions, VoxelDigest,
+    DigestBuilder, EncodedDag, SsvdagEncoding, TransformGraph, TsvdagEncoding, TsvdagOptions,
+    VoxelDigest,
 };
 use voxdag::dag::{
     analyze_symmetry, export_vox, export_xyz_u32_file, CanonicalDag, DagStats, Svdag,
@@ -244,28 +244,7 @@ pub fn encode_dag(
                 TransformDag::from_canonical(canonical, transforms == TransformsArg::Sat, &bar);
             bar.finish_and_clear();
             let graph = TransformGraph::from_transform_dag(tdag);
-            let mut best: Option<TsvdagEncoding> = None;
-            let mut too_large = None;
-            for &mode in modes {
-                match TsvdagEncoding::encode(&graph, mode) {
-                    Ok(e) => {
-                        let better = match &best {
-                            Some(b) => e.byte_size() < b.byte_size(),
-                            None => true,
-                        };
-                        if better {
-                            best = Some(e);
-                        }
-                    }
-                    // Inline pointers may not fit 48 bits on huge scenes: another mode may.
-                    Err(e @ EncodeError::TooLarge(_)) if modes.len() > 1 => too_large = Some(e),
-                    Err(e) => return Err(e.into()),
-                }
-            }
-            match best {
-                Some(e) => EncodedDag::Tsvdag(e),
-                None => return Err(too_large.expect("some mode was tried").into()),
-            }
+            EncodedDag::Tsvdag(TsvdagEncoding::encode_smallest(graph, modes)?)
         }
     })
 }

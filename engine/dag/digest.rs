@@ -54,8 +54,13 @@ impl Hasher2 {
     }
 }
 
-/// Known (hash, voxel count) per (level, node handle).
-type Memo<N> = FxHashMap<(u32, N), ([u64; 2], u64)>;
+/// Known (hash, voxel count) per (level, node handle): per level by the packed handle
+/// (`TreeView::packed`, 32-byte entries: a 64K^3 TSVDAG has tens of millions of handles), the
+/// rest (translated windows) by the handle itself.
+struct Memo<N> {
+    packed: Vec<FxHashMap<u64, ([u64; 2], u64)>>,
+    other: FxHashMap<(u32, N), ([u64; 2], u64)>,
+}
 
 /// Hash and voxel count of a node of `view` at `level`, memoized per (level, handle).
 fn node_hash<V: TreeView>(
@@ -67,7 +72,12 @@ fn node_hash<V: TreeView>(
 where
     V::Node: Hash + Eq,
 {
-    if let Some(&known) = memo.get(&(level, node.clone())) {
+    let packed = view.packed(node);
+    let known = match packed {
+        Some(key) => memo.packed[level as usize].get(&key),
+        None => memo.other.get(&(level, node.clone())),
+    };
+    if let Some(&known) = known {
         return Ok(known);
     }
     let result = if level == 0 {
@@ -92,7 +102,10 @@ where
         }
         (h.0, voxels)
     };
-    memo.insert((level, node.clone()), result);
+    match packed {
+        Some(key) => memo.packed[level as usize].insert(key, result),
+        None => memo.other.insert((level, node.clone()), result),
+    };
     Ok(result)
 }
 
@@ -104,8 +117,11 @@ where
     let Some(root) = view.root()? else {
         return Ok((Hasher2::new(u64::MAX).0, 0));
     };
-    let mut memo = FxHashMap::default();
     let root_level = view.resolution().trailing_zeros() - 2;
+    let mut memo = Memo {
+        packed: vec![FxHashMap::default(); root_level as usize + 1],
+        other: FxHashMap::default(),
+    };
     node_hash(view, &root, root_level, &mut memo)
 }
 

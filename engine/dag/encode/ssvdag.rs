@@ -328,6 +328,10 @@ impl TreeView for SsvdagEncoding {
         let t = Transform::from_parts(0, node.1 & 7).expect("mirror below 8");
         Ok(t.apply_leaf(mask))
     }
+
+    fn packed(&self, &(index, mirror): &(u64, u8)) -> Option<u64> {
+        (index < 1 << 61).then_some(index << 3 | mirror as u64)
+    }
 }
 
 impl SsvdagEncoding {

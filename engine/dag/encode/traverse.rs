@@ -29,6 +29,11 @@ pub trait TreeView {
     ) -> Result<[Option<Self::Node>; 8], EncodeError>;
     /// The 64-bit mask (bit `morton(x, y, z)`) of a level-0 node, in world orientation.
     fn leaf(&self, node: &Self::Node) -> Result<u64, EncodeError>;
+    /// The handle as one 64-bit value, when it fits: distinct handles of a level give distinct
+    /// values. Memoized walks (the content digest) then keep 8-byte keys per handle.
+    fn packed(&self, _node: &Self::Node) -> Option<u64> {
+        None
+    }
 }
 
 /// Level of the root of a grid of side `n`.
@@ -325,6 +330,10 @@ impl TreeView for Svdag {
             return Err(super::corrupt(*node as u64 * 4, "leaf out of range"));
         }
         Ok(self.leaf_mask(*node))
+    }
+
+    fn packed(&self, node: &usize) -> Option<u64> {
+        Some(*node as u64)
     }
 }
 

@@ -185,6 +185,11 @@ impl TsvdagOptions {
         },
     ];
 
+    /// Whether `tuning` stores this mode's nodes re-oriented ([`reorient`]) for `set`.
+    pub fn reorients(self, tuning: TsvdagTuning, set: TransformSet) -> bool {
+        tuning.reorient && !self.lut && set != TransformSet::None
+    }
+
     /// The mode's name: `base`, `lut`, `huffman`, or `huffman-nolut` (Huffman without tables).
     pub fn mode_name(&self) -> &'static str {
         match (self.lut, self.huffman) {
@@ -422,6 +427,53 @@ impl TsvdagEncoding {
         Self::encode_tuned(g, options, TsvdagTuning::ALL)
     }
 
+    /// Encodes `g` in each of `modes` and keeps the smallest (the first of equal sizes). The
+    /// modes that store nodes re-oriented run last, on `g` re-oriented in place, so about one
+    /// graph is in memory at a time. A mode whose inline pointers do not fit 48 bits is
+    /// skipped while another mode fits.
+    pub fn encode_smallest(
+        g: TransformGraph,
+        modes: &[TsvdagOptions],
+    ) -> Result<TsvdagEncoding, EncodeError> {
+        let (plain, turned): (Vec<usize>, Vec<usize>) =
+            (0..modes.len()).partition(|&i| !modes[i].reorients(TsvdagTuning::ALL, g.set));
+        let mut best: Option<(usize, TsvdagEncoding)> = None;
+        let mut too_large = None;
+        let mut keep = |i: usize, encoded: Result<TsvdagEncoding, EncodeError>| match encoded {
+            Ok(e) => {
+                let smaller =
+                    |(bi, b): &(usize, TsvdagEncoding)| (e.byte_size(), i) < (b.byte_size(), *bi);
+                if best.as_ref().is_none_or(smaller) {
+                    best = Some((i, e));
+                }
+                Ok(())
+            }
+            Err(e @ EncodeError::TooLarge(_)) if modes.len() > 1 => {
+                too_large = Some(e);
+                Ok(())
+            }
+            Err(e) => Err(e),
+        };
+        for &i in &plain {
+            keep(i, Self::encode(&g, modes[i]))?;
+        }
+        if !turned.is_empty() {
+            let g = reorient(g);
+            let tuning = TsvdagTuning {
+                reorient: false,
+                ..TsvdagTuning::ALL
+            };
+            for &i in &turned {
+                keep(i, Self::encode_tuned(&g, modes[i], tuning))?;
+            }
+        }
+        match best {
+            Some((_, e)) => Ok(e),
+            None => Err(too_large
+                .unwrap_or_else(|| EncodeError::InvalidInput("no encoding mode given".into()))),
+        }
+    }
+
     /// [`TsvdagEncoding::encode`] with a choice of heuristics.
     pub fn encode_tuned(
         g: &TransformGraph,
@@ -463,8 +515,8 @@ impl TsvdagEncoding {
         }
         check_graph(g)?;
         let reoriented;
-        let g = if tuning.reorient && !options.lut && g.set != TransformSet::None {
-            reoriented = reorient(g);
+        let g = if options.reorients(tuning, g.set) {
+            reoriented = reorient(g.clone());
             &reoriented
         } else {
             g
@@ -480,8 +532,10 @@ impl TsvdagEncoding {
         for l in 1..=top {
             let cl = (l - 1) as u32;
             // Distinct pointers, their reference counts, and the distinct id of every pointer
-            // in stream order (so the stream is written without a second hash look-up).
-            let mut ids: FxHashMap<PointerKey, u32> = FxHashMap::default();
+            // in stream order (so the stream is written without a second hash look-up). The
+            // table is keyed by the pointer packed in 64 bits (16-byte entries: the largest
+            // allocation of a 64K^3 encode).
+            let mut ids: FxHashMap<u64, u32> = FxHashMap::default();
             let mut keys: Vec<(PointerKey, u64)> = Vec::new();
             let mut pointer_ids: Vec<u32> = Vec::new();
             for &old in &order[l] {
@@ -491,7 +545,13 @@ impl TsvdagEncoding {
                         c.transform.index() as u8,
                         c.translation,
                     );
-                    let id = *ids.entry(key).or_insert_with(|| {
+                    let [x, y, z] = c.translation.map(|t| t as u8 as u64);
+                    let packed = (c.node as u64) << 32
+                        | (c.transform.index() as u64) << 24
+                        | x << 16
+                        | y << 8
+                        | z;
+                    let id = *ids.entry(packed).or_insert_with(|| {
                         keys.push((key, 0));
                         keys.len() as u32 - 1
                     });
@@ -1283,7 +1343,8 @@ fn check_graph(g: &TransformGraph) -> Result<(), EncodeError> {
 /// reference, top-down: node `C` becomes `R(C)` and every pointer `(C, T, t)` becomes
 /// `(R(C), T ∘ R⁻¹, t)`, so that those references turn into plain pointers. The graph means
 /// the same voxels and has the same number of stored nodes per level.
-pub fn reorient(g: &TransformGraph) -> TransformGraph {
+/// Takes the graph by value and rebuilds it level by level, so about one graph is in memory.
+pub fn reorient(g: TransformGraph) -> TransformGraph {
     let top = g.levels.len() - 1;
     let mut orient: Vec<Vec<Transform>> = g
         .levels
@@ -1291,7 +1352,7 @@ pub fn reorient(g: &TransformGraph) -> TransformGraph {
         .map(|l| vec![Transform::IDENTITY; l.len()])
         .collect();
     let Some(root) = g.root else {
-        return g.clone();
+        return g;
     };
     orient[top][root.node as usize] = root.transform;
     for l in (1..=top).rev() {
@@ -1327,7 +1388,7 @@ pub fn reorient(g: &TransformGraph) -> TransformGraph {
     }
     let levels = g
         .levels
-        .iter()
+        .into_iter()
         .enumerate()
         .map(|(l, level)| {
             if l == 0 {
@@ -1510,6 +1571,23 @@ impl TreeView for TsvdagEncoding {
                     .ok_or_else(|| corrupt(0, format!("leaf index {index} out of range")))?;
                 Ok(transform.apply_leaf(mask))
             }
+        }
+    }
+
+    /// Stored handles: index, transform id (6 bits), translation + 16 (5 bits per axis).
+    fn packed(&self, node: &TNode) -> Option<u64> {
+        match node {
+            TNode::Stored {
+                index,
+                transform,
+                translation,
+            } if *index < 1 << 43 && translation.iter().all(|t| (-16..16).contains(t)) => {
+                let t = translation
+                    .iter()
+                    .fold(0u64, |v, &t| v << 5 | (t + 16) as u64);
+                Some(index << 21 | (transform.index() as u64) << 15 | t)
+            }
+            _ => None,
         }
     }
 }
