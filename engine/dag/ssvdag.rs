@@ -20,8 +20,11 @@
 //! The rule is sound (equal keys imply equal voxels), so the identity never matches a different
 //! SVDAG node and the first stored node of every class is the first in SVDAG order.
 
+use std::hash::BuildHasher;
+
+use hashbrown::HashTable;
 use rayon::prelude::*;
-use rustc_hash::FxHashMap;
+use rustc_hash::FxBuildHasher;
 
 use super::Svdag;
 
@@ -131,21 +134,28 @@ fn mirrored_key(children: &[SymmetryPointer; 8], invs: &[u8], m: u8, rule: Invar
 /// Nodes per parallel batch.
 const BATCH: usize = 1 << 15;
 
-/// Greedy matching of one level (nodes in SVDAG order).
+/// Greedy matching of one level: `count` SVDAG nodes in SVDAG order, `children(i)` the
+/// children of the `i`-th (made per batch, so the level's SVDAG nodes are never all expanded).
 fn match_level(
-    nodes: Vec<[SymmetryPointer; 8]>,
+    count: usize,
+    children: impl Fn(usize) -> [SymmetryPointer; 8] + Sync,
     invs_below: &[u8],
     rule: Invariance,
 ) -> SsvdagLevel {
     let mut level = SsvdagLevel::default();
-    let mut table: FxHashMap<Key, u32> = FxHashMap::default();
-    level.svdag_nodes.reserve(nodes.len());
-    for batch in nodes.chunks(BATCH) {
-        let keys: Vec<([Key; 8], u8)> = batch
-            .par_iter()
-            .map(|children| {
+    // Stored node indices keyed by their unmirrored key, compared through `stored_key`: 4
+    // bytes per stored node instead of a 64-byte key.
+    let mut table: HashTable<u32> = HashTable::new();
+    let stored_key =
+        |level: &SsvdagLevel, id: u32| mirrored_key(&level.nodes[id as usize], invs_below, 0, rule);
+    level.svdag_nodes.reserve(count);
+    for start in (0..count).step_by(BATCH) {
+        let keys: Vec<([SymmetryPointer; 8], [Key; 8], u8)> = (start..count.min(start + BATCH))
+            .into_par_iter()
+            .map(|i| {
+                let children = children(i);
                 let keys: [Key; 8] =
-                    std::array::from_fn(|m| mirrored_key(children, invs_below, m as u8, rule));
+                    std::array::from_fn(|m| mirrored_key(&children, invs_below, m as u8, rule));
                 let mut inv = 0u8;
                 for m in 0..8u8 {
                     if keys[m as usize] == keys[0] {
@@ -159,24 +169,36 @@ fn match_level(
                         }
                     }
                 }
-                (keys, inv)
+                (children, keys, inv)
             })
             .collect();
-        for (children, (keys, inv)) in batch.iter().zip(keys) {
-            let found = (1..8u8).find_map(|m| table.get(&keys[m as usize]).map(|&id| (id, m)));
+        for (children, keys, inv) in keys {
+            let found = (1..8u8).find_map(|m| {
+                let key = &keys[m as usize];
+                table
+                    .find(FxBuildHasher.hash_one(key), |&id| {
+                        stored_key(&level, id) == *key
+                    })
+                    .map(|&id| (id, m))
+            });
             let ptr = match found {
                 Some((node, mirror)) => SymmetryPointer { node, mirror },
                 None => {
                     let node = level.nodes.len() as u32;
-                    table.insert(keys[0], node);
-                    level.nodes.push(*children);
+                    level.nodes.push(children);
                     level.invariance.push(inv);
+                    table.insert_unique(FxBuildHasher.hash_one(keys[0]), node, |&id| {
+                        FxBuildHasher.hash_one(stored_key(&level, id))
+                    });
                     SymmetryPointer { node, mirror: 0 }
                 }
             };
             level.svdag_nodes.push(ptr);
         }
     }
+    // The level is kept while the levels above are matched: drop the growth slack.
+    level.nodes.shrink_to_fit();
+    level.invariance.shrink_to_fit();
     level
 }
 
@@ -196,21 +218,23 @@ impl Ssvdag {
         let blocks: Vec<(u8, u8, u8)> = (0..=255u8).map(|m| sub_block(m, rule)).collect();
         // Indexed by the canonical mask: its invariance (the same for all its mirrors).
         let block_inv: Vec<u8> = blocks.iter().map(|b| b.2).collect();
-        let leaves: Vec<[SymmetryPointer; 8]> = dag
-            .level_range(0)
-            .step_by(2)
-            .map(|p| {
-                let mask = dag.leaf_mask(p);
-                std::array::from_fn(|o| {
-                    let (canon, t, _) = blocks[((mask >> (8 * o)) & 0xff) as usize];
-                    SymmetryPointer {
-                        node: canon as u32,
-                        mirror: t,
-                    }
-                })
+        let leaves = dag.level_range(0);
+        let leaf_children = |i: usize| {
+            let mask = dag.leaf_mask(leaves.start + 2 * i);
+            std::array::from_fn(|o| {
+                let (canon, t, _) = blocks[((mask >> (8 * o)) & 0xff) as usize];
+                SymmetryPointer {
+                    node: canon as u32,
+                    mirror: t,
+                }
             })
-            .collect();
-        levels.push(match_level(leaves, &block_inv, rule));
+        };
+        levels.push(match_level(
+            leaves.len() / 2,
+            leaf_children,
+            &block_inv,
+            rule,
+        ));
 
         let mut below_start = dag.level_range(0).start;
         let mut below_index: Vec<u32> = (0..dag.level_range(0).len())
@@ -219,11 +243,16 @@ impl Ssvdag {
         for l in 1..=root_level {
             let range = dag.level_range(l);
             let mut index = vec![0u32; range.len()];
-            let below = levels.last().expect("level 0 exists");
-            let mut nodes: Vec<[SymmetryPointer; 8]> = Vec::new();
+            let mut offsets: Vec<usize> = Vec::new();
             let mut p = range.start;
             while p < range.end {
-                index[p - range.start] = nodes.len() as u32;
+                index[p - range.start] = offsets.len() as u32;
+                offsets.push(p);
+                p += 1 + dag.words[p].count_ones() as usize;
+            }
+            let below = levels.last().expect("level 0 exists");
+            let node_children = |i: usize| {
+                let p = offsets[i];
                 let mask = dag.words[p];
                 let mut children = [SymmetryPointer::EMPTY; 8];
                 let mut k = 0;
@@ -234,11 +263,10 @@ impl Ssvdag {
                         k += 1;
                     }
                 }
-                nodes.push(children);
-                p += 1 + k;
-            }
-            let invs = below.invariance.clone();
-            levels.push(match_level(nodes, &invs, rule));
+                children
+            };
+            let level = match_level(offsets.len(), node_children, &below.invariance, rule);
+            levels.push(level);
             below_index = index;
             below_start = range.start;
         }
