@@ -45,9 +45,7 @@ pub use index::VoxelIndex;
 pub use ssvdag::{Invariance, Ssvdag};
 pub use stats::{ByteStats, DagStats, LevelStats};
 pub use transform::{Transform, TransformSet};
-pub use translate::{
-    build_transform_dag, build_transform_dag_with_progress, TLevel, TPointer, TransformDag,
-};
+pub use translate::{build_transform_dag, TLevel, TPointer, TransformDag};
 
 /// Largest supported grid side: Morton codes hold 21 bits per axis.
 pub const MAX_RESOLUTION: u32 = 1 << 21;

@@ -131,20 +131,11 @@ pub struct TransformDag {
 }
 
 /// Builds the transform DAG of a (valid) SVDAG: canonicalization under `set`, then, when
-/// `translations`, the translation search on the 4^3, 8^3 and 16^3 levels.
+/// `translations`, the translation search on the 4^3, 8^3 and 16^3 levels. (`voxdag build`
+/// runs the two steps itself, with progress bars and the SVDAG dropped in between.)
 pub fn build_transform_dag(dag: &Svdag, set: TransformSet, translations: bool) -> TransformDag {
-    build_transform_dag_with_progress(dag, set, translations, &ProgressBar::hidden())
-}
-
-/// [`build_transform_dag`] reporting the translation search on `progress` (items searched).
-pub fn build_transform_dag_with_progress(
-    dag: &Svdag,
-    set: TransformSet,
-    translations: bool,
-    progress: &ProgressBar,
-) -> TransformDag {
     let canonical = CanonicalDag::build(dag, set);
-    TransformDag::from_canonical(canonical, translations, progress)
+    TransformDag::from_canonical(canonical, translations, &ProgressBar::hidden())
 }
 
 /// `L(v)`: how transform `t` acts on a translation vector (`t(x + v) = t(x) + L(v)`).

@@ -540,11 +540,6 @@ impl TsvdagEncoding {
             let mut pointer_ids: Vec<u32> = Vec::new();
             for &old in &order[l] {
                 for c in g.levels[l].node_children(old) {
-                    let key = (
-                        new_id[c.node as usize],
-                        c.transform.index() as u8,
-                        c.translation,
-                    );
                     let [x, y, z] = c.translation.map(|t| t as u8 as u64);
                     let packed = (c.node as u64) << 32
                         | (c.transform.index() as u64) << 24
@@ -552,7 +547,8 @@ impl TsvdagEncoding {
                         | y << 8
                         | z;
                     let id = *ids.entry(packed).or_insert_with(|| {
-                        keys.push((key, 0));
+                        let target = new_id[c.node as usize];
+                        keys.push(((target, c.transform.index() as u8, c.translation), 0));
                         keys.len() as u32 - 1
                     });
                     keys[id as usize].1 += 1;
