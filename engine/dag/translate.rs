@@ -600,10 +600,14 @@ const LAST: u8 = 0x80;
 const FLUSH: u64 = 2;
 
 impl Table {
-    /// The table of `(key, entry)` pairs (any order; sorted here so that the groups and the
-    /// table are the same for any thread count).
-    fn build(mut pairs: Vec<(u64, Entry)>) -> Table {
+    /// Sorts `(key, entry)` pairs into the order [`Table::build`] needs: by key, then largest
+    /// offset; the rest makes the groups the same for any thread count.
+    fn sort_pairs(pairs: &mut [(u64, Entry)]) {
         pairs.par_sort_unstable_by_key(|&(k, e)| (k, e.max_offset(), e.item, e.perm_dir));
+    }
+
+    /// The table of `(key, entry)` pairs sorted by [`Table::sort_pairs`].
+    fn build(pairs: &[(u64, Entry)]) -> Table {
         let distinct = pairs.windows(2).filter(|w| w[0].0 != w[1].0).count() + 1;
         let cap = (distinct * 2).next_power_of_two().max(64);
         let flush_distinct = pairs
@@ -1130,6 +1134,10 @@ fn confirm(g: &Geometry, a: &[u64], b: &[u64], t: Transform, tr: [i8; 3]) -> boo
 /// Items per table batch: bounds the table (48 entries of 8 bytes per item, load <= 1/2).
 const TABLE_BATCH: usize = 1 << 20;
 
+/// Phases of descending parent rank per table batch; the table is rebuilt from the items still
+/// open before each (see `search_level`).
+const SEARCH_PHASES: usize = 16;
+
 /// Finds for every item (canonical ids of level `level`) its parent: `(item index of the parent,
 /// T, t)` with `item = Tr_t(T(parent))`; an item that is its own parent gets `(itself, id, 0)`.
 fn search_level(
@@ -1185,16 +1193,29 @@ fn search_level(
     let confirmed = AtomicU64::new(0);
     let passed = AtomicU64::new(0);
     let hits = AtomicU64::new(0);
+    // Table batches hold items of consecutive ranks, and the parents of a batch are searched in
+    // phases of descending rank. A candidate parent never beats an item's own rank, so an item
+    // of rank `r` is final once every parent ranked above `r` has been searched, and an item
+    // already matched is final once the phase that matched it ends (later phases rank lower).
+    // Before each phase the table keeps only the items that are still open: the table shrinks
+    // as the search goes down, and the popular small shapes that were matched early stop
+    // costing a visit from every later parent that contains them.
     let batches = items.len().div_ceil(TABLE_BATCH).max(1);
-    progress.inc_length((items.len() * batches) as u64);
+    let total: usize = (0..batches).map(|b| items.len() - b * TABLE_BATCH).sum();
+    progress.inc_length(total as u64);
+    let open = |b: u32, below_rank: u32| {
+        let r = rank[b as usize];
+        r < below_rank && best[b as usize].load(Ordering::Relaxed) >> 32 == r as u64
+    };
     for batch in 0..batches {
-        let range = batch * TABLE_BATCH..((batch + 1) * TABLE_BATCH).min(items.len());
-        let pairs: Vec<(u64, Entry)> = range
-            .clone()
-            .into_par_iter()
+        let lo = batch * TABLE_BATCH;
+        let batch_ranks = lo..((batch + 1) * TABLE_BATCH).min(items.len());
+        let mut pairs: Vec<(u64, Entry)> = by_rank[batch_ranks]
+            .par_iter()
             .map_init(
                 || ([0u64; 64], Vec::new()),
-                |(grid, keys), b| {
+                |(grid, keys), &b| {
+                    let b = b as usize;
                     grid_of(b, grid);
                     item_keys(&g, &grid[..words], &info[b], &perms, keys);
                     let entry = |e: usize| Entry::new(b as u32, e as u8, info[b], &perms, n);
@@ -1206,162 +1227,169 @@ fn search_level(
             )
             .flatten_iter()
             .collect();
-        let table = Table::build(pairs);
-
-        by_rank.par_iter().rev().for_each_init(
-            || Scratch::new(cells),
-            |s, &a| {
-                let a = a as usize;
-                let ra = rank[a];
-                let mut n_lookups = 0u64;
-                let mut n_confirmed = 0u64;
-                let mut n_passed = 0u64;
-                let mut n_hits = 0u64;
-                grid_of(a, &mut s.grid);
-                let bx = DenseBox::of(&info[a]);
-                load_dense(&g, &s.grid[..words], &bx, &mut s.hash[0], &mut s.count[0]);
-                let grid_a = s.grid;
-                let mut other = [0u64; 64];
-                let Scratch {
-                    hash: hashes,
-                    count: counts,
-                    tight,
-                    first,
-                    ..
-                } = s;
-                for_each_direction(bx.dims, hashes, counts, |d, hash, count| {
-                    collect_tight(&bx, n, d, count, tight);
-                    n_lookups += tight.len() as u64;
-                    // The cache-resident filters first (most regions have no key in the table);
-                    // a region with no gap can only match an entry with no offset. All filter
-                    // words are loaded before any is tested, so that the loads overlap.
-                    let filter = |cell: u32| {
-                        let h = hash[(cell & !FLUSH_CELL) as usize];
-                        if cell & FLUSH_CELL != 0 {
-                            table.flush.place(h)
-                        } else {
-                            table.any.place(h)
+        Table::sort_pairs(&mut pairs);
+        // Parents ranked below `lo` cannot improve any item of the batch.
+        let parents = &by_rank[lo..];
+        let phase_len = parents.len().div_ceil(SEARCH_PHASES).max(1);
+        for phase in parents.rchunks(phase_len) {
+            let phase_top = rank[*phase.last().unwrap_or(&0) as usize] + 1;
+            pairs.retain(|(_, e)| open(e.item, phase_top));
+            let table = Table::build(&pairs);
+            phase.par_iter().rev().for_each_init(
+                || Scratch::new(cells),
+                |s, &a| {
+                    let a = a as usize;
+                    let ra = rank[a];
+                    let mut n_lookups = 0u64;
+                    let mut n_confirmed = 0u64;
+                    let mut n_passed = 0u64;
+                    let mut n_hits = 0u64;
+                    grid_of(a, &mut s.grid);
+                    let bx = DenseBox::of(&info[a]);
+                    load_dense(&g, &s.grid[..words], &bx, &mut s.hash[0], &mut s.count[0]);
+                    let grid_a = s.grid;
+                    let mut other = [0u64; 64];
+                    let Scratch {
+                        hash: hashes,
+                        count: counts,
+                        tight,
+                        first,
+                        ..
+                    } = s;
+                    for_each_direction(bx.dims, hashes, counts, |d, hash, count| {
+                        collect_tight(&bx, n, d, count, tight);
+                        n_lookups += tight.len() as u64;
+                        // The cache-resident filters first (most regions have no key in the table);
+                        // a region with no gap can only match an entry with no offset. All filter
+                        // words are loaded before any is tested, so that the loads overlap.
+                        let filter = |cell: u32| {
+                            let h = hash[(cell & !FLUSH_CELL) as usize];
+                            if cell & FLUSH_CELL != 0 {
+                                table.flush.place(h)
+                            } else {
+                                table.any.place(h)
+                            }
+                        };
+                        first.clear();
+                        first.extend(tight.iter().map(|&cell| {
+                            let (w, _) = filter(cell);
+                            if cell & FLUSH_CELL != 0 {
+                                table.flush.words[w]
+                            } else {
+                                table.any.words[w]
+                            }
+                        }));
+                        let mut kept = 0;
+                        for j in 0..tight.len() {
+                            let cell = tight[j];
+                            let (_, bits) = filter(cell);
+                            tight[kept] = cell;
+                            kept += (first[j] & bits == bits) as usize;
                         }
-                    };
-                    first.clear();
-                    first.extend(tight.iter().map(|&cell| {
-                        let (w, _) = filter(cell);
-                        if cell & FLUSH_CELL != 0 {
-                            table.flush.words[w]
-                        } else {
-                            table.any.words[w]
-                        }
-                    }));
-                    let mut kept = 0;
-                    for j in 0..tight.len() {
-                        let cell = tight[j];
-                        let (_, bits) = filter(cell);
-                        tight[kept] = cell;
-                        kept += (first[j] & bits == bits) as usize;
-                    }
-                    tight.truncate(kept);
-                    n_passed += tight.len() as u64;
-                    // Independent loads first (they overlap in the memory system), then probes.
-                    first.clear();
-                    first.extend(
-                        tight
-                            .iter()
-                            .map(|&i| table.first(hash[(i & !FLUSH_CELL) as usize])),
-                    );
-                    for (&cell, &f) in tight.iter().zip(first.iter()) {
-                        if f == 0 {
-                            continue;
-                        }
-                        let flush = cell & FLUSH_CELL != 0;
-                        let i = (cell & !FLUSH_CELL) as usize;
-                        let q = bx.point(i);
-                        let cq = count[i];
-                        let mut gap = None;
-                        table.for_each_group(hash[i], flush, |group| {
-                            n_hits += 1;
-                            let gap = *gap.get_or_insert_with(|| {
-                                if flush {
-                                    [0; 3]
-                                } else {
-                                    gaps(&bx, n, count, i, d)
+                        tight.truncate(kept);
+                        n_passed += tight.len() as u64;
+                        // Independent loads first (they overlap in the memory system), then probes.
+                        first.clear();
+                        first.extend(
+                            tight
+                                .iter()
+                                .map(|&i| table.first(hash[(i & !FLUSH_CELL) as usize])),
+                        );
+                        for (&cell, &f) in tight.iter().zip(first.iter()) {
+                            if f == 0 {
+                                continue;
+                            }
+                            let flush = cell & FLUSH_CELL != 0;
+                            let i = (cell & !FLUSH_CELL) as usize;
+                            let q = bx.point(i);
+                            let cq = count[i];
+                            let mut gap = None;
+                            table.for_each_group(hash[i], flush, |group| {
+                                n_hits += 1;
+                                let gap = *gap.get_or_insert_with(|| {
+                                    if flush {
+                                        [0; 3]
+                                    } else {
+                                        gaps(&bx, n, count, i, d)
+                                    }
+                                });
+                                let widest = gap[0].max(gap[1]).max(gap[2]);
+                                'entries: for e in group {
+                                    if e.max_offset() as usize > widest {
+                                        break;
+                                    }
+                                    if (0..3).any(|ax| e.offset[ax] as usize > gap[ax]) {
+                                        continue;
+                                    }
+                                    let b = e.item as usize;
+                                    let k = ((e.perm_dir & !LAST) >> 3) as usize;
+                                    let db = (e.perm_dir & 7) as usize;
+                                    let ib = &e.info;
+                                    if b == a || ib.voxels != cq {
+                                        continue 'entries;
+                                    }
+                                    let m = (d ^ db) as u8;
+                                    let order = super::transform::PERMUTATIONS[perms[k]];
+                                    // P(b) = Tr_s(M_m(A)): corner of P(b) toward d_B minus M_m(q).
+                                    let mut shift = [0i8; 3];
+                                    let mut origin = [0usize; 3];
+                                    for ax in 0..3 {
+                                        let qm = if (m >> ax) & 1 == 1 {
+                                            n - 1 - q[ax]
+                                        } else {
+                                            q[ax]
+                                        } as i32;
+                                        let j = order[ax] as usize;
+                                        let o = if (db >> ax) & 1 == 0 {
+                                            let s_ax = ib.lo[j] as i32 - qm;
+                                            if s_ax > 0 {
+                                                continue 'entries;
+                                            }
+                                            shift[ax] = s_ax as i8;
+                                            -s_ax
+                                        } else {
+                                            let s_ax = ib.hi[j] as i32 - qm;
+                                            if s_ax < 0 {
+                                                continue 'entries;
+                                            }
+                                            shift[ax] = s_ax as i8;
+                                            n as i32 - 1 - s_ax
+                                        } as usize;
+                                        origin[ax] = if (m >> ax) & 1 == 1 { n - 1 - o } else { o };
+                                    }
+                                    // The window of A that stays inside must hold |b| voxels.
+                                    if bx.cell(origin, d).map_or(0, |c| count[c]) != cq {
+                                        continue 'entries;
+                                    }
+                                    // b = P⁻¹(Tr_s(M_m(A))) = Tr_{L(s)}((P⁻¹ ∘ M_m)(A)).
+                                    let pinv = inverse_perms[k];
+                                    let t = pinv
+                                        .compose(Transform::from_parts(0, m).unwrap_or_default());
+                                    if !set.contains(t) {
+                                        continue 'entries;
+                                    }
+                                    let tr = apply_to_vector(pinv, shift);
+                                    let key = pack(ra, t, tr);
+                                    if best[b].load(Ordering::Relaxed) >= key {
+                                        continue 'entries;
+                                    }
+                                    n_confirmed += 1;
+                                    grid_of(b, &mut other);
+                                    if confirm(&g, &grid_a[..words], &other[..words], t, tr) {
+                                        best[b].fetch_max(key, Ordering::Relaxed);
+                                    }
                                 }
                             });
-                            let widest = gap[0].max(gap[1]).max(gap[2]);
-                            'entries: for e in group {
-                                if e.max_offset() as usize > widest {
-                                    break;
-                                }
-                                if (0..3).any(|ax| e.offset[ax] as usize > gap[ax]) {
-                                    continue;
-                                }
-                                let b = e.item as usize;
-                                let k = ((e.perm_dir & !LAST) >> 3) as usize;
-                                let db = (e.perm_dir & 7) as usize;
-                                let ib = &e.info;
-                                if b == a || ib.voxels != cq {
-                                    continue 'entries;
-                                }
-                                let m = (d ^ db) as u8;
-                                let order = super::transform::PERMUTATIONS[perms[k]];
-                                // P(b) = Tr_s(M_m(A)): corner of P(b) toward d_B minus M_m(q).
-                                let mut shift = [0i8; 3];
-                                let mut origin = [0usize; 3];
-                                for ax in 0..3 {
-                                    let qm = if (m >> ax) & 1 == 1 {
-                                        n - 1 - q[ax]
-                                    } else {
-                                        q[ax]
-                                    } as i32;
-                                    let j = order[ax] as usize;
-                                    let o = if (db >> ax) & 1 == 0 {
-                                        let s_ax = ib.lo[j] as i32 - qm;
-                                        if s_ax > 0 {
-                                            continue 'entries;
-                                        }
-                                        shift[ax] = s_ax as i8;
-                                        -s_ax
-                                    } else {
-                                        let s_ax = ib.hi[j] as i32 - qm;
-                                        if s_ax < 0 {
-                                            continue 'entries;
-                                        }
-                                        shift[ax] = s_ax as i8;
-                                        n as i32 - 1 - s_ax
-                                    } as usize;
-                                    origin[ax] = if (m >> ax) & 1 == 1 { n - 1 - o } else { o };
-                                }
-                                // The window of A that stays inside must hold |b| voxels.
-                                if bx.cell(origin, d).map_or(0, |c| count[c]) != cq {
-                                    continue 'entries;
-                                }
-                                // b = P⁻¹(Tr_s(M_m(A))) = Tr_{L(s)}((P⁻¹ ∘ M_m)(A)).
-                                let pinv = inverse_perms[k];
-                                let t =
-                                    pinv.compose(Transform::from_parts(0, m).unwrap_or_default());
-                                if !set.contains(t) {
-                                    continue 'entries;
-                                }
-                                let tr = apply_to_vector(pinv, shift);
-                                let key = pack(ra, t, tr);
-                                if best[b].load(Ordering::Relaxed) >= key {
-                                    continue 'entries;
-                                }
-                                n_confirmed += 1;
-                                grid_of(b, &mut other);
-                                if confirm(&g, &grid_a[..words], &other[..words], t, tr) {
-                                    best[b].fetch_max(key, Ordering::Relaxed);
-                                }
-                            }
-                        });
-                    }
-                });
-                lookups.fetch_add(n_lookups, Ordering::Relaxed);
-                confirmed.fetch_add(n_confirmed, Ordering::Relaxed);
-                passed.fetch_add(n_passed, Ordering::Relaxed);
-                hits.fetch_add(n_hits, Ordering::Relaxed);
-                progress.inc(1);
-            },
-        );
+                        }
+                    });
+                    lookups.fetch_add(n_lookups, Ordering::Relaxed);
+                    confirmed.fetch_add(n_confirmed, Ordering::Relaxed);
+                    passed.fetch_add(n_passed, Ordering::Relaxed);
+                    hits.fetch_add(n_hits, Ordering::Relaxed);
+                    progress.inc(1);
+                },
+            );
+        }
     }
     log::debug!(
         "translations at {}^3: {} items, {:.1} s, {} lookups, {} past the filters, {} keys \
@@ -1399,7 +1427,9 @@ mod tests {
     fn table_groups_need_the_full_key() {
         let k1 = 0x0123_4567_89ab_cdef_u64;
         let k2 = k1 ^ (1 << 40);
-        let table = Table::build(vec![(k1, entry(1)), (k2, entry(2)), (k1, entry(3))]);
+        let mut pairs = vec![(k1, entry(1)), (k2, entry(2)), (k1, entry(3))];
+        Table::sort_pairs(&mut pairs);
+        let table = Table::build(&pairs);
         assert_eq!(Table::tag(k1), Table::tag(k2));
         let items = |k| {
             let mut out = Vec::new();
@@ -1426,14 +1456,15 @@ mod tests {
             rng ^= rng << 17;
             rng
         };
-        let pairs: Vec<(u64, Entry)> = (0..20_000)
+        let mut pairs: Vec<(u64, Entry)> = (0..20_000)
             .map(|i| {
                 let key = next() % 5000 * 0x9e37_79b9_7f4a_7c15;
                 let offset = [0, 1, 2].map(|_| (next() % 3 == 0) as u8 * (i % 5) as u8);
                 (key, Entry { offset, ..entry(i) })
             })
             .collect();
-        let table = Table::build(pairs.clone());
+        Table::sort_pairs(&mut pairs);
+        let table = Table::build(&pairs);
         for (k, e) in &pairs {
             assert!(table.any.may_contain(*k));
             if e.max_offset() == 0 {
