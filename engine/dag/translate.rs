@@ -457,6 +457,7 @@ const BASES: [u64; 3] = [
 
 /// Writes the voxels of canonical node `node` of level `level`, transformed by `t`, into `out`
 /// (Morton order; `out.len()` = words of the level).
+#[inline(never)]
 fn fill_grid(c: &CanonicalDag, level: usize, node: u32, t: Transform, out: &mut [u64]) {
     let lv = &c.levels[level];
     if level == 0 {
@@ -586,6 +587,11 @@ struct Table {
     shift: u32,
     slots: Vec<u64>,
     entries: Vec<Entry>,
+    /// Per group: its key and the index of its first entry.
+    keys: Vec<u64>,
+    starts: Vec<u32>,
+    /// The groups with an open entry at the last [`Table::refilter`], ascending.
+    live: Vec<u32>,
     /// Keys of groups with an entry whose offsets are all zero: the only entries a region with
     /// zero gaps on every axis can match (most regions).
     flush: KeyFilter,
@@ -606,44 +612,92 @@ impl Table {
         pairs.par_sort_unstable_by_key(|&(k, e)| (k, e.max_offset(), e.item, e.perm_dir));
     }
 
-    /// The table of `(key, entry)` pairs sorted by [`Table::sort_pairs`].
-    fn build(pairs: &[(u64, Entry)]) -> Table {
-        let distinct = pairs.windows(2).filter(|w| w[0].0 != w[1].0).count() + 1;
-        let cap = (distinct * 2).next_power_of_two().max(64);
-        let flush_distinct = pairs
-            .iter()
-            .enumerate()
-            .filter(|&(i, &(k, e))| (i == 0 || pairs[i - 1].0 != k) && e.max_offset() == 0)
-            .count();
-        let mut table = Table {
-            shift: 64 - cap.trailing_zeros(),
-            slots: huge_zeroed(cap),
-            entries: Vec::with_capacity(pairs.len()),
-            flush: KeyFilter::new(flush_distinct),
-            any: KeyFilter::new(distinct),
-        };
-        let mask = cap - 1;
-        for (i, &(key, mut entry)) in pairs.iter().enumerate() {
-            if i == 0 || pairs[i - 1].0 != key {
-                // Entries are sorted by their largest offset within a group: the first tells.
-                let flush = entry.max_offset() == 0;
-                let tag = Self::tag(key) | if flush { FLUSH } else { 0 };
-                let mut s = (key >> table.shift) as usize;
-                while table.slots[s] != 0 {
-                    s = (s + 1) & mask;
-                }
-                table.slots[s] = tag << 32 | table.entries.len() as u64;
-                table.any.insert(key);
-                if flush {
-                    table.flush.insert(key);
-                }
+    /// The table of `(key, entry)` pairs sorted by [`Table::sort_pairs`], every entry open.
+    fn build(pairs: Vec<(u64, Entry)>) -> Table {
+        let starts: Vec<u32> = (0..pairs.len())
+            .filter(|&i| i == 0 || pairs[i - 1].0 != pairs[i].0)
+            .map(|i| i as u32)
+            .collect();
+        let cap = (starts.len() * 2).next_power_of_two().max(64);
+        let mut slots = huge_zeroed(cap);
+        let (shift, mask) = (64 - cap.trailing_zeros(), cap - 1);
+        for &start in &starts {
+            let (key, entry) = pairs[start as usize];
+            // Entries are sorted by their largest offset within a group: the first tells.
+            let flush = entry.max_offset() == 0;
+            let tag = Self::tag(key) | if flush { FLUSH } else { 0 };
+            let mut s = (key >> shift) as usize;
+            while slots[s] != 0 {
+                s = (s + 1) & mask;
             }
-            if pairs.get(i + 1).is_none_or(|next| next.0 != key) {
-                entry.perm_dir |= LAST;
-            }
-            table.entries.push(entry);
+            slots[s] = tag << 32 | start as u64;
         }
+        let keys: Vec<u64> = starts.iter().map(|&i| pairs[i as usize].0).collect();
+        let entries = (0..pairs.len())
+            .into_par_iter()
+            .map(|i| {
+                let mut entry = pairs[i].1;
+                if pairs.get(i + 1).is_none_or(|next| next.0 != pairs[i].0) {
+                    entry.perm_dir |= LAST;
+                }
+                entry
+            })
+            .collect();
+        drop(pairs);
+        let mut table = Table {
+            shift,
+            slots,
+            entries,
+            live: (0..keys.len() as u32).collect(),
+            keys,
+            starts,
+            flush: KeyFilter::new(0),
+            any: KeyFilter::new(0),
+        };
+        table.refilter(|_| true);
         table
+    }
+
+    /// Rebuilds the key filters from the entries whose item is still `open`: a group without
+    /// one is left out of both filters (and out of every later rebuild: items never reopen), a
+    /// group without an open zero-offset entry out of `flush`. Lookups of closed items' keys
+    /// then stop at the cache-resident filter.
+    fn refilter(&mut self, open: impl Fn(u32) -> bool + Sync) {
+        const ANY: u8 = 1;
+        const FLUSH_OPEN: u8 = 2;
+        let entries = &self.entries;
+        let starts = &self.starts;
+        let flags: Vec<u8> = self
+            .live
+            .par_iter()
+            .map(|&g| {
+                let end = starts
+                    .get(g as usize + 1)
+                    .map_or(entries.len(), |&e| e as usize);
+                entries[starts[g as usize] as usize..end]
+                    .iter()
+                    .filter(|e| open(e.item))
+                    .fold(0, |f, e| {
+                        f | ANY | if e.max_offset() == 0 { FLUSH_OPEN } else { 0 }
+                    })
+            })
+            .collect();
+        let count = |bit: u8| flags.iter().filter(|&&f| f & bit != 0).count();
+        self.any = KeyFilter::new(count(ANY));
+        self.flush = KeyFilter::new(count(FLUSH_OPEN));
+        // Groups are in key order and the filters pick a word by the key's top bits, so these
+        // writes run through the filters in order.
+        for (&g, &f) in self.live.iter().zip(&flags) {
+            let key = self.keys[g as usize];
+            if f & ANY != 0 {
+                self.any.insert(key);
+            }
+            if f & FLUSH_OPEN != 0 {
+                self.flush.insert(key);
+            }
+        }
+        let mut flags = flags.into_iter();
+        self.live.retain(|_| flags.next().is_some_and(|f| f != 0));
     }
 
     /// The tag of `hash` without the [`FLUSH`] bit (never 0).
@@ -660,7 +714,7 @@ impl Table {
 
     /// Calls `f` with the entries of every group whose tag equals that of `hash` (with an
     /// all-zero-offset entry when `flush_only`); the group of `hash` itself is among them.
-    #[inline]
+    #[inline(never)]
     fn for_each_group(&self, hash: u64, flush_only: bool, mut f: impl FnMut(GroupIter<'_>)) {
         let mask = self.slots.len() - 1;
         let tag = Self::tag(hash);
@@ -706,10 +760,11 @@ impl<'a> Iterator for GroupIter<'a> {
     }
 }
 
-/// A blocked Bloom filter of table keys: one 64-bit word per key with two bits set, about 4 to
-/// 8 bits per key (5 to 16% false positives). It is 16 to 32 times smaller than the slot array,
-/// so most lookups (whose keys are absent) are answered from the cache instead of missing in
-/// memory on the table.
+/// A blocked Bloom filter of table keys: one 64-bit word per key with three bits set, 16 to 32
+/// bits per key (about 0.5 to 3% false positives; with 4 to 8 bits and two bits set, 5 to 16%
+/// of the absent keys went on to probe the slot array). It is 4 to 8 times smaller than the slot
+/// array, so most lookups (whose keys are absent) are answered from the cache instead of
+/// missing in memory on the table.
 struct KeyFilter {
     shift: u32,
     words: Vec<u64>,
@@ -718,20 +773,21 @@ struct KeyFilter {
 impl KeyFilter {
     /// An empty filter sized for `keys` keys.
     fn new(keys: usize) -> KeyFilter {
-        let words = (keys / 16).next_power_of_two().max(8);
+        let words = (keys / 4).next_power_of_two().max(8);
         KeyFilter {
             shift: 64 - words.trailing_zeros(),
             words: huge_zeroed(words),
         }
     }
 
-    /// The word index and the two bits of `hash` (remixed: the table uses the hash's top bits
-    /// for the slot and its low bits for the fingerprint).
+    /// The word index (the hash's top bits, so that keys inserted in ascending order write
+    /// the words in order) and the three bits of `hash` (from a remix of the whole hash: the
+    /// table uses the top bits for the slot and the low bits for the fingerprint).
     #[inline]
     fn place(&self, hash: u64) -> (usize, u64) {
         let h = (hash ^ hash >> 29).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        let bits = 1u64 << (h & 63) | 1u64 << ((h >> 6) & 63);
-        ((h >> self.shift) as usize, bits)
+        let bits = 1u64 << (h & 63) | 1u64 << ((h >> 6) & 63) | 1u64 << ((h >> 12) & 63);
+        ((hash >> self.shift) as usize, bits)
     }
 
     fn insert(&mut self, hash: u64) {
@@ -892,6 +948,7 @@ fn for_each_direction(
 /// whose slab through the cell is non-empty on every axis (the region's bounding box starts
 /// there), i.e. every distinct region once. A cell whose region has no gap on any axis (see
 /// [`gaps`]; read here from the neighbours behind the cut) carries [`FLUSH_CELL`].
+#[inline(never)]
 fn collect_tight(bx: &DenseBox, n: usize, d: usize, count: &[u16], out: &mut Vec<u32>) {
     out.clear();
     let [dx, dy, dz] = bx.dims;
@@ -1004,6 +1061,7 @@ impl DenseBox {
 /// How far the cut of the region of box cell `i` toward `d` can move back along each axis (alone)
 /// without taking in more voxels, up to the cube face. A window whose cut lies further back
 /// holds more voxels than the region, so a match never moves the cut back by more.
+#[inline(never)]
 fn gaps(bx: &DenseBox, n: usize, count: &[u16], i: usize, d: usize) -> [usize; 3] {
     let [dx, dy, _] = bx.dims;
     let local = [i % dx, (i / dx) % dy, i / (dx * dy)];
@@ -1045,6 +1103,7 @@ fn gaps(bx: &DenseBox, n: usize, count: &[u16], i: usize, d: usize) -> [usize; 3
 
 /// Loads the voxels of a Morton grid as dense hash/count seeds (1 per occupied voxel) into its
 /// bounding box `bx`.
+#[inline(never)]
 fn load_dense(g: &Geometry, grid: &[u64], bx: &DenseBox, hash: &mut [u64], count: &mut [u16]) {
     let [dx, dy, dz] = bx.dims;
     hash[..dx * dy * dz].fill(0);
@@ -1109,6 +1168,7 @@ fn item_keys(g: &Geometry, grid: &[u64], info: &ItemInfo, perms: &[usize], keys:
 
 /// Whether `b = Tr_tr(t(a))` holds given that both have `|b|` voxels inside the translated
 /// window (checked by the caller): every voxel of `b` must come from a voxel of `a`.
+#[inline(never)]
 fn confirm(g: &Geometry, a: &[u64], b: &[u64], t: Transform, tr: [i8; 3]) -> bool {
     let inv = t.inverse();
     let n = g.n as i32;
@@ -1134,8 +1194,8 @@ fn confirm(g: &Geometry, a: &[u64], b: &[u64], t: Transform, tr: [i8; 3]) -> boo
 /// Items per table batch: bounds the table (48 entries of 8 bytes per item, load <= 1/2).
 const TABLE_BATCH: usize = 1 << 20;
 
-/// Phases of descending parent rank per table batch; the table is rebuilt from the items still
-/// open before each (see `search_level`).
+/// Phases of descending parent rank per table batch; the key filters are rebuilt from the items
+/// still open before each (see `search_level`).
 const SEARCH_PHASES: usize = 16;
 
 /// Finds for every item (canonical ids of level `level`) its parent: `(item index of the parent,
@@ -1193,14 +1253,17 @@ fn search_level(
     let confirmed = AtomicU64::new(0);
     let passed = AtomicU64::new(0);
     let hits = AtomicU64::new(0);
+    let visited = AtomicU64::new(0);
+    let axis_rejected = AtomicU64::new(0);
     // Table batches hold items of consecutive ranks, and the parents of a batch are searched in
     // phases of descending rank. A candidate parent never beats an item's own rank, so an item
     // of rank `r` is final once every parent ranked above `r` has been searched, and an item
     // already matched is final once the phase that matched it ends (later phases rank lower).
-    // Before each phase the table keeps only the items that are still open: the table shrinks
-    // as the search goes down, and the popular small shapes that were matched early stop
-    // costing a visit from every later parent that contains them.
+    // Before each phase the key filters are rebuilt from the items that are still open: the
+    // popular small shapes that were matched early then stop costing a table probe from every
+    // later parent that contains them.
     let batches = items.len().div_ceil(TABLE_BATCH).max(1);
+    let mut refilter_time = 0.0;
     let total: usize = (0..batches).map(|b| items.len() - b * TABLE_BATCH).sum();
     progress.inc_length(total as u64);
     let open = |b: u32, below_rank: u32| {
@@ -1228,13 +1291,16 @@ fn search_level(
             .flatten_iter()
             .collect();
         Table::sort_pairs(&mut pairs);
+        let mut table = Table::build(pairs);
         // Parents ranked below `lo` cannot improve any item of the batch.
         let parents = &by_rank[lo..];
         let phase_len = parents.len().div_ceil(SEARCH_PHASES).max(1);
         for phase in parents.rchunks(phase_len) {
             let phase_top = rank[*phase.last().unwrap_or(&0) as usize] + 1;
-            pairs.retain(|(_, e)| open(e.item, phase_top));
-            let table = Table::build(&pairs);
+            let refilter_started = std::time::Instant::now();
+            table.refilter(|b| open(b, phase_top));
+            refilter_time += refilter_started.elapsed().as_secs_f64();
+            let table = &table;
             phase.par_iter().rev().for_each_init(
                 || Scratch::new(cells),
                 |s, &a| {
@@ -1244,6 +1310,8 @@ fn search_level(
                     let mut n_confirmed = 0u64;
                     let mut n_passed = 0u64;
                     let mut n_hits = 0u64;
+                    let mut n_visited = 0u64;
+                    let mut n_axis = 0u64;
                     grid_of(a, &mut s.grid);
                     let bx = DenseBox::of(&info[a]);
                     load_dense(&g, &s.grid[..words], &bx, &mut s.hash[0], &mut s.count[0]);
@@ -1315,10 +1383,12 @@ fn search_level(
                                 });
                                 let widest = gap[0].max(gap[1]).max(gap[2]);
                                 'entries: for e in group {
+                                    n_visited += 1;
                                     if e.max_offset() as usize > widest {
                                         break;
                                     }
                                     if (0..3).any(|ax| e.offset[ax] as usize > gap[ax]) {
+                                        n_axis += 1;
                                         continue;
                                     }
                                     let b = e.item as usize;
@@ -1386,6 +1456,8 @@ fn search_level(
                     confirmed.fetch_add(n_confirmed, Ordering::Relaxed);
                     passed.fetch_add(n_passed, Ordering::Relaxed);
                     hits.fetch_add(n_hits, Ordering::Relaxed);
+                    visited.fetch_add(n_visited, Ordering::Relaxed);
+                    axis_rejected.fetch_add(n_axis, Ordering::Relaxed);
                     progress.inc(1);
                 },
             );
@@ -1393,14 +1465,17 @@ fn search_level(
     }
     log::debug!(
         "translations at {}^3: {} items, {:.1} s, {} lookups, {} past the filters, {} keys \
-         found, {} confirmations",
+         found, {} entries visited ({} beyond the gap of an axis), {} confirmations, filter rebuilds {:.1} s",
         n,
         items.len(),
         started.elapsed().as_secs_f64(),
         lookups.load(Ordering::Relaxed),
         passed.load(Ordering::Relaxed),
         hits.load(Ordering::Relaxed),
-        confirmed.load(Ordering::Relaxed)
+        visited.load(Ordering::Relaxed),
+        axis_rejected.load(Ordering::Relaxed),
+        confirmed.load(Ordering::Relaxed),
+        refilter_time
     );
     best.iter()
         .map(|k| {
@@ -1429,7 +1504,7 @@ mod tests {
         let k2 = k1 ^ (1 << 40);
         let mut pairs = vec![(k1, entry(1)), (k2, entry(2)), (k1, entry(3))];
         Table::sort_pairs(&mut pairs);
-        let table = Table::build(&pairs);
+        let table = Table::build(pairs.clone());
         assert_eq!(Table::tag(k1), Table::tag(k2));
         let items = |k| {
             let mut out = Vec::new();
@@ -1464,7 +1539,7 @@ mod tests {
             })
             .collect();
         Table::sort_pairs(&mut pairs);
-        let table = Table::build(&pairs);
+        let table = Table::build(pairs.clone());
         for (k, e) in &pairs {
             assert!(table.any.may_contain(*k));
             if e.max_offset() == 0 {
