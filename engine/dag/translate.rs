@@ -1622,6 +1622,42 @@ mod tests {
         assert!(absent < 1500, "{absent} false positives of 10000");
     }
 
+    /// A filter rebuild keeps exactly the groups with an open entry: every key of such a group
+    /// passes `any` (and `flush` when the open entry has no offset), the closed groups leave
+    /// the live list for good, and closing more items only shrinks it.
+    #[test]
+    fn refilter_keeps_the_open_groups() {
+        let pairs_of = |i: u32| {
+            let key = (i as u64 % 700 + 1) * 0x9e37_79b9_7f4a_7c15;
+            let offset = [i.is_multiple_of(4) as u8, 0, 0];
+            (key, Entry { offset, ..entry(i) })
+        };
+        let mut pairs: Vec<(u64, Entry)> = (0..5000).map(pairs_of).collect();
+        Table::sort_pairs(&mut pairs);
+        let mut table = Table::build(pairs.clone());
+        assert_eq!(table.live.len(), 700);
+        // Items close step by step (never reopen), as in the search.
+        for step in 1..=3 {
+            let open = |item: u32| [2, 3, 7][..step].iter().all(|&t| !item.is_multiple_of(t));
+            let before = table.live.clone();
+            table.refilter(open);
+            let expected: Vec<u32> = (0..table.keys.len() as u32)
+                .filter(|&g| {
+                    let key = table.keys[g as usize];
+                    pairs.iter().any(|(k, e)| *k == key && open(e.item))
+                })
+                .collect();
+            assert_eq!(table.live, expected, "step {step}");
+            assert!(expected.iter().all(|g| before.contains(g)));
+            for (k, e) in pairs.iter().filter(|(_, e)| open(e.item)) {
+                assert!(table.any.may_contain(*k));
+                if e.max_offset() == 0 {
+                    assert!(table.flush.may_contain(*k));
+                }
+            }
+        }
+    }
+
     /// `gaps` against counting the region of every cut position directly.
     #[test]
     fn gaps_match_direct_counts() {
