@@ -1255,7 +1255,8 @@ fn confirm(g: &Geometry, a: &[u64], b: &[u64], t: Transform, tr: [i8; 3]) -> boo
     true
 }
 
-/// Items per table batch: bounds the table (48 entries of 8 bytes per item, load <= 1/2).
+/// Items per table batch: bounds the table (48 entries of 16 bytes per item, and per distinct
+/// key a slot at load <= 1/2, its key, first entry and live index).
 const TABLE_BATCH: usize = 1 << 20;
 
 /// Phases of descending parent rank per table batch; the key filters are rebuilt from the items
@@ -1359,8 +1360,9 @@ fn search_level(
         // Parents ranked below `lo` cannot improve any item of the batch.
         let parents = &by_rank[lo..];
         let phase_len = parents.len().div_ceil(SEARCH_PHASES).max(1);
-        for phase in parents.rchunks(phase_len) {
-            let phase_top = rank[*phase.last().unwrap_or(&0) as usize] + 1;
+        // Phase `k` ends where `k` phases from the top end (`by_rank[r]` has rank `r`).
+        for (k, phase) in parents.rchunks(phase_len).enumerate() {
+            let phase_top = (items.len() - k * phase_len) as u32;
             let refilter_started = std::time::Instant::now();
             table.refilter(|b| open(b, phase_top));
             refilter_time += refilter_started.elapsed().as_secs_f64();
