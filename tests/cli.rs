@@ -339,11 +339,76 @@ fn render_writes_png_profile_and_trace() {
 fn bench_compress_writes_consistent_tables() {
     let dir = tempfile::tempdir().unwrap();
     let teapot = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/teapot.obj");
-    let (json, md, png) = (
+    let (json, md, png, cache) = (
         dir.path().join("c.json"),
         dir.path().join("c.md"),
         dir.path().join("c.png"),
+        dir.path().join("cache"),
     );
+    let bench = |extra: &[&str]| {
+        let mut args = vec![
+            "bench",
+            "compress",
+            "--scenes",
+            teapot,
+            "--resolutions",
+            "64",
+            "--json",
+            s(&json),
+            "--markdown",
+            s(&md),
+            "--chart",
+            s(&png),
+            "--cache",
+            s(&cache),
+        ];
+        args.extend(extra);
+        let out = voxdag(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let rows: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+        rows[0].clone()
+    };
+    let row = bench(&[]);
+    let e = |row: &serde_json::Value, k: &str| row["elements"][k].as_u64().unwrap();
+    assert!(e(&row, "svdag") <= e(&row, "svo") && e(&row, "s") <= e(&row, "svdag"));
+    assert!(e(&row, "a") <= e(&row, "svdag") && e(&row, "s") <= e(&row, "ssvdag"));
+    assert!(e(&row, "sa") <= e(&row, "s").min(e(&row, "a")) && e(&row, "sat") <= e(&row, "sa"));
+    let b = |k: &str| row["bytes"][k].as_u64().unwrap();
+    assert!(b("ssvdag") < b("svdag32") && b("tsvdag") > 0 && b("tsvdag_base") > 0);
+    assert!(std::fs::read_to_string(&md).unwrap().contains("S+A+T"));
+    let chart = image::open(&png).unwrap();
+    assert_eq!(
+        (chart.width(), chart.height()),
+        (18 + 5 * 14 + 18, 260),
+        "one bar group"
+    );
+    // The svdag32 build is kept in --cache and reused; without the translation search the
+    // other counts are the same and the S+A+T column says so.
+    let cached = cache.join("teapot-64-svdag32.vdag");
+    let built = std::fs::metadata(&cached).unwrap().modified().unwrap();
+    let off = bench(&["--translations", "off"]);
+    assert_eq!(
+        std::fs::metadata(&cached).unwrap().modified().unwrap(),
+        built
+    );
+    for k in ["svo", "svdag", "ssvdag", "s", "a", "sa"] {
+        assert_eq!(e(&off, k), e(&row, k), "{k}");
+    }
+    assert!(off["elements"]["sat"].is_null() && off["seconds"]["sat"].is_null());
+    assert!(std::fs::read_to_string(&md).unwrap().contains("not run"));
+    // A cached report of another resolution is refused, naming the file.
+    let report = cache.join("teapot-64-svdag32.json");
+    let text = std::fs::read_to_string(&report).unwrap();
+    std::fs::write(
+        &report,
+        text.replacen("\"resolution\": 64", "\"resolution\": 128", 1),
+    )
+    .unwrap();
     let out = voxdag(&[
         "bench",
         "compress",
@@ -357,25 +422,13 @@ fn bench_compress_writes_consistent_tables() {
         s(&md),
         "--chart",
         s(&png),
+        "--cache",
+        s(&cache),
     ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let rows: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
-    let row = &rows[0];
-    let e = |k: &str| row["elements"][k].as_u64().unwrap();
-    assert!(e("svdag") <= e("svo") && e("s") <= e("svdag") && e("a") <= e("svdag"));
-    assert!(e("sa") <= e("s").min(e("a")) && e("sat") <= e("sa") && e("s") <= e("ssvdag"));
-    let b = |k: &str| row["bytes"][k].as_u64().unwrap();
-    assert!(b("ssvdag") < b("svdag32") && b("tsvdag") > 0 && b("tsvdag_base") > 0);
-    assert!(std::fs::read_to_string(&md).unwrap().contains("S+A+T"));
-    let chart = image::open(&png).unwrap();
-    assert_eq!(
-        (chart.width(), chart.height()),
-        (18 + 5 * 14 + 18, 260),
-        "one bar group"
+        !out.status.success() && stderr.contains("teapot-64-svdag32.json"),
+        "{stderr}"
     );
 }
 

@@ -175,9 +175,40 @@ struct BuildRow {
     report: serde_json::Value,
 }
 
+/// Runs `voxdag build INPUT -r RESOLUTION -o OUT --report REPORT` (without colours when
+/// `no_colors`) in a child process, so that the report's peak RSS is the build's own.
+fn run_build(
+    input: &Path,
+    resolution: u32,
+    out: &Path,
+    report: &Path,
+    no_colors: bool,
+) -> Result<serde_json::Value> {
+    let exe = std::env::current_exe().context("locating the voxdag executable")?;
+    let mut build = Command::new(&exe);
+    build
+        .arg("build")
+        .arg(input)
+        .args(["--resolution", &resolution.to_string(), "-o"])
+        .arg(out)
+        .arg("--report")
+        .arg(report);
+    if no_colors {
+        build.arg("--no-colors");
+    }
+    let status = build.status().context("starting voxdag build")?;
+    if !status.success() {
+        bail!(
+            "voxdag build {} at {resolution} failed ({status})",
+            input.display()
+        );
+    }
+    let json = std::fs::read(report).with_context(|| format!("reading {}", report.display()))?;
+    serde_json::from_slice(&json).with_context(|| format!("parsing {}", report.display()))
+}
+
 /// `voxdag bench build`: each build runs in a child process so that its peak RSS is its own.
 fn bench_build(args: &BenchBuildArgs) -> Result<()> {
-    let exe = std::env::current_exe().context("locating the voxdag executable")?;
     let scratch = tempfile::Builder::new().prefix("voxdag-bench").tempdir()?;
     let mut rows = Vec::new();
     for name in &args.scenes {
@@ -186,22 +217,7 @@ fn bench_build(args: &BenchBuildArgs) -> Result<()> {
             eprintln!("bench build: {name} at {resolution}^3");
             let out = scratch.path().join("scene.vdag");
             let report_path = scratch.path().join("report.json");
-            let status = Command::new(&exe)
-                .arg("build")
-                .arg(&input)
-                .args(["--resolution", &resolution.to_string(), "-o"])
-                .arg(&out)
-                .arg("--report")
-                .arg(&report_path)
-                .status()
-                .context("starting voxdag build")?;
-            if !status.success() {
-                bail!(
-                    "voxdag build {} at {resolution} failed ({status})",
-                    input.display()
-                );
-            }
-            let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&report_path)?)?;
+            let report = run_build(&input, resolution, &out, &report_path, false)?;
             rows.push(BuildRow {
                 scene: name.clone(),
                 report,

@@ -1,7 +1,7 @@
 //! `voxdag bench compress`: the dissertation's Tables 3.2-3.4 for our scenes — unique element
 //! counts per transform set, encoded bytes per encoding feature, stage times and peak memory.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
@@ -12,11 +12,11 @@ use serde::{Deserialize, Serialize};
 use voxdag::dag::encode::{
     SsvdagEncoding, TransformGraph, TsvdagEncoding, TsvdagOptions, TsvdagTuning,
 };
-use voxdag::dag::{build_transform_dag, CanonicalDag, Invariance, Ssvdag, Svdag, TransformSet};
-use voxdag::scene::{self, ImportOptions};
+use voxdag::dag::{CanonicalDag, Invariance, Ssvdag, Svdag, TransformDag, TransformSet};
 
 use super::{scene_path, write_outputs};
-use crate::commands::{peak_rss_bytes, write_json};
+use crate::commands::{peak_rss_bytes, write_json, BuildReport};
+use crate::ooc::OnOff;
 
 /// Arguments of `voxdag bench compress`.
 #[derive(Args)]
@@ -43,9 +43,23 @@ pub struct BenchCompressArgs {
     /// Bar chart (PNG) of the element counts relative to the SVDAG.
     #[arg(long, default_value = "out/bench-compress.png")]
     chart: PathBuf,
+    /// Keep each scene's svdag32 build here (`SCENE-N-svdag32.vdag` with its build report
+    /// `SCENE-N-svdag32.json`) and reuse it: at 65536^3 the voxelization alone takes an hour.
+    #[arg(long)]
+    cache: Option<PathBuf>,
+    /// The translation search (S+A+T). `off` leaves the S+A+T column empty and measures the
+    /// encodings on S+A: at 65536^3 the search takes hours (docs/translations.md).
+    #[arg(long, value_enum, default_value = "on")]
+    translations: OnOff,
     /// Internal: measure one scene at one resolution in this process and write its row here.
     #[arg(long, hide = true)]
     row_out: Option<PathBuf>,
+    /// Internal: the row's svdag32 file (with `--row-out`).
+    #[arg(long, hide = true)]
+    svdag: Option<PathBuf>,
+    /// Internal: the report of the build that wrote `--svdag`.
+    #[arg(long, hide = true)]
+    build_report: Option<PathBuf>,
 }
 
 impl BenchCompressArgs {
@@ -65,12 +79,16 @@ impl BenchCompressArgs {
 /// Seconds spent in each stage.
 #[derive(Serialize, Deserialize, Default)]
 struct StageTimes {
+    /// `voxdag build` (streaming) of the svdag32 file, in its own process.
     voxelize_and_build: f64,
+    /// Loading the svdag32 file for the stages below.
+    load: f64,
     ssvdag: f64,
     s: f64,
     a: f64,
     sa: f64,
-    sat: f64,
+    /// The translation search on top of S+A (none with `--translations off`).
+    sat: Option<f64>,
     encode_ssvdag: f64,
     encode_tsvdag: f64,
     /// The three modes with the format-v1 encoder's heuristics (`TsvdagTuning::V1`), same run.
@@ -87,10 +105,12 @@ struct Elements {
     s: u64,
     a: u64,
     sa: u64,
-    sat: u64,
+    /// None with `--translations off`.
+    sat: Option<u64>,
 }
 
-/// Encoded bytes per encoding / feature set (TSVDAG on S+A+T).
+/// Encoded bytes per encoding / feature set (TSVDAG on S+A+T, or on S+A without the
+/// translation search).
 #[derive(Serialize, Deserialize, Default)]
 struct Bytes {
     svdag32: u64,
@@ -120,9 +140,22 @@ struct CompressRow {
     elements: Elements,
     bytes: Bytes,
     seconds: StageTimes,
+    /// Peak RSS of the build process (voxelization and SVDAG build).
+    build_peak_rss_bytes: u64,
+    /// Peak RSS of the process that ran the stages after the build.
     peak_rss_bytes: u64,
-    #[serde(default)]
     ablation: Vec<Ablation>,
+}
+
+impl CompressRow {
+    /// The transform set the TSVDAG encodings were measured on.
+    fn encoded_set(&self) -> &'static str {
+        if self.elements.sat.is_some() {
+            "S+A+T"
+        } else {
+            "S+A"
+        }
+    }
 }
 
 /// Runs `f` and returns its result with the seconds it took.
@@ -132,28 +165,41 @@ fn timed<T>(f: impl FnOnce() -> T) -> (T, f64) {
     (value, start.elapsed().as_secs_f64())
 }
 
-/// Measures one scene at one resolution in this process.
-fn measure(scene_name: &str, input: &std::path::Path, resolution: u32) -> Result<CompressRow> {
-    let (dag, build_s) = timed(|| -> Result<Svdag> {
-        let options = ImportOptions {
-            resolution: Some(resolution),
-            ..Default::default()
-        };
-        let voxels = scene::import(input, &options, &indicatif::ProgressBar::hidden())?;
-        Ok(Svdag::from_voxels(&voxels)?)
-    });
-    let dag = dag?;
+/// Measures one scene at one resolution in this process, from its svdag32 build.
+fn measure(
+    scene_name: &str,
+    svdag: &Path,
+    build: &BuildReport,
+    translations: bool,
+) -> Result<CompressRow> {
+    // Each stage prints its time: at 65536^3 they take minutes each.
+    let stage = |name: &str, seconds: f64| eprintln!("  {name}: {seconds:.1} s");
+    let (dag, load_s) = timed(|| Svdag::load(svdag));
+    let dag = dag.with_context(|| format!("loading {}", svdag.display()))?;
+    stage("load", load_s);
     let stats = dag.stats();
     let total = |counts: Vec<u64>| counts.iter().sum::<u64>();
     let (ssvdag, ssvdag_s) = timed(|| total(Ssvdag::build(&dag, Invariance::Axes3).level_counts()));
+    stage("SSVDAG", ssvdag_s);
     let (s, s_s) = timed(|| total(CanonicalDag::build(&dag, TransformSet::Mirrors).level_counts()));
+    stage("S", s_s);
     let (a, a_s) =
         timed(|| total(CanonicalDag::build(&dag, TransformSet::AxisPermutations).level_counts()));
-    let (sa, sa_s) = timed(|| total(CanonicalDag::build(&dag, TransformSet::All).level_counts()));
-    let (tdag, sat_s) = timed(|| build_transform_dag(&dag, TransformSet::All, true));
+    stage("A", a_s);
+    let (canonical, sa_s) = timed(|| CanonicalDag::build(&dag, TransformSet::All));
+    let sa = total(canonical.level_counts());
+    stage("S+A", sa_s);
+    let (tdag, translate_s) = timed(|| {
+        TransformDag::from_canonical(canonical, translations, &indicatif::ProgressBar::hidden())
+    });
+    let sat = translations.then(|| total(tdag.level_counts()));
+    let sat_s = translations.then_some(translate_s);
+    if translations {
+        stage("translation search", translate_s);
+    }
     let (ssvdag_bytes, encode_ssvdag) =
         timed(|| SsvdagEncoding::build(&dag).map(|e| e.byte_size()));
-    let sat = total(tdag.level_counts());
+    stage("encode SSVDAG", encode_ssvdag);
     let graph = TransformGraph::from_transform_dag(tdag);
     let encode = |lut, huffman| {
         TsvdagEncoding::encode(&graph, TsvdagOptions { lut, huffman }).map(|e| e.byte_size())
@@ -165,6 +211,7 @@ fn measure(scene_name: &str, input: &std::path::Path, resolution: u32) -> Result
             encode(true, true),
         )
     });
+    stage("encode TSVDAG", encode_tsvdag);
     let modes = |tuning: TsvdagTuning| -> Result<[u64; 3]> {
         let mut out = [0; 3];
         for (o, &mode) in out.iter_mut().zip(&TsvdagOptions::MODES) {
@@ -174,6 +221,7 @@ fn measure(scene_name: &str, input: &std::path::Path, resolution: u32) -> Result
     };
     let (v1, encode_tsvdag_v1) = timed(|| modes(TsvdagTuning::V1));
     let v1 = v1?;
+    stage("encode TSVDAG, v1 heuristics", encode_tsvdag_v1);
     let mut ablation = Vec::new();
     let mut tuning = TsvdagTuning::V1;
     for step in ["v1", "+reorient", "+compact", "+tie-break", "+tagged"] {
@@ -194,7 +242,7 @@ fn measure(scene_name: &str, input: &std::path::Path, resolution: u32) -> Result
     }
     Ok(CompressRow {
         scene: scene_name.to_string(),
-        resolution,
+        resolution: stats.resolution,
         voxels: stats.voxels,
         elements: Elements {
             svo: stats.levels.iter().map(|l| l.svo).sum(),
@@ -213,7 +261,8 @@ fn measure(scene_name: &str, input: &std::path::Path, resolution: u32) -> Result
             tsvdag: full?,
         },
         seconds: StageTimes {
-            voxelize_and_build: build_s,
+            voxelize_and_build: build.voxelize_s + build.build_s,
+            load: load_s,
             ssvdag: ssvdag_s,
             s: s_s,
             a: a_s,
@@ -223,41 +272,61 @@ fn measure(scene_name: &str, input: &std::path::Path, resolution: u32) -> Result
             encode_tsvdag,
             encode_tsvdag_v1,
         },
+        build_peak_rss_bytes: build.peak_rss_bytes,
         peak_rss_bytes: peak_rss_bytes(),
         ablation,
     })
 }
 
-/// `voxdag bench compress`: each (scene, resolution) runs in a child process so that its peak RSS
-/// is its own.
+/// `voxdag bench compress`: each (scene, resolution) is built to svdag32 by `voxdag build` (the
+/// streaming build, so 65536^3 fits) and measured in a second child process, so that the peak
+/// RSS of each is its own.
 pub fn bench_compress(args: &BenchCompressArgs) -> Result<()> {
+    let translations = args.translations == OnOff::On;
     if let Some(row_out) = &args.row_out {
-        let (name, resolution) = match (args.scenes.as_slice(), args.resolutions.as_slice()) {
-            ([name], [resolution]) => (name, *resolution),
-            _ => bail!("--row-out measures exactly one scene at one resolution"),
+        let (Some(svdag), Some(report), [name]) =
+            (&args.svdag, &args.build_report, args.scenes.as_slice())
+        else {
+            bail!("--row-out measures exactly one scene from its --svdag and --build-report");
         };
-        let row = measure(name, &scene_path(&args.data, name)?, resolution)?;
+        let row = measure(name, svdag, &read_build_report(report)?, translations)?;
         return write_json(row_out, &row);
     }
     let exe = std::env::current_exe().context("locating the voxdag executable")?;
     let scratch = tempfile::Builder::new().prefix("voxdag-bench").tempdir()?;
+    let builds = match &args.cache {
+        Some(dir) => {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+            dir.as_path()
+        }
+        None => scratch.path(),
+    };
     let mut rows: Vec<CompressRow> = Vec::new();
     for name in &args.scenes {
-        scene_path(&args.data, name)?; // fail before any work on an unknown scene
+        let input = scene_path(&args.data, name)?;
+        let stem = input
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| name.clone());
         for &resolution in &args.resolutions {
             eprintln!("bench compress: {name} at {resolution}^3");
+            let svdag = builds.join(format!("{stem}-{resolution}-svdag32.vdag"));
+            let report = svdag.with_extension("json");
+            if svdag.exists() && report.exists() {
+                check_cached_build(&report, resolution)?;
+                eprintln!("  svdag32 build: cached {}", svdag.display());
+            } else {
+                super::run_build(&input, resolution, &svdag, &report, true)?;
+            }
             let row_path = scratch.path().join("row.json");
             let status = Command::new(&exe)
-                .args([
-                    "bench",
-                    "compress",
-                    "--scenes",
-                    name,
-                    "--resolutions",
-                    &resolution.to_string(),
-                ])
-                .arg("--data")
-                .arg(&args.data)
+                .args(["bench", "compress", "--scenes", name])
+                .arg("--translations")
+                .arg(if translations { "on" } else { "off" })
+                .arg("--svdag")
+                .arg(&svdag)
+                .arg("--build-report")
+                .arg(&report)
                 .arg("--row-out")
                 .arg(&row_path)
                 .status()
@@ -266,12 +335,34 @@ pub fn bench_compress(args: &BenchCompressArgs) -> Result<()> {
                 bail!("bench compress of {name} at {resolution} failed ({status})");
             }
             rows.push(serde_json::from_slice(&std::fs::read(&row_path)?)?);
+            if args.cache.is_none() {
+                std::fs::remove_file(&svdag).ok();
+            }
         }
     }
     let md = markdown(&rows);
     print!("{md}");
     write_chart(&args.chart, &rows)?;
     write_outputs(&args.json, &rows, &args.markdown, &md)
+}
+
+/// A `voxdag build --report` file.
+fn read_build_report(path: &Path) -> Result<BuildReport> {
+    let json = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_slice(&json).with_context(|| format!("parsing {}", path.display()))
+}
+
+/// Refuses a cached build report of another resolution (a renamed or stale file).
+fn check_cached_build(report: &Path, resolution: u32) -> Result<()> {
+    let build = read_build_report(report)?;
+    if build.resolution != resolution {
+        bail!(
+            "{} is a build at {}^3, not {resolution}^3: delete it or use another --cache",
+            report.display(),
+            build.resolution
+        );
+    }
+    Ok(())
 }
 
 /// Tables 3.2 (elements), 3.3 (bytes) and 3.4 (times) as Markdown.
@@ -286,19 +377,25 @@ fn markdown(rows: &[CompressRow]) -> String {
     let mut md = String::from("### Unique elements (nodes + leaves; % of SSVDAG)\n\n| scene | N | voxels | SVO | SVDAG | SSVDAG | S | A | S+A | S+A+T |\n|---|---|---|---|---|---|---|---|---|---|\n");
     for r in rows {
         let e = &r.elements;
-        md += &format!(
-            "| {} | {} | {} | {} | {} | {} | {} ({:.1}%) | {} ({:.1}%) | {} ({:.1}%) | {} ({:.1}%) |\n",
+        let sat = match e.sat {
+            Some(sat) => format!("{sat} ({:.1}%)", pct(sat, e.ssvdag)),
+            None => "not run".to_string(),
+        };
+        md +=
+            &format!(
+            "| {} | {} | {} | {} | {} | {} | {} ({:.1}%) | {} ({:.1}%) | {} ({:.1}%) | {sat} |\n",
             r.scene, r.resolution, r.voxels, e.svo, e.svdag, e.ssvdag,
-            e.s, pct(e.s, e.ssvdag), e.a, pct(e.a, e.ssvdag), e.sa, pct(e.sa, e.ssvdag), e.sat, pct(e.sat, e.ssvdag)
+            e.s, pct(e.s, e.ssvdag), e.a, pct(e.a, e.ssvdag), e.sa, pct(e.sa, e.ssvdag)
         );
     }
-    md += "\n### Encoded bytes (TSVDAG on S+A+T; % of SSVDAG)\n\n| scene | N | SVDAG32 | SSVDAG | Base | +LUT | +LUT+Huffman |\n|---|---|---|---|---|---|---|\n";
+    md += "\n### Encoded bytes (TSVDAG on the set named; % of SSVDAG)\n\n| scene | N | TSVDAG on | SVDAG32 | SSVDAG | Base | +LUT | +LUT+Huffman |\n|---|---|---|---|---|---|---|---|\n";
     for r in rows {
         let b = &r.bytes;
         md += &format!(
-            "| {} | {} | {} | {} | {} ({:.1}%) | {} ({:.1}%) | {} ({:.1}%) |\n",
+            "| {} | {} | {} | {} | {} | {} ({:.1}%) | {} ({:.1}%) | {} ({:.1}%) |\n",
             r.scene,
             r.resolution,
+            r.encoded_set(),
             b.svdag32,
             b.ssvdag,
             b.tsvdag_base,
@@ -309,7 +406,8 @@ fn markdown(rows: &[CompressRow]) -> String {
             pct(b.tsvdag, b.ssvdag)
         );
     }
-    md += "\n### TSVDAG bytes per encoder heuristic (cumulative; best mode in bold)\n\n| scene | N | heuristics | Base | +LUT | +LUT+Huffman |\n|---|---|---|---|---|---|\n";
+    md += "\nFor comparison, the dissertation reports for its own voxelizations at 65536^3 TSVDAG bytes (S+A+T, full encoding) at 61-83% of the SSVDAG's, 61% on its bunny.\n";
+    md += "\n### TSVDAG bytes per encoder heuristic (cumulative; best mode in bold)\n\n| scene | N | TSVDAG on | heuristics | Base | +LUT | +LUT+Huffman |\n|---|---|---|---|---|---|---|\n";
     for r in rows {
         for a in &r.ablation {
             let best = a.base.min(a.lut).min(a.huffman);
@@ -321,9 +419,10 @@ fn markdown(rows: &[CompressRow]) -> String {
                 }
             };
             md += &format!(
-                "| {} | {} | {} | {} | {} | {} |\n",
+                "| {} | {} | {} | {} | {} | {} | {} |\n",
                 r.scene,
                 r.resolution,
+                r.encoded_set(),
                 a.heuristics,
                 cell(a.base),
                 cell(a.lut),
@@ -331,14 +430,16 @@ fn markdown(rows: &[CompressRow]) -> String {
             );
         }
     }
-    md += "\n### Seconds per stage and peak memory\n\n| scene | N | voxelize+build | SSVDAG | S | A | S+A | S+A+T | encode SSVDAG | encode TSVDAG (3 variants) | same, v1 heuristics | peak RSS MiB |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+    md += "\n### Seconds per stage and peak memory\n\n| scene | N | voxelize+build | build peak RSS MiB | load | SSVDAG | S | A | S+A | translation search | encode SSVDAG | encode TSVDAG (3 variants) | same, v1 heuristics | stages peak RSS MiB |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+    let mib = |bytes: u64| bytes as f64 / 1048576.0;
     for r in rows {
         let t = &r.seconds;
-        md +=
-            &format!(
-            "| {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.0} |\n",
-            r.scene, r.resolution, t.voxelize_and_build, t.ssvdag, t.s, t.a, t.sa, t.sat,
-            t.encode_ssvdag, t.encode_tsvdag, t.encode_tsvdag_v1, r.peak_rss_bytes as f64 / 1048576.0
+        let sat = t.sat.map_or("not run".to_string(), |s| format!("{s:.2}"));
+        md += &format!(
+            "| {} | {} | {:.2} | {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {sat} | {:.2} | {:.2} | {:.2} | {:.0} |\n",
+            r.scene, r.resolution, t.voxelize_and_build, mib(r.build_peak_rss_bytes), t.load,
+            t.ssvdag, t.s, t.a, t.sa, t.encode_ssvdag, t.encode_tsvdag, t.encode_tsvdag_v1,
+            mib(r.peak_rss_bytes)
         );
     }
     md += "\nChart: per row one group of bars = element counts of SSVDAG, S, A, S+A, S+A+T as a share of the SVDAG's (full height = SVDAG).\n";
@@ -361,7 +462,8 @@ fn write_chart(path: &std::path::Path, rows: &[CompressRow]) -> Result<()> {
     let mut img = RgbImage::from_pixel(width, height + 20, Rgb([255, 255, 255]));
     for (i, r) in rows.iter().enumerate() {
         let e = &r.elements;
-        let values = [e.ssvdag, e.s, e.a, e.sa, e.sat];
+        // A search not run leaves its bar out.
+        let values = [e.ssvdag, e.s, e.a, e.sa, e.sat.unwrap_or(0)];
         for (j, &value) in values.iter().enumerate() {
             let h = (height as f64 * value as f64 / e.svdag.max(1) as f64).round() as u32;
             let x0 = gap + i as u32 * (5 * bar + gap) + j as u32 * bar;
