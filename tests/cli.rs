@@ -391,7 +391,12 @@ fn bench_compress_writes_consistent_tables() {
     // other counts are the same and the S+A+T column says so.
     let cached = cache.join("teapot-64-svdag32.vdag");
     let built = std::fs::metadata(&cached).unwrap().modified().unwrap();
-    let off = bench(&["--translations", "off"]);
+    let ablation = row["ablation"].as_array().unwrap();
+    assert_eq!(ablation.len(), 5);
+    // The last ablation step has every heuristic on: the sizes of the bytes table.
+    assert_eq!(ablation[4]["huffman"], row["bytes"]["tsvdag"]);
+    assert_eq!(ablation[4]["base"], row["bytes"]["tsvdag_base"]);
+    let off = bench(&["--translations", "off", "--heuristics", "off"]);
     assert_eq!(
         std::fs::metadata(&cached).unwrap().modified().unwrap(),
         built
@@ -400,6 +405,8 @@ fn bench_compress_writes_consistent_tables() {
         assert_eq!(e(&off, k), e(&row, k), "{k}");
     }
     assert!(off["elements"]["sat"].is_null() && off["seconds"]["sat"].is_null());
+    assert!(off["ablation"].as_array().unwrap().is_empty());
+    assert!(off["seconds"]["encode_tsvdag_v1"].is_null());
     assert!(std::fs::read_to_string(&md).unwrap().contains("not run"));
     // A cached report of another resolution is refused, naming the file.
     let report = cache.join("teapot-64-svdag32.json");

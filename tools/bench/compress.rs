@@ -51,6 +51,9 @@ pub struct BenchCompressArgs {
     /// encodings on S+A: at 65536^3 the search takes hours (docs/translations.md).
     #[arg(long, value_enum, default_value = "on")]
     translations: OnOff,
+    /// The encoder-heuristic ablation (12 more TSVDAG encodes; about 20 minutes at 65536^3).
+    #[arg(long, value_enum, default_value = "on")]
+    heuristics: OnOff,
     /// Internal: measure one scene at one resolution in this process and write its row here.
     #[arg(long, hide = true)]
     row_out: Option<PathBuf>,
@@ -91,9 +94,9 @@ struct StageTimes {
     sat: Option<f64>,
     encode_ssvdag: f64,
     encode_tsvdag: f64,
-    /// The three modes with the format-v1 encoder's heuristics (`TsvdagTuning::V1`), same run.
-    #[serde(default)]
-    encode_tsvdag_v1: f64,
+    /// The three modes with the format-v1 encoder's heuristics (`TsvdagTuning::V1`), same run
+    /// (none with `--heuristics off`).
+    encode_tsvdag_v1: Option<f64>,
 }
 
 /// Unique elements (nodes + leaves over all levels) per variant.
@@ -171,6 +174,7 @@ fn measure(
     svdag: &Path,
     build: &BuildReport,
     translations: bool,
+    heuristics: bool,
 ) -> Result<CompressRow> {
     // Each stage prints its time: at 65536^3 they take minutes each.
     let stage = |name: &str, seconds: f64| eprintln!("  {name}: {seconds:.1} s");
@@ -201,17 +205,6 @@ fn measure(
         timed(|| SsvdagEncoding::build(&dag).map(|e| e.byte_size()));
     stage("encode SSVDAG", encode_ssvdag);
     let graph = TransformGraph::from_transform_dag(tdag);
-    let encode = |lut, huffman| {
-        TsvdagEncoding::encode(&graph, TsvdagOptions { lut, huffman }).map(|e| e.byte_size())
-    };
-    let ((base, lut, full), encode_tsvdag) = timed(|| {
-        (
-            encode(false, false),
-            encode(true, false),
-            encode(true, true),
-        )
-    });
-    stage("encode TSVDAG", encode_tsvdag);
     let modes = |tuning: TsvdagTuning| -> Result<[u64; 3]> {
         let mut out = [0; 3];
         for (o, &mode) in out.iter_mut().zip(&TsvdagOptions::MODES) {
@@ -219,26 +212,42 @@ fn measure(
         }
         Ok(out)
     };
-    let (v1, encode_tsvdag_v1) = timed(|| modes(TsvdagTuning::V1));
-    let v1 = v1?;
-    stage("encode TSVDAG, v1 heuristics", encode_tsvdag_v1);
+    // Base, +LUT, +LUT+Huffman with every heuristic (what `TsvdagEncoding::encode` uses).
+    let (all, encode_tsvdag) = timed(|| modes(TsvdagTuning::ALL));
+    let [base, lut, full] = all?;
+    stage("encode TSVDAG", encode_tsvdag);
     let mut ablation = Vec::new();
-    let mut tuning = TsvdagTuning::V1;
-    for step in ["v1", "+reorient", "+compact", "+tie-break", "+tagged"] {
-        match step {
-            "+reorient" => tuning.reorient = true,
-            "+compact" => tuning.compact_translations = true,
-            "+tie-break" => tuning.tie_break = true,
-            "+tagged" => tuning.tagged_pointers = true,
-            _ => {}
+    let mut encode_tsvdag_v1 = None;
+    if heuristics {
+        let (v1, v1_s) = timed(|| modes(TsvdagTuning::V1));
+        encode_tsvdag_v1 = Some(v1_s);
+        stage("encode TSVDAG, v1 heuristics", v1_s);
+        let mut tuning = TsvdagTuning::V1;
+        let mut sizes = v1?;
+        for step in ["v1", "+reorient", "+compact", "+tie-break", "+tagged"] {
+            match step {
+                "+reorient" => tuning.reorient = true,
+                "+compact" => tuning.compact_translations = true,
+                "+tie-break" => tuning.tie_break = true,
+                "+tagged" => tuning.tagged_pointers = true,
+                _ => {}
+            }
+            if step != "v1" {
+                // The last step turns every heuristic on: the sizes measured above.
+                sizes = if tuning == TsvdagTuning::ALL {
+                    [base, lut, full]
+                } else {
+                    modes(tuning)?
+                };
+            }
+            let [base, lut, huffman] = sizes;
+            ablation.push(Ablation {
+                heuristics: step.to_string(),
+                base,
+                lut,
+                huffman,
+            });
         }
-        let [base, lut, huffman] = if step == "v1" { v1 } else { modes(tuning)? };
-        ablation.push(Ablation {
-            heuristics: step.to_string(),
-            base,
-            lut,
-            huffman,
-        });
     }
     Ok(CompressRow {
         scene: scene_name.to_string(),
@@ -256,9 +265,9 @@ fn measure(
         bytes: Bytes {
             svdag32: dag.bytes_svdag32(),
             ssvdag: ssvdag_bytes?,
-            tsvdag_base: base?,
-            tsvdag_lut: lut?,
-            tsvdag: full?,
+            tsvdag_base: base,
+            tsvdag_lut: lut,
+            tsvdag: full,
         },
         seconds: StageTimes {
             voxelize_and_build: build.voxelize_s + build.build_s,
@@ -283,13 +292,16 @@ fn measure(
 /// RSS of each is its own.
 pub fn bench_compress(args: &BenchCompressArgs) -> Result<()> {
     let translations = args.translations == OnOff::On;
+    let heuristics = args.heuristics == OnOff::On;
+    let on_off = |on: bool| if on { "on" } else { "off" };
     if let Some(row_out) = &args.row_out {
         let (Some(svdag), Some(report), [name]) =
             (&args.svdag, &args.build_report, args.scenes.as_slice())
         else {
             bail!("--row-out measures exactly one scene from its --svdag and --build-report");
         };
-        let row = measure(name, svdag, &read_build_report(report)?, translations)?;
+        let build = read_build_report(report)?;
+        let row = measure(name, svdag, &build, translations, heuristics)?;
         return write_json(row_out, &row);
     }
     let exe = std::env::current_exe().context("locating the voxdag executable")?;
@@ -321,8 +333,8 @@ pub fn bench_compress(args: &BenchCompressArgs) -> Result<()> {
             let row_path = scratch.path().join("row.json");
             let status = Command::new(&exe)
                 .args(["bench", "compress", "--scenes", name])
-                .arg("--translations")
-                .arg(if translations { "on" } else { "off" })
+                .args(["--translations", on_off(translations)])
+                .args(["--heuristics", on_off(heuristics)])
                 .arg("--svdag")
                 .arg(&svdag)
                 .arg("--build-report")
@@ -434,12 +446,12 @@ fn markdown(rows: &[CompressRow]) -> String {
     let mib = |bytes: u64| bytes as f64 / 1048576.0;
     for r in rows {
         let t = &r.seconds;
-        let sat = t.sat.map_or("not run".to_string(), |s| format!("{s:.2}"));
+        let seconds = |s: Option<f64>| s.map_or("not run".to_string(), |s| format!("{s:.2}"));
+        let (sat, v1) = (seconds(t.sat), seconds(t.encode_tsvdag_v1));
         md += &format!(
-            "| {} | {} | {:.2} | {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {sat} | {:.2} | {:.2} | {:.2} | {:.0} |\n",
+            "| {} | {} | {:.2} | {:.0} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {sat} | {:.2} | {:.2} | {v1} | {:.0} |\n",
             r.scene, r.resolution, t.voxelize_and_build, mib(r.build_peak_rss_bytes), t.load,
-            t.ssvdag, t.s, t.a, t.sa, t.encode_ssvdag, t.encode_tsvdag, t.encode_tsvdag_v1,
-            mib(r.peak_rss_bytes)
+            t.ssvdag, t.s, t.a, t.sa, t.encode_ssvdag, t.encode_tsvdag, mib(r.peak_rss_bytes)
         );
     }
     md += "\nChart: per row one group of bars = element counts of SSVDAG, S, A, S+A, S+A+T as a share of the SVDAG's (full height = SVDAG).\n";
