@@ -419,7 +419,9 @@ fn markdown(rows: &[CompressRow]) -> String {
         );
     }
     md += "\nFor comparison, the dissertation reports for its own voxelizations at 65536^3 TSVDAG bytes (S+A+T, full encoding) at 61-83% of the SSVDAG's, 61% on its bunny.\n";
-    md += "\n### TSVDAG bytes per encoder heuristic (cumulative; best mode in bold)\n\n| scene | N | TSVDAG on | heuristics | Base | +LUT | +LUT+Huffman |\n|---|---|---|---|---|---|---|\n";
+    if rows.iter().any(|r| !r.ablation.is_empty()) {
+        md += "\n### TSVDAG bytes per encoder heuristic (cumulative; best mode in bold)\n\n| scene | N | TSVDAG on | heuristics | Base | +LUT | +LUT+Huffman |\n|---|---|---|---|---|---|---|\n";
+    }
     for r in rows {
         for a in &r.ablation {
             let best = a.base.min(a.lut).min(a.huffman);
