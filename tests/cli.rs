@@ -345,7 +345,7 @@ fn bench_compress_writes_consistent_tables() {
         dir.path().join("c.png"),
         dir.path().join("cache"),
     );
-    let bench = |extra: &[&str]| {
+    let run = |extra: &[&str]| {
         let mut args = vec![
             "bench",
             "compress",
@@ -363,7 +363,10 @@ fn bench_compress_writes_consistent_tables() {
             s(&cache),
         ];
         args.extend(extra);
-        let out = voxdag(&args);
+        voxdag(&args)
+    };
+    let bench = |extra: &[&str]| {
+        let out = run(extra);
         assert!(
             out.status.success(),
             "{}",
@@ -417,22 +420,7 @@ fn bench_compress_writes_consistent_tables() {
         text.replacen("\"resolution\": 64", "\"resolution\": 128", 1),
     )
     .unwrap();
-    let out = voxdag(&[
-        "bench",
-        "compress",
-        "--scenes",
-        teapot,
-        "--resolutions",
-        "64",
-        "--json",
-        s(&json),
-        "--markdown",
-        s(&md),
-        "--chart",
-        s(&png),
-        "--cache",
-        s(&cache),
-    ]);
+    let out = run(&[]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
         !out.status.success() && stderr.contains("teapot-64-svdag32.json"),

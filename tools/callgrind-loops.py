@@ -20,30 +20,25 @@ def parse(path):
     """Self cost per (function id, instruction address), the names of the ids, and the ids of
     the functions of code without an object file (JIT code)."""
     costs = collections.defaultdict(collections.Counter)
-    names = {}
-    objects = {}
-    current_object = None
+    # Compressed names: `ob=(id) name` / `fn=(id) name` define an id, later lines give the id
+    # alone; `cob`/`cfn` (a call's target) define ids without changing the current object or
+    # function.
+    table = {"ob": {}, "fn": {}}
+    current = {"ob": None, "fn": None}
     jit = set()
-    current = None
     addr = 0
     skip_next = False  # the cost line after `calls=` is the callee's inclusive cost
     for raw in open(path):
         line = raw.rstrip("\n")
-        m = re.match(r"(c?ob)=\((\d+)\)(?: (.*))?", line)
+        m = re.match(r"(c?)(ob|fn)=\((\d+)\)(?: (.*))?", line)
         if m:
-            if m.group(3):
-                objects[m.group(2)] = m.group(3)
-            if m.group(1) == "ob":
-                current_object = m.group(2)
-            continue
-        m = re.match(r"(c?fn)=\((\d+)\)(?: (.*))?", line)
-        if m:
-            if m.group(3):
-                names[m.group(2)] = m.group(3)
-            if m.group(1) == "fn":
-                current = m.group(2)
-                if objects.get(current_object) == "???":
-                    jit.add(current)
+            call, kind, ident, name = m.groups()
+            if name:
+                table[kind][ident] = name
+            if not call:
+                current[kind] = ident
+                if kind == "fn" and table["ob"].get(current["ob"]) == "???":
+                    jit.add(ident)
             continue
         if line.startswith("calls="):
             skip_next = True
@@ -61,9 +56,9 @@ def parse(path):
         if skip_next:
             skip_next = False
             continue
-        if len(parts) >= 3 and current is not None:
-            costs[current][addr] += int(parts[2])
-    return costs, names, jit
+        if len(parts) >= 3 and current["fn"] is not None:
+            costs[current["fn"]][addr] += int(parts[2])
+    return costs, table["fn"], jit
 
 
 def main():
