@@ -25,7 +25,7 @@ use voxdag::render::{render_cpu, Camera, RenderSettings};
 use voxdag::scene::{self, ImportOptions};
 
 use crate::commands::{
-    check_output, peak_rss_bytes, progress_bar, seconds, write_json, BuildReport,
+    check_output, peak_rss_bytes, progress_bar, read_json, seconds, write_json, BuildReport,
 };
 
 /// The benchmarks.
@@ -203,8 +203,7 @@ fn run_build(
             input.display()
         );
     }
-    let json = std::fs::read(report).with_context(|| format!("reading {}", report.display()))?;
-    serde_json::from_slice(&json).with_context(|| format!("parsing {}", report.display()))
+    read_json(report)
 }
 
 /// `voxdag bench build`: each build runs in a child process so that its peak RSS is its own.

@@ -1121,6 +1121,12 @@ pub fn check_output(output: &Path) -> Result<()> {
     Ok(check_output_path(output)?)
 }
 
+/// Reads a JSON file, naming it in errors.
+pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
+    let json = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    serde_json::from_slice(&json).with_context(|| format!("parsing {}", path.display()))
+}
+
 /// Writes pretty JSON atomically.
 pub fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
     write_atomic(path, |w| Ok(serde_json::to_writer_pretty(w, value)?))

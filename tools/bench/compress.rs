@@ -15,7 +15,7 @@ use voxdag::dag::encode::{
 use voxdag::dag::{CanonicalDag, Invariance, Ssvdag, Svdag, TransformDag, TransformSet};
 
 use super::{scene_path, write_outputs};
-use crate::commands::{peak_rss_bytes, write_json, BuildReport};
+use crate::commands::{peak_rss_bytes, read_json, write_json, BuildReport};
 use crate::ooc::OnOff;
 
 /// Arguments of `voxdag bench compress`.
@@ -222,8 +222,8 @@ fn measure(
         let (v1, v1_s) = timed(|| modes(TsvdagTuning::V1));
         encode_tsvdag_v1 = Some(v1_s);
         stage("encode TSVDAG, v1 heuristics", v1_s);
+        let v1 = v1?;
         let mut tuning = TsvdagTuning::V1;
-        let mut sizes = v1?;
         for step in ["v1", "+reorient", "+compact", "+tie-break", "+tagged"] {
             match step {
                 "+reorient" => tuning.reorient = true,
@@ -232,15 +232,14 @@ fn measure(
                 "+tagged" => tuning.tagged_pointers = true,
                 _ => {}
             }
-            if step != "v1" {
-                // The last step turns every heuristic on: the sizes measured above.
-                sizes = if tuning == TsvdagTuning::ALL {
-                    [base, lut, full]
-                } else {
-                    modes(tuning)?
-                };
-            }
-            let [base, lut, huffman] = sizes;
+            // The first step (v1) and the last (every heuristic) were encoded above.
+            let [base, lut, huffman] = if tuning == TsvdagTuning::V1 {
+                v1
+            } else if tuning == TsvdagTuning::ALL {
+                [base, lut, full]
+            } else {
+                modes(tuning)?
+            };
             ablation.push(Ablation {
                 heuristics: step.to_string(),
                 base,
@@ -300,7 +299,7 @@ pub fn bench_compress(args: &BenchCompressArgs) -> Result<()> {
         else {
             bail!("--row-out measures exactly one scene from its --svdag and --build-report");
         };
-        let build = read_build_report(report)?;
+        let build: BuildReport = read_json(report)?;
         let row = measure(name, svdag, &build, translations, heuristics)?;
         return write_json(row_out, &row);
     }
@@ -346,7 +345,7 @@ pub fn bench_compress(args: &BenchCompressArgs) -> Result<()> {
             if !status.success() {
                 bail!("bench compress of {name} at {resolution} failed ({status})");
             }
-            rows.push(serde_json::from_slice(&std::fs::read(&row_path)?)?);
+            rows.push(read_json(&row_path)?);
             if args.cache.is_none() {
                 std::fs::remove_file(&svdag).ok();
             }
@@ -358,15 +357,9 @@ pub fn bench_compress(args: &BenchCompressArgs) -> Result<()> {
     write_outputs(&args.json, &rows, &args.markdown, &md)
 }
 
-/// A `voxdag build --report` file.
-fn read_build_report(path: &Path) -> Result<BuildReport> {
-    let json = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    serde_json::from_slice(&json).with_context(|| format!("parsing {}", path.display()))
-}
-
 /// Refuses a cached build report of another resolution (a renamed or stale file).
 fn check_cached_build(report: &Path, resolution: u32) -> Result<()> {
-    let build = read_build_report(report)?;
+    let build: BuildReport = read_json(report)?;
     if build.resolution != resolution {
         bail!(
             "{} is a build at {}^3, not {resolution}^3: delete it or use another --cache",
