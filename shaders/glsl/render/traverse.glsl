@@ -109,6 +109,32 @@ ivec3 traverse_normal(vec3 dir, float t_near, uint entry_axis) {
 }
 
 #if defined(TSVDAG_TRANSLATIONS)
+// A translated-subtree entry packed into one word: the translation (|t| < 16 per axis, 5 bits
+// each, biased by 16), the depth of the subtree's root frame (5 bits) and the cell's offset
+// from the enclosing subtree's base (< 16 per axis: translated subtrees are at most 16^3; 4
+// bits each, unused for the outermost entry, whose cell is kept whole).
+uint traverse_entry(uint depth, ivec3 shift, ivec3 offset) {
+    uvec3 t = uvec3(shift + 16) & 31u;
+    uvec3 o = uvec3(offset) & 15u;
+    return t.x | (t.y << 5u) | (t.z << 10u) | (depth << 15u) | (o.x << 20u) | (o.y << 24u) |
+           (o.z << 28u);
+}
+
+// The translation of a packed entry.
+ivec3 traverse_entry_shift(uint e) {
+    return ivec3(uvec3(e, e >> 5u, e >> 10u) & 31u) - 16;
+}
+
+// The root frame depth of a packed entry.
+uint traverse_entry_depth(uint e) {
+    return (e >> 15u) & 31u;
+}
+
+// The cell offset of a packed entry from the enclosing subtree's base.
+ivec3 traverse_entry_offset(uint e) {
+    return ivec3(uvec3(e >> 20u, e >> 24u, e >> 28u) & 15u);
+}
+
 // Morton code of a point inside a 16^3 cell (4 bits per axis).
 uint traverse_morton16(uvec3 p) {
     uint code = 0u;
@@ -309,15 +335,14 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     uint hit_c = 0u;
     ivec3 hit_voxel = ivec3(0);
 #if defined(TSVDAG_TRANSLATIONS)
-    // The second stack: one entry per translated subtree on the path: the depth of its root
-    // frame, its cell (world) and the outer base. Voxels outside the clip box (the
-    // intersection of the cells) are dropped, as the destructive translation says. A pop
-    // derives the rest: the outer cursor is cell - outer base, the outer clip box the
-    // intersection of the outer cells, the subtree's origin the next entry's outer base (or
-    // the current base). Its entries are three sets of registers (selects) rather than arrays
-    // (lavapipe turns a dynamically indexed array write into a scalar store per lane and
-    // field), kept to 7 values each: every value live across the loop costs on every
-    // iteration (spills).
+    // The second stack: one entry per translated subtree on the path, packed (see
+    // `traverse_entry`): the depth of its root frame, its translation and where its cell lies
+    // in the enclosing subtree; the outermost cell is kept whole (`sh_cell0`). Voxels outside
+    // the clip box (the intersection of the cells) are dropped, as the destructive translation
+    // says. A pop derives the rest: the cells and the outer bases follow from the outermost
+    // cell, the offsets and the translations. Every value live across the loops costs on
+    // every iteration (spills), and an entry written by selects costs one select per value, so
+    // the 21 values of three unpacked entries are 6 here.
     ivec3 base = ivec3(0);
     ivec3 clip_lo = ivec3(0);
     ivec3 clip_hi = ivec3(n);
@@ -325,15 +350,10 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     // The root depth of the innermost translated subtree (none: never reached).
     uint shift_depth = TRAVERSE_MAX_FRAMES;
     bool leave_shift = false;
-    uint sh_depth0 = 0u;
-    uint sh_depth1 = 0u;
-    uint sh_depth2 = 0u;
     ivec3 sh_cell0 = ivec3(0);
-    ivec3 sh_cell1 = ivec3(0);
-    ivec3 sh_cell2 = ivec3(0);
-    ivec3 sh_base0 = ivec3(0);
-    ivec3 sh_base1 = ivec3(0);
-    ivec3 sh_base2 = ivec3(0);
+    uint sh_entry0 = 0u;
+    uint sh_entry1 = 0u;
+    uint sh_entry2 = 0u;
 #else
     const ivec3 base = ivec3(0);
 #endif
@@ -433,22 +453,26 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
                 // cursor is its cell less the outer base, the clip box the intersection of
                 // the outer cells; the inner loop then pops that frame as usual.
                 leave_shift = false;
-                ivec3 cell = shifts == 1u ? sh_cell0 : (shifts == 2u ? sh_cell1 : sh_cell2);
-                base = shifts == 1u ? sh_base0 : (shifts == 2u ? sh_base1 : sh_base2);
+                ivec3 base1 = sh_cell0 + traverse_entry_shift(sh_entry0);
+                ivec3 cell1 = base1 + traverse_entry_offset(sh_entry1);
+                ivec3 base2 = cell1 + traverse_entry_shift(sh_entry1);
+                ivec3 cell = shifts == 1u ? sh_cell0
+                                          : (shifts == 2u ? cell1 : base2 + traverse_entry_offset(sh_entry2));
+                base = shifts == 1u ? ivec3(0) : (shifts == 2u ? base1 : base2);
                 cursor = uvec3(cell - base);
                 shifts -= 1u;
                 clip_lo = ivec3(0);
                 clip_hi = ivec3(n);
                 shift_depth = TRAVERSE_MAX_FRAMES;
                 if (shifts >= 1u) {
+                    shift_depth = traverse_entry_depth(sh_entry0);
                     clip_lo = max(clip_lo, sh_cell0);
-                    clip_hi = min(clip_hi, sh_cell0 + ivec3(n >> sh_depth0));
-                    shift_depth = sh_depth0;
+                    clip_hi = min(clip_hi, sh_cell0 + ivec3(n >> shift_depth));
                 }
                 if (shifts >= 2u) {
-                    clip_lo = max(clip_lo, sh_cell1);
-                    clip_hi = min(clip_hi, sh_cell1 + ivec3(n >> sh_depth1));
-                    shift_depth = sh_depth1;
+                    shift_depth = traverse_entry_depth(sh_entry1);
+                    clip_lo = max(clip_lo, cell1);
+                    clip_hi = min(clip_hi, cell1 + ivec3(n >> shift_depth));
                 }
                 continue;
             }
@@ -482,19 +506,11 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
             // Enter a translated subtree: its frames start at its translated origin; only
             // the voxels inside the cell (and any outer translated cell) count.
             uint half_size = n >> depth;
-            if (shifts == 0u) {
-                sh_depth0 = depth;
-                sh_cell0 = fetch_child;
-                sh_base0 = base;
-            } else if (shifts == 1u) {
-                sh_depth1 = depth;
-                sh_cell1 = fetch_child;
-                sh_base1 = base;
-            } else {
-                sh_depth2 = depth;
-                sh_cell2 = fetch_child;
-                sh_base2 = base;
-            }
+            uint entry = traverse_entry(depth, shift, fetch_child - base);
+            sh_cell0 = shifts == 0u ? fetch_child : sh_cell0;
+            sh_entry0 = shifts == 0u ? entry : sh_entry0;
+            sh_entry1 = shifts == 1u ? entry : sh_entry1;
+            sh_entry2 = shifts == 2u ? entry : sh_entry2;
             clip_lo = max(clip_lo, fetch_child);
             clip_hi = min(clip_hi, fetch_child + ivec3(half_size));
             base = fetch_child + shift;
@@ -519,7 +535,7 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     uint ranked_depth = leaf_depth;
 #if defined(TSVDAG_TRANSLATIONS)
     if (shifts > 0u) {
-        ranked_depth = sh_depth0;
+        ranked_depth = traverse_entry_depth(sh_entry0);
     }
 #endif
     for (uint d = 0u; d < ranked_depth; d++) {
@@ -532,9 +548,9 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     if (shifts > 0u) {
         // The siblings before the translated cell are counted; add the voxel's rank among the
         // voxels the translated subtree leaves in its cell.
-        uint d0 = sh_depth0;
+        uint d0 = traverse_entry_depth(sh_entry0);
         uint side = n >> d0;
-        ivec3 origin0 = shifts == 1u ? base : sh_base1;
+        ivec3 origin0 = sh_cell0 + traverse_entry_shift(sh_entry0);
         color += uint64_t(traverse_shifted_rank(
             stack_node[d0], (stack_state[d0] >> 24u) & 63u, root_level - d0,
             origin0, sh_cell0, side, hit_voxel));
