@@ -637,3 +637,52 @@ fn build_from_a_vdag_re_encodes_the_same_voxels() {
     );
     assert!(!refused.exists());
 }
+
+#[test]
+fn bench_pathtrace_keeps_colours_in_the_svdag32_cache_only() {
+    let dir = tempfile::tempdir().unwrap();
+    let vox = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/ff3.vox");
+    let (json, md, cache) = (
+        dir.path().join("p.json"),
+        dir.path().join("p.md"),
+        dir.path().join("cache"),
+    );
+    let out = voxdag(&[
+        "bench",
+        "pathtrace",
+        "--scenes",
+        vox,
+        "--resolutions",
+        "64",
+        "--size",
+        "32x18",
+        "--spp",
+        "1",
+        "--formats",
+        "svdag32,tsvdag-sa-huffman",
+        "--cache",
+        s(&cache),
+        "--json",
+        s(&json),
+        "--markdown",
+        s(&md),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let rows = report["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 2);
+    for row in rows {
+        assert_eq!(row["gpu_colors"], "raw");
+        assert_eq!(row["first_hit_mismatches"], 0);
+    }
+    let colors = |format: &str| {
+        let file = voxdag::dag::VdagFile::load(&cache.join(format!("ff3-64-{format}.vdag")));
+        file.unwrap().colors.len()
+    };
+    assert!(colors("svdag32") > 0);
+    assert_eq!(colors("tsvdag-sa-huffman"), 0);
+}

@@ -11,6 +11,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use serde::Serialize;
+use voxdag::attr::{ChunkedColors, ColorCodec, LosslessVariant};
 use voxdag::dag::encode::EncodedDag;
 use voxdag::dag::{Svdag, VdagFile, VoxelIndex};
 use voxdag::gpu::{GpuContext, GpuOptions, Profiler};
@@ -127,6 +128,9 @@ struct PathtraceRow {
     /// Mean absolute linear pixel difference to svdag32's megakernel image (0: bit-identical
     /// paths).
     image_mean_abs_diff: f64,
+    /// How the GPU read the voxel colours: `raw`, `lossless` (chunks, where the raw words
+    /// exceed one GPU allocation) or `none` (no colours, or the geometry-only hash DAG).
+    gpu_colors: String,
 }
 
 /// The whole run.
@@ -187,16 +191,40 @@ fn load_encoded(dag: &Svdag, name: &str, cached: Option<&Path>) -> Result<Encode
     let encoded = encode(dag, name)?;
     eprintln!("  encoded {name} in {:.1} s", start.elapsed().as_secs_f64());
     if let Some(c) = cached {
+        // Nodes only: the colours live in the svdag32 file of the cache (a copy per format
+        // was 2.5 GB for sponza-crytek at 8192).
         VdagFile {
             digest: Some(encoded.digest()?),
             encoded: encoded.clone(),
-            colors: dag.colors.clone(),
+            colors: Vec::new(),
             stored_colors: None,
             materials: None,
         }
         .save(c)?;
     }
     Ok(encoded)
+}
+
+/// The colours as the GPU rows upload them: `None` for raw words, or lossless chunks (the
+/// build's default storage, the same colours) when the raw words exceed `max_allocation`, the
+/// device's largest allocation (sponza-crytek at 8192: 2.5 GB against lavapipe's 2 GiB).
+fn gpu_colors(dag: &Svdag, max_allocation: u64) -> Result<Option<ChunkedColors>> {
+    let raw_bytes = dag.colors.len() as u64 * 4;
+    if raw_bytes <= max_allocation {
+        return Ok(None);
+    }
+    let start = Instant::now();
+    let codec = ColorCodec::Lossless(LosslessVariant::Rgb888);
+    let chunks = ChunkedColors::build(dag, codec, None, &progress_bar(true))?;
+    eprintln!(
+        "  {} raw colours ({raw_bytes} bytes) exceed one GPU allocation: uploaded as {} chunks \
+         ({} bytes, encoded in {:.1} s)",
+        dag.colors.len(),
+        codec.name(),
+        chunks.byte_size(),
+        start.elapsed().as_secs_f64()
+    );
+    Ok(Some(chunks))
 }
 
 /// Renders `s` with `mode` after a one-sample warm-up: per-sample GPU ms and the image.
@@ -254,6 +282,7 @@ impl RunConfig<'_> {
         scene: &GpuScene,
         format: &str,
         node_bytes: Option<u64>,
+        gpu_colors: &str,
         base: &mut Option<Base>,
         passes: &mut String,
     ) -> Result<PathtraceRow> {
@@ -325,6 +354,7 @@ impl RunConfig<'_> {
             wave_over_cpu: ratio(self.cpu_ms, wave_ms),
             first_hit_mismatches: mismatches,
             image_mean_abs_diff: diff,
+            gpu_colors: gpu_colors.to_string(),
         };
         if base.is_none() {
             *base = Some(Base {
@@ -382,6 +412,12 @@ pub fn bench_pathtrace(args: &BenchPathtraceArgs) -> Result<()> {
                     .map(|c| c.join(format!("{stem}-{resolution}-{format}.vdag")))
             };
             let dag = load_svdag(&path, resolution, cached("svdag32").as_deref())?;
+            let chunked = gpu_colors(&dag, ctx.info().max_memory_allocation_size)?;
+            let color_storage = match (&chunked, dag.colors.is_empty()) {
+                (Some(_), _) => "lossless",
+                (None, true) => "none",
+                (None, false) => "raw",
+            };
             let mut s = PtSettings::new(RenderSettings::new(w, h, Camera::frame(&dag)));
             s.spp = args.spp;
             s.bounces = args.bounces;
@@ -416,16 +452,22 @@ pub fn bench_pathtrace(args: &BenchPathtraceArgs) -> Result<()> {
                     for variant in HashVariant::ALL {
                         let hash = HashDagScene::load(&ctx, &renderer, &dag, variant, None)?;
                         let label = format!("hash-dag-{}", variant.name());
-                        rows.push(run.row(&hash.scene, &label, None, &mut base, &mut passes)?);
+                        let row =
+                            run.row(&hash.scene, &label, None, "none", &mut base, &mut passes)?;
+                        rows.push(row);
                     }
                     continue;
                 }
                 let encoded = load_encoded(&dag, format, cached(format).as_deref())?;
-                let scene = renderer.upload_encoded(&encoded, ColorSource::Raw(&dag.colors))?;
+                let colors = chunked
+                    .as_ref()
+                    .map_or(ColorSource::Raw(&dag.colors), ColorSource::Chunked);
+                let scene = renderer.upload_encoded(&encoded, colors)?;
                 let row = run.row(
                     &scene,
                     format,
                     Some(encoded.byte_size()),
+                    color_storage,
                     &mut base,
                     &mut passes,
                 )?;
@@ -488,4 +530,22 @@ fn markdown(device: &str, rows: &[PathtraceRow]) -> String {
         ));
     }
     md
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn colours_beyond_one_allocation_go_to_the_gpu_as_lossless_chunks() {
+        let mut voxels =
+            voxdag::scene::Voxels::from_coords(16, [[0, 0, 0], [3, 1, 2], [9, 9, 9], [15, 0, 7]]);
+        // Opaque colours: the lossless codec keeps RGB (alpha comes back 255).
+        voxels.colors = (1..=4).map(|i| 0xff00_0000 | 0x0010_2030 * i).collect();
+        let dag = Svdag::from_voxels(&voxels).unwrap();
+        let raw_bytes = dag.colors.len() as u64 * 4;
+        assert!(gpu_colors(&dag, raw_bytes).unwrap().is_none());
+        let chunks = gpu_colors(&dag, raw_bytes - 1).unwrap().expect("chunked");
+        assert_eq!(chunks.decode_all().unwrap(), dag.colors);
+    }
 }
