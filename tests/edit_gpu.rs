@@ -866,7 +866,7 @@ fn fixed_tool_cases_match_the_cpu_editor_and_brute_force() {
 /// level with temporary nodes, plus the traversal's, the first level's counters and the
 /// root's. Printed for docs/editing-gpu.md.
 #[test]
-fn an_edit_waits_once_per_level_plus_three() {
+fn an_edit_waits_once_per_level_plus_two() {
     let ctx = common::gpu();
     let dag = Svdag::from_voxels(&synthetic(64, 9)).unwrap();
     let mut hd = GpuHashDag::load(
@@ -891,7 +891,7 @@ fn an_edit_waits_once_per_level_plus_three() {
         );
         assert_eq!(report.retried_rounds, 0);
         assert!(
-            stats.host_waits <= levels + 3,
+            stats.host_waits <= levels + 2,
             "{} host waits for {levels} levels",
             stats.host_waits
         );

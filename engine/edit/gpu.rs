@@ -32,7 +32,8 @@ use crate::gpu::{
 use crate::hash::dedup::{DedupError, DedupResult, GpuDedup};
 use crate::hash::layout::SLABS_PER_SUPER_BLOCK;
 use crate::hash::{
-    GpuHashTable, Handle, HashError, HashTableConfig, HashVariant, PendingInsert, TableImage,
+    GpuHashTable, Handle, HashError, HashStatus, HashTableConfig, HashVariant, PendingInsert,
+    TableImage,
 };
 use crate::scene::Voxels;
 
@@ -224,6 +225,30 @@ struct MergeBuffers {
     push: EditPush,
 }
 
+/// What a merged level's submission records after its resolve.
+#[derive(Clone, Copy)]
+enum After<'a> {
+    /// The next level's build_items.
+    Level(&'a MergeBuffers),
+    /// The readback of the root in the last level's results.
+    Root(&'a Buffer),
+    /// Nothing (a load's level: the load reads the root at its end).
+    Nothing,
+}
+
+/// What that submission reads back: the next level's counters, or the root.
+enum Back {
+    Counts(Option<Readback<u32>>),
+    Root(RootReadback),
+}
+
+/// The readbacks that end an edit: the new root's value, the missing handles, the pools.
+struct RootReadback {
+    root: Readback<u32>,
+    missing: Readback<u32>,
+    statuses: Vec<Readback<HashStatus>>,
+}
+
 impl GpuHashDag {
     /// An empty hash DAG (root `Empty`) for a grid whose root is at `root_level` (side
     /// `4 << root_level`), geometry only or with materials.
@@ -376,6 +401,7 @@ impl GpuHashDag {
                     results: &results,
                     result_index: Some(&offset_buf),
                 }],
+                false,
                 profiler.as_deref_mut(),
             )?;
         }
@@ -642,15 +668,15 @@ impl GpuHashDag {
             });
         }
         let first = levels - merge_levels.len();
-        for (k, (items, retried)) in self
-            .merge(&merge_levels, profiler.as_deref_mut())?
-            .into_iter()
-            .enumerate()
-        {
+        let (merged, root) = self.merge(&merge_levels, true, profiler.as_deref_mut())?;
+        for (k, (items, retried)) in merged.into_iter().enumerate() {
             report.items[first + k] = items;
             report.retried_rounds += retried;
         }
-        let root = self.read_root(&results[levels - 1])?;
+        let root = match root {
+            Some(readback) => self.finish_root_readback(readback)?,
+            None => self.read_root(&results[levels - 1])?,
+        };
         if let Some(p) = profiler {
             p.resolve()?;
         }
@@ -921,20 +947,47 @@ impl GpuHashDag {
     }
 
     /// Reads the root value a bottom-up merge left in `results[0]`, the merges' missing
-    /// handle count and the tables' pool use (kept for the next edit's auto-GC check) in one
-    /// submission (one wait), and clears the count for the next merge.
+    /// handle count and the tables' pool use in a submission of its own (one wait); the
+    /// merge of a level with items records the same readback with its inserts instead.
     fn read_root(&mut self, results: &Buffer) -> Result<Root, GpuDagError> {
         let mut cmd = self.ctx.begin_commands("hash dag root")?;
+        let readback = self.record_root_readback(&mut cmd, results)?;
+        cmd.submit_async()?;
+        self.finish_root_readback(readback)
+    }
+
+    /// Records the readback of the root value in `results[0]`, the merges' missing handle
+    /// count and the tables' pool use (kept for the next edit's auto-GC check), then clears
+    /// the count for the next merge.
+    fn record_root_readback<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        results: &'a Buffer,
+    ) -> Result<RootReadback, GpuDagError> {
+        cmd.barrier();
         let root = cmd.readback::<u32>(results, 0, 1)?;
         let missing = cmd.readback::<u32>(&self.merge_errors, 0, 1)?;
         let statuses = self
             .tables
             .iter()
-            .map(|t| t.record_status(&mut cmd))
+            .map(|t| t.record_status(&mut *cmd))
             .collect::<Result<Vec<_>, _>>()?;
         cmd.barrier();
         cmd.fill_buffer(&self.merge_errors, 0);
-        cmd.submit_async()?;
+        Ok(RootReadback {
+            root,
+            missing,
+            statuses,
+        })
+    }
+
+    /// The root of a submitted [`GpuHashDag::record_root_readback`] (waits for it).
+    fn finish_root_readback(&mut self, readback: RootReadback) -> Result<Root, GpuDagError> {
+        let RootReadback {
+            root,
+            missing,
+            statuses,
+        } = readback;
         let missing = missing.read()?[0];
         if missing != 0 {
             return Err(GpuDagError::Corrupt(format!(
@@ -1094,15 +1147,16 @@ impl GpuHashDag {
         Ok(cmd.readback::<u32>(&b.counters, 0, COUNTERS)?)
     }
 
-    /// Records the level's `resolve` (missing handles counted in `merge_errors`), then, when
-    /// there is a next level, its `build_items` with the counters' readback.
-    fn record_resolve_next<'a>(
+    /// Records the level's `resolve` (missing handles counted in `merge_errors`), then what
+    /// comes after it: the next level's `build_items` with the counters' readback, or the
+    /// root's readback.
+    fn record_resolve_after<'a>(
         &'a self,
         cmd: &mut Commands<'a>,
         b: &'a MergeBuffers,
-        next: Option<&'a MergeBuffers>,
+        after: After<'a>,
         profiler: &mut Option<&mut Profiler>,
-    ) -> Result<Option<Readback<u32>>, GpuDagError> {
+    ) -> Result<Back, GpuDagError> {
         let resolve = EditPush {
             counters: self.merge_errors.address(),
             ..b.push
@@ -1116,23 +1170,29 @@ impl GpuHashDag {
         )?;
         cmd.end_pass(profiler);
         cmd.barrier();
-        next.map(|n| self.record_build_items(cmd, n, profiler))
-            .transpose()
+        Ok(match after {
+            After::Level(n) => Back::Counts(Some(self.record_build_items(cmd, n, profiler)?)),
+            After::Root(results) => Back::Root(self.record_root_readback(cmd, results)?),
+            After::Nothing => Back::Counts(None),
+        })
     }
 
     /// Merges `levels` bottom-up, each on the results of the one before (see the module
-    /// docs); returns per level the items built and the extra insert rounds run. The host waits
-    /// once per level for its size counters and, where it has items, once for the table
-    /// passes: the submission that ends with a level's inserts also holds its `resolve` and the
-    /// next level's `build_items`, whose counters the wait reads.
+    /// docs); returns per level the items built and the extra insert rounds run, and the
+    /// readback of the new root when the last level had items. The host waits once per level
+    /// for its size counters and, where it has items, once for the table passes: the
+    /// submission that ends with a level's inserts also holds its `resolve` and the next
+    /// level's `build_items`, whose counters the wait reads (the last level: the root's
+    /// readback, with `read_root`).
     fn merge(
         &mut self,
         levels: &[MergeLevel<'_>],
+        read_root: bool,
         mut profiler: Option<&mut Profiler>,
-    ) -> Result<Vec<(u32, u32)>, GpuDagError> {
+    ) -> Result<(Vec<(u32, u32)>, Option<RootReadback>), GpuDagError> {
         let mut out = Vec::new();
         let Some(first) = levels.first() else {
-            return Ok(out);
+            return Ok((out, None));
         };
         let mut current = self.merge_buffers(first)?;
         let mut cmd = self.ctx.begin_commands("edit build items")?;
@@ -1145,8 +1205,22 @@ impl GpuHashDag {
                 None => None,
             };
             let total: u32 = level_counts.iter().sum();
+            let last = (read_root && at + 1 == levels.len()).then_some(levels[at].results);
             let (retried, next_counts) = if total > 0 {
-                self.merge_items(&current, &level_counts, next.as_ref(), &mut profiler)?
+                let after = match (next.as_ref(), last) {
+                    (Some(n), _) => After::Level(n),
+                    (None, Some(results)) => After::Root(results),
+                    (None, None) => After::Nothing,
+                };
+                let (retried, back) =
+                    self.merge_items(&current, &level_counts, after, &mut profiler)?;
+                match back {
+                    Back::Root(root) => {
+                        out.push((total, retried));
+                        return Ok((out, Some(root)));
+                    }
+                    Back::Counts(c) => (retried, c),
+                }
             } else {
                 // Nothing to insert (every node uniform, written by build_items).
                 let mut cmd = self.ctx.begin_commands("edit build items")?;
@@ -1166,18 +1240,19 @@ impl GpuHashDag {
                 _ => break,
             }
         }
-        Ok(out)
+        Ok((out, None))
     }
 
-    /// The table passes of one level with items (`counts` per size), its resolve and the next
-    /// level's build_items; returns the extra insert rounds and the next level's counters.
+    /// The table passes of one level with items (`counts` per size), its resolve and what
+    /// comes after it (the next level's build_items, or the root's readback); returns the
+    /// extra insert rounds and the next level's counters or the root's readback.
     fn merge_items(
         &mut self,
         b: &MergeBuffers,
         counts: &[u32],
-        next: Option<&MergeBuffers>,
+        after: After<'_>,
         profiler: &mut Option<&mut Profiler>,
-    ) -> Result<(u32, Option<Readback<u32>>), GpuDagError> {
+    ) -> Result<(u32, Back), GpuDagError> {
         let ctx = Arc::clone(&self.ctx);
         let (items, reps, handles) = (&b.items, &b.reps, &b.handles);
         let mut retried = 0;
@@ -1234,12 +1309,12 @@ impl GpuHashDag {
         }
         let mut pending_insert = Vec::new();
         let mut errors_before = None;
-        let mut next_counts = None;
+        let mut back = None;
         if fused {
             cmd.barrier();
             pending_insert = self.record_mark_insert(&mut cmd, b, counts, &sizes, profiler)?;
             errors_before = Some(cmd.readback::<u32>(&self.merge_errors, 0, 1)?);
-            next_counts = self.record_resolve_next(&mut cmd, b, next, profiler)?;
+            back = Some(self.record_resolve_after(&mut cmd, b, after, profiler)?);
         }
         cmd.submit_async()?;
         for (pending, &s) in pending_dedup.into_iter().zip(&deduped) {
@@ -1268,7 +1343,7 @@ impl GpuHashDag {
             let mut cmd = ctx.begin_commands("edit insert")?;
             pending_insert = self.record_mark_insert(&mut cmd, b, counts, &sizes, profiler)?;
             errors_before = Some(cmd.readback::<u32>(&self.merge_errors, 0, 1)?);
-            next_counts = self.record_resolve_next(&mut cmd, b, next, profiler)?;
+            back = Some(self.record_resolve_after(&mut cmd, b, after, profiler)?);
             cmd.submit_async()?;
         }
         for (pending, &s) in pending_insert.into_iter().zip(&sizes) {
@@ -1288,18 +1363,19 @@ impl GpuHashDag {
                 )));
             }
         }
-        // Nodes left without a handle are counted in `merge_errors`, read with the root
-        // (`read_root`). When a pool ran out, the resolve recorded with the inserts saw
-        // the items of the extra rounds missing (they stay pending): the count goes back to
-        // its value before, and resolve and the next build_items run again.
+        // Nodes left without a handle are counted in `merge_errors`, read with the root.
+        // When a pool ran out, the resolve recorded with the inserts saw the items of the
+        // extra rounds missing (they stay pending): the count goes back to its value before,
+        // and resolve and what comes after it (next build_items, root readback) run again.
         let before = errors_before.expect("recorded with the inserts").read()?[0];
+        let mut back = back.expect("recorded with the inserts");
         if retried > 0 {
             let mut cmd = ctx.begin_commands("edit resolve")?;
             cmd.fill_buffer(&self.merge_errors, before);
-            next_counts = self.record_resolve_next(&mut cmd, b, next, profiler)?;
+            back = self.record_resolve_after(&mut cmd, b, after, profiler)?;
             cmd.submit_async()?;
         }
-        Ok((retried, next_counts))
+        Ok((retried, back))
     }
 }
 

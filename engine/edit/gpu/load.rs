@@ -165,6 +165,7 @@ impl GpuHashDag {
                     results: &results,
                     result_index: None,
                 }],
+                false,
                 profiler.as_deref_mut(),
             )?;
             below = Some(results);
