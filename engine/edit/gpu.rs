@@ -242,6 +242,13 @@ enum Back {
     Root(RootReadback),
 }
 
+/// What [`GpuHashDag::merge`] did: per level the items built and the extra insert rounds, and
+/// the root's readback when the last level's submission recorded it.
+struct Merged {
+    levels: Vec<(u32, u32)>,
+    root: Option<RootReadback>,
+}
+
 /// The readbacks that end an edit: the new root's value, the missing handles, the pools.
 struct RootReadback {
     root: Readback<u32>,
@@ -668,12 +675,12 @@ impl GpuHashDag {
             });
         }
         let first = levels - merge_levels.len();
-        let (merged, root) = self.merge(&merge_levels, true, profiler.as_deref_mut())?;
-        for (k, (items, retried)) in merged.into_iter().enumerate() {
+        let merged = self.merge(&merge_levels, true, profiler.as_deref_mut())?;
+        for (k, &(items, retried)) in merged.levels.iter().enumerate() {
             report.items[first + k] = items;
             report.retried_rounds += retried;
         }
-        let root = match root {
+        let root = match merged.root {
             Some(readback) => self.finish_root_readback(readback)?,
             None => self.read_root(&results[levels - 1])?,
         };
@@ -1189,10 +1196,13 @@ impl GpuHashDag {
         levels: &[MergeLevel<'_>],
         read_root: bool,
         mut profiler: Option<&mut Profiler>,
-    ) -> Result<(Vec<(u32, u32)>, Option<RootReadback>), GpuDagError> {
+    ) -> Result<Merged, GpuDagError> {
         let mut out = Vec::new();
         let Some(first) = levels.first() else {
-            return Ok((out, None));
+            return Ok(Merged {
+                levels: out,
+                root: None,
+            });
         };
         let mut current = self.merge_buffers(first)?;
         let mut cmd = self.ctx.begin_commands("edit build items")?;
@@ -1217,7 +1227,10 @@ impl GpuHashDag {
                 match back {
                     Back::Root(root) => {
                         out.push((total, retried));
-                        return Ok((out, Some(root)));
+                        return Ok(Merged {
+                            levels: out,
+                            root: Some(root),
+                        });
                     }
                     Back::Counts(c) => (retried, c),
                 }
@@ -1240,7 +1253,10 @@ impl GpuHashDag {
                 _ => break,
             }
         }
-        Ok((out, None))
+        Ok(Merged {
+            levels: out,
+            root: None,
+        })
     }
 
     /// The table passes of one level with items (`counts` per size), its resolve and what

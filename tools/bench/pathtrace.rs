@@ -541,7 +541,7 @@ mod tests {
         let mut voxels =
             voxdag::scene::Voxels::from_coords(16, [[0, 0, 0], [3, 1, 2], [9, 9, 9], [15, 0, 7]]);
         // Opaque colours: the lossless codec keeps RGB (alpha comes back 255).
-        voxels.colors = (1..=4).map(|i| 0xff00_0000 | 0x0010_2030 * i).collect();
+        voxels.colors = (1..=4).map(|i| 0xff00_0000 | (0x0010_2030 * i)).collect();
         let dag = Svdag::from_voxels(&voxels).unwrap();
         let raw_bytes = dag.colors.len() as u64 * 4;
         assert!(gpu_colors(&dag, raw_bytes).unwrap().is_none());
