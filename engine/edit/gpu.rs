@@ -965,13 +965,13 @@ impl GpuHashDag {
 
     /// Records the readback of the root value in `results[0]`, the merges' missing handle
     /// count and the tables' pool use (kept for the next edit's auto-GC check), then clears
-    /// the count for the next merge.
+    /// the count for the next merge. Recorded at the start of a submission or after the
+    /// barrier that ends the resolve (`record_resolve_after`).
     fn record_root_readback<'a>(
         &'a self,
         cmd: &mut Commands<'a>,
         results: &'a Buffer,
     ) -> Result<RootReadback, GpuDagError> {
-        cmd.barrier();
         let root = cmd.readback::<u32>(results, 0, 1)?;
         let missing = cmd.readback::<u32>(&self.merge_errors, 0, 1)?;
         let statuses = self
