@@ -6,10 +6,10 @@ mod common;
 
 use common::{assert_renders_match, check_golden, gpu, shared_data};
 use indicatif::ProgressBar;
-use voxdag::attr::{ColorCodec, StoredColors};
+use voxdag::attr::{ColorCodec, ColorFormat, StoredColors};
 use voxdag::dag::{Svdag, VoxelIndex};
 use voxdag::render::cpu::{render_cpu_with, ColorSource};
-use voxdag::render::gpu::GpuRenderer;
+use voxdag::render::gpu::{colors_for_allocation, GpuRenderer};
 use voxdag::render::{render_cpu, Camera, RenderOutput, RenderSettings};
 use voxdag::scene::{self, morton, ImportOptions, Voxels};
 
@@ -96,6 +96,35 @@ fn chunked_colours_render_like_their_decoded_values() {
         let reference = render_cpu(&decoded, &VoxelIndex::new(&decoded), &settings).unwrap();
         assert_eq!(cpu_image, reference, "{codec}");
     }
+}
+
+#[test]
+fn raw_colours_beyond_one_allocation_render_exactly_as_raw() {
+    let dag = painted_sphere();
+    let raw_bytes = dag.colors.len() as u64 * 4;
+    assert!(colors_for_allocation(&dag.colors, raw_bytes)
+        .unwrap()
+        .is_none());
+    // One byte over the limit: the upload's fallback, lossless chunks in colour order.
+    let fitted = colors_for_allocation(&dag.colors, raw_bytes - 1)
+        .unwrap()
+        .expect("re-encoded");
+    assert_eq!(fitted.decode_all().unwrap(), dag.colors);
+    assert!(fitted.byte_size() < raw_bytes);
+    let settings = RenderSettings::new(96, 96, Camera::frame(&dag));
+    let context = gpu();
+    let renderer = GpuRenderer::new(&context).unwrap();
+    let raw = renderer.upload(&dag).unwrap();
+    assert_eq!(raw.color_format(), ColorFormat::Raw);
+    let chunked = renderer
+        .upload_with(&dag, ColorSource::Chunked(&fitted))
+        .unwrap();
+    assert_eq!(chunked.color_format(), ColorFormat::Lossless888);
+    let raw_image = renderer.render(&raw, &settings, None).unwrap();
+    let chunked_image = renderer.render(&chunked, &settings, None).unwrap();
+    assert_eq!(raw_image, chunked_image);
+    drop((raw, chunked, renderer));
+    assert_eq!(context.validation_errors(), 0, "Vulkan validation errors");
 }
 
 /// Voxelizes a textured scene from `../shared/data/textured` at 256^3.

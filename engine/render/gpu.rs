@@ -11,12 +11,15 @@
 use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
+use indicatif::ProgressBar;
+
 use super::cpu::ColorSource;
 use super::format::{GpuDagData, TraversalFormat};
 use super::gpu_shared::{FirstHit, PrimaryPush};
 use super::params::{RenderParams, FLAG_HAS_COLORS};
 use super::{RenderOutput, RenderSettings};
-use crate::attr::ColorFormat;
+use crate::attr::chunks::MAX_CHUNK_COLORS;
+use crate::attr::{AttrError, ChunkedColors, ColorCodec, ColorFormat, LosslessVariant};
 use crate::dag::encode::EncodedDag;
 use crate::dag::Svdag;
 use crate::edit::gpu::GpuHashDag;
@@ -61,6 +64,31 @@ pub struct GpuScene {
     hash_tables: Vec<u64>,
     resolution: u32,
     color_count: u64,
+}
+
+/// Colours per chunk of [`colors_for_allocation`]: the binary search of the chunk table stays
+/// short (sponza-crytek at 8192: 605 chunks) and every chunk is far below `MAX_CHUNK_COLORS`.
+const FITTED_CHUNK_COLORS: u64 = 1 << 20;
+
+/// Raw colours (one RGBA8 word per voxel) whose words exceed `max_allocation` bytes (the
+/// device's largest buffer) or one chunk's index range, re-encoded for the upload as lossless
+/// RGB888 chunks of [`FITTED_CHUNK_COLORS`] colours: exact (alpha is 255 on the GPU either way)
+/// and far smaller (sponza-crytek at 8192: 2.54 GB of raw words against lavapipe's 2 GiB
+/// limit, ~0.1 GB of chunks). `None` when the raw words fit as they are. The chunks follow the
+/// colour order, not SVO nodes (`chunk_depth` 0): they are made for the GPU, never stored.
+pub fn colors_for_allocation(
+    colors: &[u32],
+    max_allocation: u64,
+) -> Result<Option<ChunkedColors>, AttrError> {
+    let count = colors.len() as u64;
+    if count * 4 <= max_allocation && count <= MAX_CHUNK_COLORS {
+        return Ok(None);
+    }
+    let sizes: Vec<u64> = (0..count.div_ceil(FITTED_CHUNK_COLORS))
+        .map(|c| FITTED_CHUNK_COLORS.min(count - c * FITTED_CHUNK_COLORS))
+        .collect();
+    let codec = ColorCodec::Lossless(LosslessVariant::Rgb888);
+    ChunkedColors::encode(colors, &sizes, codec, 0, &ProgressBar::hidden()).map(Some)
 }
 
 /// Palette of a hash DAG with materials: the sRGB RGB8 colour of each material id.
@@ -190,10 +218,10 @@ impl GpuRenderer {
         Ok(())
     }
 
-    /// Uploads `dag.words`, its colours (as one raw chunk) and the per-node voxel counts of
-    /// `VoxelIndex` (`u64`: colour indices of huge scenes exceed 2^32). Errors when raw colours
-    /// (one chunk) reach 2^32, when the DAG has 2^32 or more words (GPU word indices are `uint`),
-    /// or when a buffer exceeds the device's allocation limit.
+    /// Uploads `dag.words`, its colours (as one raw chunk, or as lossless chunks when they do not
+    /// fit one: [`colors_for_allocation`]) and the per-node voxel counts of `VoxelIndex` (`u64`:
+    /// colour indices of huge scenes exceed 2^32). Errors when the DAG has 2^32 or more words
+    /// (GPU word indices are `uint`), or when a buffer exceeds the device's allocation limit.
     pub fn upload(&self, dag: &Svdag) -> Result<GpuScene, GpuError> {
         self.upload_with(dag, ColorSource::Raw(&dag.colors))
     }
@@ -278,15 +306,14 @@ impl GpuRenderer {
                 dag.words.len()
             )));
         }
-        if let ColorSource::Raw(raw) = colors {
-            if raw.len() as u64 > u32::MAX as u64 {
-                return Err(invalid(format!(
-                    "{} raw colours in one chunk: the GPU needs fewer than 2^32 per chunk (store \
-                     them chunked: --colors)",
-                    raw.len()
-                )));
-            }
-        }
+        // Raw colours too large for one buffer (or one chunk) go up as exact lossless chunks.
+        let max_allocation = self.ctx.info().max_memory_allocation_size;
+        let fitted = match colors {
+            ColorSource::Raw(raw) => colors_for_allocation(raw, max_allocation)
+                .map_err(|e| invalid(format!("encoding raw colours for the GPU: {e}")))?,
+            ColorSource::Chunked(_) => None,
+        };
+        let colors = fitted.as_ref().map_or(colors, ColorSource::Chunked);
         self.ensure_pipeline(dag.format)?;
         let words = self.ctx.upload("dag words", &dag.words)?;
         let node_voxels = self.ctx.upload("dag node voxel counts", &dag.node_voxels)?;

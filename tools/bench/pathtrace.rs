@@ -11,13 +11,13 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use serde::Serialize;
-use voxdag::attr::{ChunkedColors, ColorCodec, LosslessVariant};
+use voxdag::attr::ChunkedColors;
 use voxdag::dag::encode::EncodedDag;
 use voxdag::dag::{Svdag, VdagFile, VoxelIndex};
 use voxdag::gpu::{GpuContext, GpuOptions, Profiler};
 use voxdag::hash::HashVariant;
 use voxdag::render::cpu::ColorSource;
-use voxdag::render::gpu::{GpuRenderer, GpuScene};
+use voxdag::render::gpu::{colors_for_allocation, GpuRenderer, GpuScene};
 use voxdag::render::hash_scene::HashDagScene;
 use voxdag::render::pathtrace::{render_pt_cpu, CpuScene, PtImage, PtSettings};
 use voxdag::render::pathtrace_gpu::{GpuPathTracer, PtMode};
@@ -205,26 +205,24 @@ fn load_encoded(dag: &Svdag, name: &str, cached: Option<&Path>) -> Result<Encode
     Ok(encoded)
 }
 
-/// The colours as the GPU rows upload them: `None` for raw words, or lossless chunks (the
-/// build's default storage, the same colours) when the raw words exceed `max_allocation`, the
-/// device's largest allocation (sponza-crytek at 8192: 2.5 GB against lavapipe's 2 GiB).
+/// The colours as the GPU rows upload them: `None` for raw words, or the lossless chunks the
+/// renderer would make itself when the raw words exceed `max_allocation` (sponza-crytek at
+/// 8192: 2.5 GB against lavapipe's 2 GiB), encoded once here for every format's upload.
 fn gpu_colors(dag: &Svdag, max_allocation: u64) -> Result<Option<ChunkedColors>> {
-    let raw_bytes = dag.colors.len() as u64 * 4;
-    if raw_bytes <= max_allocation {
-        return Ok(None);
-    }
     let start = Instant::now();
-    let codec = ColorCodec::Lossless(LosslessVariant::Rgb888);
-    let chunks = ChunkedColors::build(dag, codec, None, &progress_bar(true))?;
-    eprintln!(
-        "  {} raw colours ({raw_bytes} bytes) exceed one GPU allocation: uploaded as {} chunks \
-         ({} bytes, encoded in {:.1} s)",
-        dag.colors.len(),
-        codec.name(),
-        chunks.byte_size(),
-        start.elapsed().as_secs_f64()
-    );
-    Ok(Some(chunks))
+    let chunks = colors_for_allocation(&dag.colors, max_allocation)?;
+    if let Some(c) = &chunks {
+        eprintln!(
+            "  {} raw colours ({} bytes) exceed one GPU allocation: uploaded as {} chunks \
+             ({} bytes, encoded in {:.1} s)",
+            dag.colors.len(),
+            dag.colors.len() as u64 * 4,
+            c.codec.name(),
+            c.byte_size(),
+            start.elapsed().as_secs_f64()
+        );
+    }
+    Ok(chunks)
 }
 
 /// Renders `s` with `mode` after a one-sample warm-up: per-sample GPU ms and the image.
@@ -530,22 +528,4 @@ fn markdown(device: &str, rows: &[PathtraceRow]) -> String {
         ));
     }
     md
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn colours_beyond_one_allocation_go_to_the_gpu_as_lossless_chunks() {
-        let mut voxels =
-            voxdag::scene::Voxels::from_coords(16, [[0, 0, 0], [3, 1, 2], [9, 9, 9], [15, 0, 7]]);
-        // Opaque colours: the lossless codec keeps RGB (alpha comes back 255).
-        voxels.colors = (1..=4).map(|i| 0xff00_0000 | (0x0010_2030 * i)).collect();
-        let dag = Svdag::from_voxels(&voxels).unwrap();
-        let raw_bytes = dag.colors.len() as u64 * 4;
-        assert!(gpu_colors(&dag, raw_bytes).unwrap().is_none());
-        let chunks = gpu_colors(&dag, raw_bytes - 1).unwrap().expect("chunked");
-        assert_eq!(chunks.decode_all().unwrap(), dag.colors);
-    }
 }
