@@ -142,6 +142,47 @@ fn buffer_round_trip_and_range_errors() {
 }
 
 #[test]
+fn dropped_small_buffers_are_reused_with_their_own_size() {
+    let ctx = context();
+    {
+        let first = ctx
+            .create_buffer("first", 1000, MemLocation::GpuOnly)
+            .unwrap();
+        let address = first.address();
+        drop(first);
+        ctx.wait_idle().unwrap();
+        // The same size class (1024 bytes) and location: the same Vulkan buffer, seen with the
+        // new size; fills, uploads and downloads stay within it.
+        let second = ctx
+            .create_buffer("second", 700, MemLocation::GpuOnly)
+            .unwrap();
+        assert_eq!(second.address(), address);
+        assert_eq!(second.size(), 700);
+        let data: Vec<u32> = (0..175u32).map(|i| i * 3 + 1).collect();
+        ctx.write_buffer(&second, 0, &data).unwrap();
+        assert_eq!(ctx.download::<u32>(&second).unwrap(), data);
+        let mut cmd = ctx.begin_commands("fill").unwrap();
+        cmd.fill_buffer(&second, 9);
+        cmd.submit().unwrap();
+        assert_eq!(ctx.download::<u32>(&second).unwrap(), vec![9u32; 175]);
+        // Another class or location gets a buffer of its own; a host-visible one maps its size.
+        let other_class = ctx
+            .create_buffer("other", 3000, MemLocation::GpuOnly)
+            .unwrap();
+        assert_ne!(other_class.address(), address);
+        let mut host = ctx
+            .create_buffer("host", 12, MemLocation::CpuToGpu)
+            .unwrap();
+        ctx.write_mapped(&mut host, 0, &[1u32, 2, 3]).unwrap();
+        assert!(ctx.write_mapped(&mut host, 12, &[4u32]).is_err());
+        assert_eq!(ctx.download::<u32>(&host).unwrap(), [1, 2, 3]);
+        // Counted as live while used, not once dropped (kept buffers are released for counting).
+        assert_eq!(ctx.live_allocations(), 3);
+    }
+    assert_clean(&ctx);
+}
+
+#[test]
 fn fill_shader_spec_and_push_constants_and_subgroup_size() {
     let ctx = context();
     {

@@ -239,7 +239,7 @@ enum After<'a> {
 /// What that submission reads back: the next level's counters, or the root.
 enum Back {
     Counts(Option<Readback<u32>>),
-    Root(RootReadback),
+    Root(Box<RootReadback>),
 }
 
 /// What [`GpuHashDag::merge`] did: per level the items built and the extra insert rounds, and
@@ -1179,7 +1179,7 @@ impl GpuHashDag {
         cmd.barrier();
         Ok(match after {
             After::Level(n) => Back::Counts(Some(self.record_build_items(cmd, n, profiler)?)),
-            After::Root(results) => Back::Root(self.record_root_readback(cmd, results)?),
+            After::Root(results) => Back::Root(Box::new(self.record_root_readback(cmd, results)?)),
             After::Nothing => Back::Counts(None),
         })
     }
@@ -1229,7 +1229,7 @@ impl GpuHashDag {
                         out.push((total, retried));
                         return Ok(Merged {
                             levels: out,
-                            root: Some(root),
+                            root: Some(*root),
                         });
                     }
                     Back::Counts(c) => (retried, c),

@@ -638,11 +638,15 @@ impl<'a> Commands<'a> {
     /// Fills a whole buffer with a repeated `u32` (size rounded down to 4 bytes).
     pub fn fill_buffer(&mut self, dst: &'a Buffer, value: u32) {
         self.barrier();
-        // SAFETY: whole-size fill of a TRANSFER_DST buffer.
-        unsafe {
-            self.ctx
-                .device
-                .cmd_fill_buffer(self.raw, dst.raw, 0, vk::WHOLE_SIZE, value);
+        // The buffer's own size, not the Vulkan buffer's (a reused size class may be larger).
+        let size = dst.size() & !3;
+        if size > 0 {
+            // SAFETY: an in-range fill (a multiple of 4 bytes) of a TRANSFER_DST buffer.
+            unsafe {
+                self.ctx
+                    .device
+                    .cmd_fill_buffer(self.raw, dst.raw, 0, size, value);
+            }
         }
         self.barrier();
     }

@@ -11,9 +11,9 @@ use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 use gpu_allocator::{AllocationSizes, AllocatorDebugSettings, MemoryLocation};
 
-use super::release::{Garbage, Recorder};
+use super::release::{FreeBuffers, Garbage, Recorder};
 use super::ring::{Ring, RingAlloc, RingKind};
-use super::{vk_err, GpuError};
+use super::{vk_err, GpuError, MemLocation};
 
 /// Bytes of each staging ring (upload and readback).
 const RING_BYTES: u64 = 4 << 20;
@@ -278,6 +278,8 @@ pub struct GpuContext {
     deferred: Mutex<Vec<(u64, Garbage)>>,
     /// Reset recorders ready for reuse.
     free_recorders: Mutex<Vec<Recorder>>,
+    /// Dropped buffers of the reusable size classes whose last submission completed.
+    free_buffers: Mutex<FreeBuffers>,
     upload_ring: Mutex<Ring>,
     readback_ring: Mutex<Ring>,
     submissions: AtomicU64,
@@ -713,6 +715,7 @@ impl GpuContext {
             completed: AtomicU64::new(0),
             deferred: Mutex::new(Vec::new()),
             free_recorders: Mutex::new(Vec::new()),
+            free_buffers: Mutex::new(FreeBuffers::default()),
             upload_ring: Mutex::new(upload_ring),
             readback_ring: Mutex::new(readback_ring),
             submissions: AtomicU64::new(0),
@@ -801,6 +804,7 @@ impl GpuContext {
     /// [`GpuContext::wait_idle`] first to be sure of the latter).
     pub fn live_allocations(&self) -> usize {
         self.maintain();
+        self.release_free_buffers();
         self.allocator()
             .generate_report()
             .allocations
@@ -813,6 +817,7 @@ impl GpuContext {
     /// finished garbage first, as [`GpuContext::live_allocations`]).
     pub fn allocated_bytes(&self) -> u64 {
         self.maintain();
+        self.release_free_buffers();
         self.allocator()
             .generate_report()
             .allocations
@@ -965,10 +970,13 @@ impl GpuContext {
         // owned by the garbage entry alone; each is destroyed exactly once.
         unsafe {
             match garbage {
-                Garbage::Buffer(raw, allocation) => {
-                    device.destroy_buffer(raw, None);
-                    if let Err(e) = self.allocator().free(allocation) {
-                        log::error!("freeing a buffer: {e}");
+                Garbage::Buffer(raw, allocation, recyclable) => {
+                    let rejected = match recyclable {
+                        Some(r) => self.free_buffers().keep(raw, allocation, r),
+                        None => Some((raw, allocation)),
+                    };
+                    if let Some((raw, allocation)) = rejected {
+                        self.destroy_buffer(raw, allocation);
                     }
                 }
                 Garbage::Image(raw, view, allocation) => {
@@ -992,6 +1000,37 @@ impl GpuContext {
                     RingKind::Readback => self.readback_ring().alloc.free(id),
                 },
             }
+        }
+    }
+
+    fn destroy_buffer(&self, raw: vk::Buffer, allocation: gpu_allocator::vulkan::Allocation) {
+        // SAFETY: the GPU no longer uses the buffer, owned by the caller alone.
+        unsafe { self.device.destroy_buffer(raw, None) };
+        if let Err(e) = self.allocator().free(allocation) {
+            log::error!("freeing a buffer: {e}");
+        }
+    }
+
+    fn free_buffers(&self) -> MutexGuard<'_, FreeBuffers> {
+        self.free_buffers.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// A dropped buffer of size class `class` in `location` whose last use has completed: its
+    /// Vulkan buffer, allocation and device address.
+    pub(crate) fn reuse_buffer(
+        &self,
+        class: u64,
+        location: MemLocation,
+    ) -> Option<(vk::Buffer, gpu_allocator::vulkan::Allocation, u64)> {
+        self.maintain();
+        self.free_buffers().take(class, location)
+    }
+
+    /// Destroys every kept free buffer (their memory goes back to the allocator).
+    fn release_free_buffers(&self) {
+        let all = self.free_buffers().drain();
+        for (raw, allocation) in all {
+            self.destroy_buffer(raw, allocation);
         }
     }
 
@@ -1181,6 +1220,7 @@ impl Drop for GpuContext {
             for r in self.free_recorders().drain(..) {
                 Self::destroy_recorder(&self.device, r);
             }
+            self.release_free_buffers();
             for ring in [&self.upload_ring, &self.readback_ring] {
                 let mut ring = ring.lock().unwrap_or_else(|p| p.into_inner());
                 self.device.destroy_buffer(ring.raw, None);

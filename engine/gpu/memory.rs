@@ -6,7 +6,7 @@ use ash::vk;
 use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
 use gpu_allocator::MemoryLocation;
 
-use super::release::Garbage;
+use super::release::{Garbage, Recyclable};
 use super::{vk_err, GpuContext, GpuError};
 
 /// Largest staging buffer used by uploads and readbacks; bigger transfers go in chunks.
@@ -47,7 +47,23 @@ pub struct Buffer {
     address: u64,
     name: String,
     location: MemLocation,
+    /// The reusable size class of the Vulkan buffer (at least `size`), `None` for buffers
+    /// larger than [`RECYCLE_MAX_BYTES`], which are destroyed when dropped.
+    class: Option<u64>,
     ctx: Arc<GpuContext>,
+}
+
+/// Buffers up to this size are created in power-of-two size classes and kept for reuse when
+/// dropped: creating and destroying a Vulkan buffer with its allocation costs far more than the
+/// small passes of an edit that use it (docs/gpu.md, "Buffer reuse").
+pub(crate) const RECYCLE_MAX_BYTES: u64 = 4 << 20;
+
+/// Smallest size class.
+const RECYCLE_MIN_BYTES: u64 = 256;
+
+/// The size class of a `size`-byte buffer, `None` when it is too large to be reused.
+pub(crate) fn size_class(size: u64) -> Option<u64> {
+    (size <= RECYCLE_MAX_BYTES).then(|| size.next_power_of_two().max(RECYCLE_MIN_BYTES))
 }
 
 impl std::fmt::Debug for Buffer {
@@ -94,20 +110,33 @@ impl Buffer {
         Ok(())
     }
 
-    /// Mapped bytes of a host-visible buffer.
+    /// Mapped bytes of a host-visible buffer (its `size` bytes; the size class may hold more).
     pub(crate) fn mapped(&self) -> Option<&[u8]> {
-        self.allocation.as_ref().and_then(|a| a.mapped_slice())
+        let size = self.size as usize;
+        self.allocation
+            .as_ref()
+            .and_then(|a| a.mapped_slice())
+            .map(|m| &m[..size])
     }
 
     pub(crate) fn mapped_mut(&mut self) -> Option<&mut [u8]> {
-        self.allocation.as_mut().and_then(|a| a.mapped_slice_mut())
+        let size = self.size as usize;
+        self.allocation
+            .as_mut()
+            .and_then(|a| a.mapped_slice_mut())
+            .map(|m| &mut m[..size])
     }
 }
 
 impl Drop for Buffer {
     fn drop(&mut self) {
         if let Some(a) = self.allocation.take() {
-            self.ctx.defer(Garbage::Buffer(self.raw, a));
+            let recyclable = self.class.map(|class| Recyclable {
+                class,
+                location: self.location,
+                address: self.address,
+            });
+            self.ctx.defer(Garbage::Buffer(self.raw, a, recyclable));
         }
     }
 }
@@ -182,8 +211,22 @@ impl GpuContext {
                 max,
             });
         }
-        let (raw, allocation, address) = self.raw_buffer(name, size, location.to_allocator())?;
-        self.set_name(raw, name);
+        let class = size_class(size);
+        let (raw, allocation, address) = match class.and_then(|c| self.reuse_buffer(c, location)) {
+            Some(free) => {
+                // Renamed only where validation messages quote names: naming costs as much
+                // as the reuse saves on small buffers.
+                if self.validation_enabled() {
+                    self.set_name(free.0, name);
+                }
+                free
+            }
+            None => {
+                let new = self.raw_buffer(name, class.unwrap_or(size), location.to_allocator())?;
+                self.set_name(new.0, name);
+                new
+            }
+        };
         Ok(Buffer {
             raw,
             allocation: Some(allocation),
@@ -191,6 +234,7 @@ impl GpuContext {
             address,
             name: name.to_string(),
             location,
+            class,
             ctx: Arc::clone(self),
         })
     }

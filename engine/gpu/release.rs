@@ -6,6 +6,7 @@ use ash::vk;
 use gpu_allocator::vulkan::Allocation;
 
 use super::ring::RingKind;
+use super::MemLocation;
 
 /// A command pool with its one primary command buffer and the descriptor pools its recordings
 /// allocated from; reset and reused once its submission has completed.
@@ -21,10 +22,21 @@ pub(crate) struct Recorder {
     pub(crate) current_sets: u32,
 }
 
+/// What a dropped buffer of a reusable size class needs to be handed out again
+/// (`GpuContext::create_buffer`).
+pub(crate) struct Recyclable {
+    /// The size class (the Vulkan buffer's size).
+    pub(crate) class: u64,
+    /// Memory location it was allocated for.
+    pub(crate) location: super::MemLocation,
+    /// Its device address.
+    pub(crate) address: u64,
+}
+
 /// Something whose destruction waits for the GPU.
 pub(crate) enum Garbage {
-    /// A buffer and its memory.
-    Buffer(vk::Buffer, Allocation),
+    /// A buffer and its memory; with its size class, it goes to the free buffers for reuse.
+    Buffer(vk::Buffer, Allocation, Option<Recyclable>),
     /// An image, its view and its memory.
     Image(vk::Image, vk::ImageView, Allocation),
     /// A pipeline, its layout and its set layout.
@@ -39,4 +51,61 @@ pub(crate) enum Garbage {
     Recorder(Recorder),
     /// A staging-ring region.
     RingRegion(RingKind, u64),
+}
+
+/// Most bytes the free buffers may hold; a dropped buffer beyond it is destroyed.
+const FREE_BUFFER_BUDGET: u64 = 64 << 20;
+
+/// A kept buffer: the Vulkan buffer, its allocation and its device address.
+type KeptBuffer = (vk::Buffer, Allocation, u64);
+
+/// Dropped buffers kept for reuse, per size class and memory location (most recently kept
+/// first out, so a steady loop of creating and dropping reuses the same few).
+#[derive(Default)]
+pub(crate) struct FreeBuffers {
+    lists: Vec<((u64, MemLocation), Vec<KeptBuffer>)>,
+    bytes: u64,
+}
+
+impl FreeBuffers {
+    /// Keeps a buffer for reuse; gives it back when the budget is full.
+    pub(crate) fn keep(
+        &mut self,
+        raw: vk::Buffer,
+        allocation: Allocation,
+        r: Recyclable,
+    ) -> Option<(vk::Buffer, Allocation)> {
+        if self.bytes + r.class > FREE_BUFFER_BUDGET {
+            return Some((raw, allocation));
+        }
+        self.bytes += r.class;
+        let key = (r.class, r.location);
+        let entry = (raw, allocation, r.address);
+        match self.lists.iter_mut().find(|(k, _)| *k == key) {
+            Some((_, list)) => list.push(entry),
+            None => self.lists.push((key, vec![entry])),
+        }
+        None
+    }
+
+    /// A kept buffer of size class `class` in `location`.
+    pub(crate) fn take(&mut self, class: u64, location: MemLocation) -> Option<KeptBuffer> {
+        let (_, list) = self
+            .lists
+            .iter_mut()
+            .find(|(k, _)| *k == (class, location))?;
+        let entry = list.pop()?;
+        self.bytes -= class;
+        Some(entry)
+    }
+
+    /// Every kept buffer, to destroy.
+    pub(crate) fn drain(&mut self) -> Vec<(vk::Buffer, Allocation)> {
+        self.bytes = 0;
+        self.lists
+            .drain(..)
+            .flat_map(|(_, list)| list)
+            .map(|(raw, allocation, _)| (raw, allocation))
+            .collect()
+    }
 }
