@@ -12,6 +12,17 @@ fn voxdag(args: &[&str]) -> Output {
         .expect("run voxdag")
 }
 
+/// Runs voxdag and asserts it succeeded (stderr in the message otherwise).
+fn voxdag_ok(args: &[&str]) -> Output {
+    let out = voxdag(args);
+    assert!(
+        out.status.success(),
+        "voxdag {args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
 /// Asserts a clean failure: non-zero exit, one `error:` line containing every `needle`, no panic.
 fn assert_clean_error(out: &Output, needles: &[&str]) {
     let stderr = String::from_utf8_lossy(&out.stderr);
@@ -55,7 +66,7 @@ fn build_stats_export_round_trip() {
     let dir = tempfile::tempdir().unwrap();
     let obj = write(dir.path(), "tetra.obj", TETRAHEDRON.as_bytes());
     let vdag = dir.path().join("tetra.vdag");
-    let out = voxdag(&[
+    voxdag_ok(&[
         "build",
         s(&obj),
         "--resolution",
@@ -64,18 +75,8 @@ fn build_stats_export_round_trip() {
         s(&vdag),
         "--quiet",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
 
-    let out = voxdag(&["stats", s(&vdag), "--json"]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = voxdag_ok(&["stats", s(&vdag), "--json"]);
     let json: serde_json::Value =
         serde_json::from_slice(&out.stdout).expect("stats --json is JSON");
     assert_eq!(json["resolution"], 64);
@@ -101,12 +102,7 @@ fn build_stats_export_round_trip() {
         );
     }
     // --quick: the same SVO/SVDAG numbers without the transform searches and encodings.
-    let out = voxdag(&["stats", s(&vdag), "--json", "--quick"]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = voxdag_ok(&["stats", s(&vdag), "--json", "--quick"]);
     let quick: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(quick["voxels"], json["voxels"]);
     assert_eq!(quick["bytes"]["svdag32"], json["bytes"]["svdag32"]);
@@ -116,7 +112,7 @@ fn build_stats_export_round_trip() {
     }
 
     let xyz = dir.path().join("tetra.xyz");
-    let out = voxdag(&[
+    voxdag_ok(&[
         "export-voxels",
         s(&vdag),
         "--format",
@@ -124,11 +120,6 @@ fn build_stats_export_round_trip() {
         "-o",
         s(&xyz),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let bytes = std::fs::read(&xyz).unwrap();
     assert_eq!(bytes.len() as u64, voxels * 12);
     assert!(bytes
@@ -136,12 +127,7 @@ fn build_stats_export_round_trip() {
         .all(|c| u32::from_le_bytes(c.try_into().unwrap()) < 64));
 
     let vox = dir.path().join("tetra.vox");
-    let out = voxdag(&["export-voxels", s(&vdag), "--format", "vox", "-o", s(&vox)]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    voxdag_ok(&["export-voxels", s(&vdag), "--format", "vox", "-o", s(&vox)]);
     let reimported = dot_vox_count(&vox);
     assert_eq!(reimported, voxels);
 }
@@ -149,12 +135,7 @@ fn build_stats_export_round_trip() {
 fn dot_vox_count(path: &Path) -> u64 {
     // Re-import through voxdag itself: build from the .vox at native size and read the voxel count.
     let vdag = path.with_extension("back.vdag");
-    let out = voxdag(&["build", s(path), "-o", s(&vdag), "--quiet"]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    voxdag_ok(&["build", s(path), "-o", s(&vdag), "--quiet"]);
     let out = voxdag(&["stats", s(&vdag), "--json"]);
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     json["voxels"].as_u64().unwrap()
@@ -309,7 +290,7 @@ fn render_writes_png_profile_and_trace() {
 
     // The CPU reference renderer gives the same hit pixels as the GPU (within the edge tolerance).
     let cpu_png = dir.path().join("tetra-cpu.png");
-    let out = voxdag(&[
+    voxdag_ok(&[
         "render",
         s(&vdag),
         "--size",
@@ -318,11 +299,6 @@ fn render_writes_png_profile_and_trace() {
         s(&cpu_png),
         "--cpu",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let cpu = image::open(&cpu_png).unwrap().to_rgba8();
     let differing = image
         .pixels()
@@ -458,12 +434,7 @@ fn build_colors_flags() {
             "{codec:?}: {}",
             String::from_utf8_lossy(&out.stderr)
         );
-        let out = voxdag(&["stats", s(&vdag), "--json", "--quick"]);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        let out = voxdag_ok(&["stats", s(&vdag), "--json", "--quick"]);
         let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
         let voxels = json["voxels"].as_u64().unwrap();
         let (bytes, raw) = (
@@ -490,14 +461,9 @@ fn build_colors_flags() {
             }
         }
         sizes.push((codec, bytes));
-        let out = voxdag(&["verify", s(&vdag)]);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        voxdag_ok(&["verify", s(&vdag)]);
         let png = dir.path().join("img.png");
-        let out = voxdag(&[
+        voxdag_ok(&[
             "render",
             s(&vdag),
             "--cpu",
@@ -506,11 +472,6 @@ fn build_colors_flags() {
             "--out",
             s(&png),
         ]);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
     }
     // Lossy is smaller than lossless, which is smaller than raw RGBA8 words.
     let size = |c: &str| sizes.iter().find(|(k, _)| *k == Some(c)).unwrap().1;
@@ -568,33 +529,17 @@ fn build_from_a_vdag_re_encodes_the_same_voxels() {
     let dir = tempfile::tempdir().unwrap();
     let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/avocado/Avocado.gltf");
     let svdag = dir.path().join("a.vdag");
-    let ok = |out: Output| {
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        out
-    };
-    ok(voxdag(&[
-        "-q",
-        "build",
-        s(&model),
-        "-r",
-        "64",
-        "-o",
-        s(&svdag),
-    ]));
+    voxdag_ok(&["-q", "build", s(&model), "-r", "64", "-o", s(&svdag)]);
     let export = |vdag: &Path, name: &str| {
         let path = dir.path().join(name);
-        ok(voxdag(&[
+        voxdag_ok(&[
             "export-voxels",
             s(vdag),
             "--format",
             "xyz-u32",
             "-o",
             s(&path),
-        ]));
+        ]);
         std::fs::read(path).unwrap()
     };
     let original = export(&svdag, "a.xyz");
@@ -608,13 +553,13 @@ fn build_from_a_vdag_re_encodes_the_same_voxels() {
         let out_path = dir.path().join(name);
         let mut args = vec!["-q", "build", s(&svdag), "-o", s(&out_path)];
         args.extend_from_slice(extra);
-        let out = ok(voxdag(&args));
+        let out = voxdag_ok(&args);
         assert!(
             String::from_utf8_lossy(&out.stdout).contains("loaded and decoded"),
             "{}",
             String::from_utf8_lossy(&out.stdout)
         );
-        let verify = ok(voxdag(&["verify", s(&out_path)]));
+        let verify = voxdag_ok(&["verify", s(&out_path)]);
         assert!(
             String::from_utf8_lossy(&verify.stdout).contains("matching the content digest"),
             "{name}: {}",
@@ -647,7 +592,7 @@ fn bench_pathtrace_keeps_colours_in_the_svdag32_cache_only() {
         dir.path().join("p.md"),
         dir.path().join("cache"),
     );
-    let out = voxdag(&[
+    voxdag_ok(&[
         "bench",
         "pathtrace",
         "--scenes",
@@ -667,11 +612,6 @@ fn bench_pathtrace_keeps_colours_in_the_svdag32_cache_only() {
         "--markdown",
         s(&md),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
     let rows = report["rows"].as_array().unwrap();
     assert_eq!(rows.len(), 2);
