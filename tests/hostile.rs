@@ -542,6 +542,34 @@ fn verify_is_honest() {
     let bad = dir.path().join("bad.vdag");
     std::fs::write(&bad, &b).unwrap();
     expect(&run(&["verify", s(&bad)]), 1, &["colours", "differ"]);
+    // The same with chunked colours (section 6), which verify hashes chunk by chunk without
+    // decoding them all at once: raw chunks, so a changed word still decodes.
+    let codec = voxdag::attr::ColorCodec::Raw;
+    let hidden = indicatif::ProgressBar::hidden();
+    let stored = voxdag::attr::StoredColors::encode(&dag, codec, Some(1), &hidden).unwrap();
+    let chunks = stored.chunks.chunk_count();
+    let chunked = dir.path().join("chunked.vdag");
+    VdagFile {
+        colors: dag.colors.clone(),
+        digest: None,
+        encoded: EncodedDag::Svdag32(dag.clone()),
+        stored_colors: Some(stored),
+        materials: None,
+    }
+    .save(&chunked)
+    .unwrap();
+    let o = run(&["verify", s(&chunked)]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let count = format!("{} colours in {chunks} raw chunks", dag.colors.len());
+    assert!(stdout.contains(&count), "{stdout}");
+    let mut b = std::fs::read(&chunked).unwrap();
+    let (_, at, _) = section(&b, 6);
+    let last_word = at + 40 + 16 * (chunks + 1) + 4 * (dag.colors.len() - 1);
+    b[last_word] ^= 0x5a;
+    fix_crc(&mut b);
+    std::fs::write(&bad, &b).unwrap();
+    expect(&run(&["verify", s(&bad)]), 1, &["colours", "differ"]);
     // No digest section (the bare to_bytes form).
     let bare = dir.path().join("bare.vdag");
     std::fs::write(&bare, dag.to_bytes()).unwrap();

@@ -5,6 +5,7 @@ use std::path::Path;
 mod common;
 
 use proptest::prelude::*;
+use voxdag::dag::encode::EncodedDag;
 use voxdag::dag::{export_vox, export_xyz_u32, export_xyz_u32_file, DagError, Svdag, MAGIC};
 use voxdag::scene::{load_vox, morton, ImportOptions, Voxels};
 
@@ -506,7 +507,7 @@ fn repaired_colour_edit_is_accepted() {
 /// A colour-rich 32^3 file (svdag32, digest) with its colours stored by `codec`.
 fn chunked_file(codec: &str) -> voxdag::dag::VdagFile {
     use voxdag::attr::{ColorCodec, StoredColors};
-    use voxdag::dag::encode::{EncodedDag, VoxelDigest};
+    use voxdag::dag::encode::VoxelDigest;
     let mut v = scene(32, true);
     for (i, c) in v.colors.iter_mut().enumerate() {
         *c ^= (i as u32).wrapping_mul(2654435761) & 0x00ff_ffff;
@@ -537,15 +538,22 @@ fn section_offset(bytes: &[u8], id: u32) -> usize {
         .expect("section present")
 }
 
+/// Both loaders (colours decoded, colours kept encoded) report the same format error.
 fn expect_file_error(bytes: &[u8], offset: Option<u64>) {
-    match voxdag::dag::VdagFile::from_bytes(bytes, "corrupt.vdag") {
-        Err(e @ DagError::Format { offset: got, .. }) => {
-            assert!(e.to_string().contains("corrupt.vdag"), "{e}");
-            if let Some(want) = offset {
-                assert_eq!(got, want, "{e}");
+    use voxdag::dag::VdagFile;
+    for loaded in [
+        VdagFile::from_bytes(bytes, "corrupt.vdag"),
+        VdagFile::from_bytes_encoded_colors(bytes, "corrupt.vdag"),
+    ] {
+        match loaded {
+            Err(e @ DagError::Format { offset: got, .. }) => {
+                assert!(e.to_string().contains("corrupt.vdag"), "{e}");
+                if let Some(want) = offset {
+                    assert_eq!(got, want, "{e}");
+                }
             }
+            other => panic!("expected a format error, got {:?}", other.map(|_| ())),
         }
-        other => panic!("expected a format error, got {:?}", other.map(|_| ())),
     }
 }
 
@@ -560,6 +568,20 @@ fn chunked_colours_round_trip() {
         // Svdag::from_bytes decodes the chunks too.
         let dag = Svdag::from_bytes(&bytes, "mem").unwrap();
         assert_eq!(dag.colors, file.colors);
+        // A renderer's load keeps them encoded: the same file without decoded colours.
+        let encoded = voxdag::dag::VdagFile::from_bytes_encoded_colors(&bytes, "mem").unwrap();
+        assert!(encoded.colors.is_empty());
+        assert_eq!(encoded.stored_colors, file.stored_colors);
+        assert_eq!(
+            (encoded.digest, &encoded.materials),
+            (file.digest, &file.materials)
+        );
+        let (EncodedDag::Svdag32(a), EncodedDag::Svdag32(b)) = (&encoded.encoded, &file.encoded)
+        else {
+            panic!("svdag32 expected");
+        };
+        assert!(a.colors.is_empty());
+        assert_eq!((&a.words, &a.level_starts), (&b.words, &b.level_starts));
         // Stored without encoding: RGBA8 files are still written and read.
         let mut plain = file.clone();
         plain.stored_colors = None;

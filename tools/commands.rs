@@ -9,7 +9,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
 use voxdag::atomic_file::{check_output_path, write_atomic};
 use voxdag::attr::{ColorCodec, LosslessVariant, Materials, StoredColors};
-use voxdag::dag::digest::{attributes_hash, ContentDigest};
+use voxdag::dag::digest::{attributes_hash, chunked_colors_hash, ContentDigest};
 use voxdag::dag::encode::{
     DigestBuilder, EncodedDag, SsvdagEncoding, TransformGraph, TsvdagEncoding, TsvdagOptions,
     VoxelDigest,
@@ -541,7 +541,8 @@ impl ColorStats {
 
 /// `voxdag stats`.
 pub fn stats(args: &StatsArgs, quiet: bool) -> Result<()> {
-    let mut file = VdagFile::load(&args.file)?;
+    // Statistics need the colours' count and storage only: chunks stay encoded.
+    let mut file = VdagFile::load_encoded_colors(&args.file)?;
     let encoding = file.encoded.kind().name();
     let mode = match &file.encoded {
         EncodedDag::Tsvdag(e) => Some(e.options.mode_name()),
@@ -554,7 +555,10 @@ pub fn stats(args: &StatsArgs, quiet: bool) -> Result<()> {
         (palette, ids, 80 + ids.div_ceil(2))
     });
     let dag = file.into_svdag(&args.file)?;
-    let colors = ColorStats::new(dag.colors.len() as u64, stored.as_ref());
+    let color_count = stored
+        .as_ref()
+        .map_or(dag.colors.len() as u64, |s| s.chunks.color_count());
+    let colors = ColorStats::new(color_count, stored.as_ref());
     let (stats, bytes) = if args.quick {
         (dag.stats(), Vec::new())
     } else {
@@ -662,7 +666,13 @@ const LEGACY_MAX_VOXELS: u64 = 1 << 32;
 /// compares with another file, voxel by voxel where their digests differ. A file without a
 /// content digest is checked as far as it can be and reported [`Unproven`] (exit 2).
 pub fn verify(args: &VerifyArgs) -> Result<()> {
-    let (file, stored) = VdagFile::load_with_digest(&args.file)?;
+    // Chunked colours are hashed a batch of chunks at a time, never all decoded at once
+    // (sponza-crytek at 32768: 40 GB decoded); `--against` compares decoded colours.
+    let (file, stored) = if args.against.is_some() {
+        VdagFile::load_with_digest(&args.file)?
+    } else {
+        VdagFile::load_encoded_colors_with_digest(&args.file)?
+    };
     let name = args.file.display();
     let kind = file.encoded.kind().name();
     if let EncodedDag::Svdag32(dag) = &file.encoded {
@@ -670,7 +680,24 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
     }
     let mut digest = ContentDigest::of(&file.encoded, &file.colors)
         .with_context(|| format!("{name}: traversing the {kind} encoding"))?;
-    digest.colors = attributes_hash(&file.colors, file.materials.as_ref());
+    let encoded_only = file
+        .stored_colors
+        .as_ref()
+        .filter(|_| file.colors.is_empty());
+    digest.colors = match encoded_only {
+        Some(s) => chunked_colors_hash(&s.chunks)
+            .with_context(|| format!("{name}: decoding the colour chunks"))?,
+        None => attributes_hash(&file.colors, file.materials.as_ref()),
+    };
+    if let Some(s) = encoded_only {
+        if s.chunks.color_count() != digest.voxels {
+            bail!(
+                "{name}: {} colours for {} decoded voxels",
+                s.chunks.color_count(),
+                digest.voxels
+            );
+        }
+    }
     if let Some(m) = file.materials.as_ref() {
         if m.ids.len() as u64 != digest.voxels {
             bail!(
@@ -723,11 +750,11 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
         ))
         .into());
     }
-    // Loading already decoded every colour chunk; say what was checked.
+    // Every colour chunk was decoded (by the load or by the hash); say what was checked.
     let colors = match &file.stored_colors {
         Some(s) => format!(
             ", {} colours in {} {} chunks decoded",
-            file.colors.len(),
+            s.chunks.color_count(),
             s.chunks.chunk_count(),
             s.chunks.codec.name()
         ),
@@ -999,7 +1026,8 @@ pub fn render(args: &RenderArgs) -> Result<()> {
         let index = VoxelIndex::new(&dag);
         render_cpu_with(&dag, &index, colors, &settings)?
     } else {
-        let mut file = VdagFile::load(&args.file)?;
+        // The GPU decodes chunked colours per hit: they stay encoded in memory too.
+        let mut file = VdagFile::load_encoded_colors(&args.file)?;
         expand_materials(&mut file);
         let stored = file.stored_colors.take();
         let colors = match &stored {

@@ -10,11 +10,12 @@
 
 use std::hash::Hash;
 
+use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 
 use super::encode::{EncodeError, EncodedDag, TreeView};
 use super::Svdag;
-use crate::attr::Materials;
+use crate::attr::{AttrError, ChunkedColors, Materials};
 
 /// What section 7 stores.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -133,6 +134,24 @@ pub fn colors_hash(colors: &[u32]) -> u64 {
         h.absorb(v);
     }
     h.0[0] ^ h.0[1].rotate_left(17)
+}
+
+/// [`colors_hash`] of the decoded colours of `chunks`, decoded a batch of chunks at a time (in
+/// parallel, absorbed in order): memory for one batch, not for every colour.
+pub fn chunked_colors_hash(chunks: &ChunkedColors) -> Result<u64, AttrError> {
+    const BATCH: usize = 256;
+    let mut h = ColorsHasher::new(chunks.color_count());
+    let count = chunks.chunk_count();
+    for first in (0..count).step_by(BATCH) {
+        let decoded: Vec<Vec<u32>> = (first..(first + BATCH).min(count))
+            .into_par_iter()
+            .map(|c| chunks.decode_chunk(c))
+            .collect::<Result<_, _>>()?;
+        for colors in &decoded {
+            h.absorb(colors);
+        }
+    }
+    Ok(h.finish())
 }
 
 /// Hash of a material scene's attributes (palette and ids; `docs/vdag-format.md` section 7),
@@ -289,6 +308,31 @@ impl ContentDigest {
 mod tests {
     use super::*;
     use crate::scene::Voxels;
+
+    #[test]
+    fn chunked_colours_hash_like_their_decoded_values() {
+        use crate::attr::{ColorCodec, LosslessVariant};
+        // 1..=3 colours per chunk, past one decode batch of 256 chunks, odd sizes splitting
+        // the hash's colour pairs.
+        let colors: Vec<u32> = (0..1201u32)
+            .map(|i| 0xff00_0000 | i.wrapping_mul(2_654_435_761) >> 8)
+            .collect();
+        let mut sizes = Vec::new();
+        let mut left = colors.len() as u64;
+        for k in 0.. {
+            let n = (k % 3 + 1).min(left);
+            sizes.push(n);
+            left -= n;
+            if left == 0 {
+                break;
+            }
+        }
+        assert!(sizes.len() > 256);
+        let codec = ColorCodec::Lossless(LosslessVariant::Rgb888);
+        let hidden = indicatif::ProgressBar::hidden();
+        let chunks = ChunkedColors::encode(&colors, &sizes, codec, 0, &hidden).unwrap();
+        assert_eq!(chunked_colors_hash(&chunks).unwrap(), colors_hash(&colors));
+    }
 
     #[test]
     fn digest_is_canonical_and_detects_changes() {

@@ -127,13 +127,16 @@ fn stored_colors_bytes(stored: &StoredColors) -> Vec<u8> {
 
 /// Parses and validates the chunked colour section at `at` (`len` bytes, inside `bytes`) of a
 /// file with `color_count` colours and root level `root_level`; sizes are checked before
-/// allocating. Returns the section and its decoded colours.
+/// allocating. Every chunk is decoded (a corrupt one is an error naming its offset); returns
+/// the section and, with `keep_decoded`, the decoded colours (otherwise empty: each chunk is
+/// dropped once checked, so a scene whose colours exceed memory still loads).
 fn parse_stored_colors(
     bytes: &[u8],
     (at, len): (u64, u64),
     color_count: u64,
     root_level: u32,
     name: &Path,
+    keep_decoded: bool,
 ) -> Result<(StoredColors, Vec<u32>), DagError> {
     let err = |offset: u64, reason: String| DagError::Format {
         path: name.to_path_buf(),
@@ -216,28 +219,38 @@ fn parse_stored_colors(
             ),
         ));
     }
-    // Decoded colours can outgrow the file (a compressed run): check before decoding.
-    crate::safety::check_memory(
-        format!("{}: decoding {color_count} colours", name.display()),
-        color_count.saturating_mul(8),
-    )?;
-    // Every chunk must decode (in parallel); report the first failure with its byte offset.
-    let decoded: Vec<Result<Vec<u32>, AttrError>> = (0..chunks_parsed.chunk_count())
-        .into_par_iter()
-        .map(|c| chunks_parsed.decode_chunk(c))
-        .collect();
-    let mut colors = Vec::with_capacity(color_count as usize);
-    for (c, chunk) in decoded.into_iter().enumerate() {
-        match chunk {
-            Ok(chunk) => colors.extend_from_slice(&chunk),
-            Err(e) => {
-                let word = match &e {
-                    AttrError::Corrupt { word, .. } => *word,
-                    _ => 0,
-                };
-                let offset = words_at + 4 * (chunks_parsed.chunk_offsets[c] + word);
-                return Err(err(offset, format!("colour chunk {c}: {e}")));
-            }
+    let chunk_error = |c: usize, e: AttrError| {
+        let word = match &e {
+            AttrError::Corrupt { word, .. } => *word,
+            _ => 0,
+        };
+        let offset = words_at + 4 * (chunks_parsed.chunk_offsets[c] + word);
+        err(offset, format!("colour chunk {c}: {e}"))
+    };
+    let mut colors = Vec::new();
+    if keep_decoded {
+        // Decoded colours can outgrow the file (a compressed run): check before decoding.
+        crate::safety::check_memory(
+            format!("{}: decoding {color_count} colours", name.display()),
+            color_count.saturating_mul(8),
+        )?;
+        // Every chunk must decode (in parallel); report the first failure with its byte offset.
+        let decoded: Vec<Result<Vec<u32>, AttrError>> = (0..chunks_parsed.chunk_count())
+            .into_par_iter()
+            .map(|c| chunks_parsed.decode_chunk(c))
+            .collect();
+        colors.reserve_exact(color_count as usize);
+        for (c, chunk) in decoded.into_iter().enumerate() {
+            colors.extend_from_slice(&chunk.map_err(|e| chunk_error(c, e))?);
+        }
+    } else {
+        // The same check, one chunk at a time per thread (the first failure by chunk index).
+        let failure = (0..chunks_parsed.chunk_count())
+            .into_par_iter()
+            .filter_map(|c| chunks_parsed.decode_chunk(c).err().map(|e| (c, e)))
+            .min_by_key(|(c, _)| *c);
+        if let Some((c, e)) = failure {
+            return Err(chunk_error(c, e));
         }
     }
     let stored = StoredColors {
@@ -965,7 +978,8 @@ pub struct VdagFile {
     /// Voxel count and checksum of the source voxels.
     pub digest: Option<VoxelDigest>,
     /// The colours as an encoder stored them; when present they are written instead of the
-    /// raw colours, and `colors` holds their decoded values.
+    /// raw colours, and `colors` holds their decoded values (none when loaded with
+    /// [`VdagFile::load_encoded_colors`]).
     pub stored_colors: Option<StoredColors>,
     /// Palette and per-voxel material ids (section 8); a file has materials or colours, not
     /// both (`docs/materials.md`).
@@ -1058,6 +1072,34 @@ impl VdagFile {
         Ok(Self::load_with_digest(path)?.0)
     }
 
+    /// [`VdagFile::load`] for a renderer: chunked colours are checked (every chunk decodes)
+    /// but kept encoded only (`stored_colors`), so `colors` is empty for such a file and its
+    /// memory is the file's, not 4 bytes per voxel (sponza-crytek at 32768: 1.6 GB of chunks,
+    /// 40 GB decoded). Raw colours load as with [`VdagFile::load`].
+    pub fn load_encoded_colors(path: &Path) -> Result<VdagFile, DagError> {
+        Ok(Self::load_encoded_colors_with_digest(path)?.0)
+    }
+
+    /// [`VdagFile::load_encoded_colors`] with the stored content digest (section 7), if any.
+    pub fn load_encoded_colors_with_digest(
+        path: &Path,
+    ) -> Result<(VdagFile, Option<ContentDigest>), DagError> {
+        let bytes = read_vdag(path)?;
+        let parsed = parse_header(&bytes, path)?;
+        let content = content_digest(&bytes, &parsed);
+        Ok((Self::from_parsed(&bytes, path, parsed, false)?, content))
+    }
+
+    /// [`VdagFile::from_bytes`] keeping chunked colours encoded, as
+    /// [`VdagFile::load_encoded_colors`].
+    pub fn from_bytes_encoded_colors(
+        bytes: &[u8],
+        name: impl AsRef<Path>,
+    ) -> Result<VdagFile, DagError> {
+        let name = name.as_ref();
+        Self::from_parsed(bytes, name, parse_header(bytes, name)?, false)
+    }
+
     /// [`VdagFile::load`] with the stored content digest (section 7), if any.
     pub fn load_with_digest(path: &Path) -> Result<(VdagFile, Option<ContentDigest>), DagError> {
         Self::from_bytes_with_digest(&read_vdag(path)?, path)
@@ -1075,13 +1117,18 @@ impl VdagFile {
     ) -> Result<(VdagFile, Option<ContentDigest>), DagError> {
         let name = name.as_ref();
         let parsed = parse_header(bytes, name)?;
-        let content = parsed.sections[SECTION_CONTENT_DIGEST as usize - 1]
-            .map(|(at, n)| ContentDigest::from_bytes(&bytes[at as usize..(at + n) as usize]));
-        Ok((Self::from_parsed(bytes, name, parsed)?, content))
+        let content = content_digest(bytes, &parsed);
+        Ok((Self::from_parsed(bytes, name, parsed, true)?, content))
     }
 
-    /// The file of a checked header and section table.
-    fn from_parsed(bytes: &[u8], name: &Path, parsed: Parsed) -> Result<VdagFile, DagError> {
+    /// The file of a checked header and section table; `decode_colors`: chunked colours are
+    /// also decoded into `colors` (else only checked).
+    fn from_parsed(
+        bytes: &[u8],
+        name: &Path,
+        parsed: Parsed,
+        decode_colors: bool,
+    ) -> Result<VdagFile, DagError> {
         let err = |offset: u64, reason: String| DagError::Format {
             path: name.to_path_buf(),
             offset,
@@ -1111,6 +1158,7 @@ impl VdagFile {
                     parsed.color_count,
                     parsed.resolution.trailing_zeros() - 2,
                     name,
+                    decode_colors,
                 )?;
                 (Some(stored), Some(colors))
             }
@@ -1139,6 +1187,16 @@ impl VdagFile {
                 let voxels = dag.voxel_count();
                 if m.ids.len() as u64 != voxels {
                     return Err(count_err(m, voxels));
+                }
+            }
+            // Colours kept encoded are not in `dag.colors`, whose check counted them.
+            if let Some(s) = stored_colors.as_ref().filter(|_| !decode_colors) {
+                let voxels = dag.voxel_count();
+                if s.chunks.color_count() != voxels {
+                    return Err(err(
+                        48,
+                        format!("{} colours for {voxels} voxels", s.chunks.color_count()),
+                    ));
                 }
             }
             let colors = dag.colors.clone();
@@ -1206,6 +1264,12 @@ impl VdagFile {
                 reason: format!("decoding {}: {e}", self.encoded.kind().name()),
             })
     }
+}
+
+/// The stored content digest (section 7) of a parsed file, if any.
+fn content_digest(bytes: &[u8], parsed: &Parsed) -> Option<ContentDigest> {
+    parsed.sections[SECTION_CONTENT_DIGEST as usize - 1]
+        .map(|(at, n)| ContentDigest::from_bytes(&bytes[at as usize..(at + n) as usize]))
 }
 
 /// Colour format, raw colour section and chunked colour section of a file with `colors` and
