@@ -3,8 +3,9 @@
 //! directory with its proxies.
 //!
 //! Grouping: each triangle's centroid gets a 30-bit Morton code over the scene bounds. The
-//! codes are cut into `2^B` buckets by their top `B` bits (so a scene far larger than memory is
-//! never held at once); each bucket's triangles are regenerated from the source when its turn
+//! codes are cut into buckets by code prefixes, split further where an upper bound of their
+//! triangles exceeds `bucket_bytes` (so a scene far larger than memory is never held at once,
+//! however unevenly its triangles lie); each bucket's triangles are regenerated from the source when its turn
 //! comes (only the mesh copies and terrain cells whose bounds reach the bucket's box are
 //! produced, nothing is written to temporary files), sorted by code and split recursively at
 //! the highest differing code bit (as an LBVH would) until a range holds at most
@@ -202,19 +203,7 @@ impl SceneSource {
     fn region_triangles(&self, q: &Quantizer, region: &Region) -> Vec<(u32, Tri)> {
         let mut out: Vec<(u32, Tri)> = Vec::new();
         if let Some(t) = &self.terrain {
-            // Cells whose x/z span reaches the region's (one cell of slack for rounding).
-            let step = t.size / t.cells as f64;
-            let span = |k: usize| -> (u32, u32) {
-                let (a, b) = q.world_span(region, k);
-                let lo = ((a / step).floor() - 1.0).max(0.0);
-                let hi = ((b / step).ceil() + 1.0).min(t.cells as f64);
-                if hi <= lo {
-                    (0, 0)
-                } else {
-                    (lo as u32, hi as u32)
-                }
-            };
-            let ((i0, i1), (j0, j1)) = (span(0), span(2));
+            let ((i0, i1), (j0, j1)) = terrain_cells(t, q, region);
             let rows: Vec<Vec<(u32, Tri)>> = (j0..j1)
                 .into_par_iter()
                 .map(|j| {
@@ -251,6 +240,26 @@ impl SceneSource {
             .collect();
         out.extend(copies.into_iter().flatten());
         out
+    }
+
+    /// An upper bound of the triangles [`SceneSource::region_triangles`] returns for `region`:
+    /// every triangle of the terrain cells and mesh copies it generates there.
+    fn region_bound(&self, q: &Quantizer, region: &Region) -> u64 {
+        let terrain = self.terrain.as_ref().map_or(0, |t| {
+            let ((i0, i1), (j0, j1)) = terrain_cells(t, q, region);
+            2 * (i1 - i0) as u64 * (j1 - j0) as u64
+        });
+        let mesh_bounds: Vec<Aabb> = self.meshes.iter().map(SourceMesh::bounds).collect();
+        let copies: u64 = self
+            .instances
+            .par_iter()
+            .filter(|inst| {
+                let b = inst.bounds(&mesh_bounds[inst.mesh as usize]);
+                region.overlaps(q.cell(b.lo), q.cell(b.hi))
+            })
+            .map(|inst| self.meshes[inst.mesh as usize].triangles.len() as u64)
+            .sum();
+        terrain + copies
     }
 
     /// A landscape: a terrain of about a tenth of `triangles`, the rest copies of `meshes`
@@ -432,6 +441,49 @@ impl Region {
     }
 }
 
+/// The terrain cells (x range, z range) whose x/z span reaches the region's (one cell of slack
+/// for rounding).
+fn terrain_cells(t: &Terrain, q: &Quantizer, region: &Region) -> ((u32, u32), (u32, u32)) {
+    let step = t.size / t.cells as f64;
+    let span = |k: usize| -> (u32, u32) {
+        let (a, b) = q.world_span(region, k);
+        let lo = ((a / step).floor() - 1.0).max(0.0);
+        let hi = ((b / step).ceil() + 1.0).min(t.cells as f64);
+        if hi <= lo {
+            (0, 0)
+        } else {
+            (lo as u32, hi as u32)
+        }
+    };
+    (span(0), span(2))
+}
+
+/// Most code bits a bucket prefix takes (a bucket of 2^-24 of the grid is 64 cells).
+const MAX_BUCKET_BITS: u32 = 24;
+
+/// The buckets of the grouping, in code order: the whole grid split at the next code bit
+/// while a part may hold more than `bucket_bytes` of triangles by [`SceneSource::region_bound`]
+/// (an upper bound, so no bucket's triangles exceed it unless one grid box of
+/// `MAX_BUCKET_BITS` bits alone does). Uneven scenes (a landscape is flat: most of the grid's
+/// height is empty) get small buckets where the triangles are and large ones elsewhere.
+fn buckets(source: &SceneSource, q: &Quantizer, bucket_bytes: u64) -> Vec<Region> {
+    let mut out = Vec::new();
+    let mut todo = vec![Region::new(0, 0)];
+    while let Some(region) = todo.pop() {
+        if region.bits >= MAX_BUCKET_BITS
+            || source.region_bound(q, &region) * TRI_BYTES <= bucket_bytes
+        {
+            out.push(region);
+        } else {
+            // Children pushed high first so that the low one is split or taken next.
+            let (prefix, bits) = (region.prefix << 1, region.bits + 1);
+            todo.push(Region::new(prefix | 1, bits));
+            todo.push(Region::new(prefix, bits));
+        }
+    }
+    out
+}
+
 /// Splits the sorted `codes[lo..hi]` into ranges of at most `k` at the highest differing bit.
 fn split_points(codes: &[u32], lo: usize, hi: usize, k: usize, out: &mut Vec<(usize, usize)>) {
     if hi - lo <= k {
@@ -483,11 +535,8 @@ pub fn prepare(
     }
     std::fs::create_dir_all(dir).map_err(|e| OocError::io(dir, e))?;
     let q = Quantizer::new(&source.bounds());
-    // Buckets by the top code bits, each regenerated from the source when its turn comes.
-    let mut bits = 0u32;
-    while bits < 12 && (total * TRI_BYTES) >> bits > options.bucket_bytes {
-        bits += 1;
-    }
+    // Buckets by code prefixes, each regenerated from the source when its turn comes.
+    let regions = buckets(source, &q, options.bucket_bytes);
     progress.set_length(2 * total);
     progress.set_message("points");
     let geometry_path = dir.join(format::GEOMETRY_FILE);
@@ -505,8 +554,8 @@ pub fn prepare(
         head.extend_from_slice(&format::FORMAT_VERSION.to_le_bytes());
         head.extend_from_slice(&0u32.to_le_bytes());
         geo.write_all(&head).map_err(geo_error)?;
-        for prefix in 0..1u32 << bits {
-            let mut keyed = source.region_triangles(&q, &Region::new(prefix, bits));
+        for region in &regions {
+            let mut keyed = source.region_triangles(&q, region);
             progress.inc(keyed.len() as u64);
             if keyed.is_empty() {
                 continue;
