@@ -262,15 +262,21 @@ fn encode_as_asked(dag: Svdag, args: &BuildArgs, quiet: bool) -> Result<(Encoded
     Ok((encoded, start.elapsed()))
 }
 
-/// Loads a `.vdag` file of any encoding as an SVDAG, decoding compact encodings on the CPU.
+/// Loads a `.vdag` file of any encoding as an SVDAG with its decoded colours, decoding compact
+/// encodings on the CPU.
 pub fn load_svdag(path: &Path) -> Result<Svdag> {
-    Ok(load_svdag_stored(path)?.0)
+    Ok(svdag_of(VdagFile::load(path)?, path)?.0)
 }
 
-/// [`load_svdag`] with the file's encoded colours, if it stores them chunked. A material
+/// [`load_svdag`] for renderers: a file that stores its colours chunked gives them encoded
+/// (`Some`) and an SVDAG without colours (decoded per hit, never all at once). A material
 /// scene's voxels come with their palette colours (`palette[id]`).
 pub fn load_svdag_stored(path: &Path) -> Result<(Svdag, Option<StoredColors>)> {
-    let mut file = VdagFile::load(path)?;
+    svdag_of(VdagFile::load_encoded_colors(path)?, path)
+}
+
+/// The SVDAG of a loaded file and its stored colours.
+fn svdag_of(mut file: VdagFile, path: &Path) -> Result<(Svdag, Option<StoredColors>)> {
     expand_materials(&mut file);
     let kind = file.encoded.kind();
     if kind != voxdag::dag::encode::EncodingKind::Svdag32 {
@@ -516,22 +522,22 @@ pub struct ColorStats {
 }
 
 impl ColorStats {
-    /// The statistics of `colors` colours, stored as `stored` or as RGBA8 words when `None`.
-    pub fn new(colors: u64, stored: Option<&StoredColors>) -> ColorStats {
+    /// The statistics of a file's colours: `stored`, or `raw_colors` RGBA8 words when `None`.
+    pub fn new(raw_colors: u64, stored: Option<&StoredColors>) -> ColorStats {
         match stored {
             Some(s) => ColorStats {
                 codec: s.chunks.codec.name(),
-                colors,
+                colors: s.chunks.color_count(),
                 color_bytes: s.chunks.byte_size(),
-                raw_color_bytes: 3 * colors,
+                raw_color_bytes: 3 * s.chunks.color_count(),
                 color_rmse: s.rmse,
                 chunks: s.chunks.chunk_count() as u64,
             },
             None => ColorStats {
-                codec: if colors == 0 { "none" } else { "raw" }.into(),
-                colors,
-                color_bytes: 4 * colors,
-                raw_color_bytes: 3 * colors,
+                codec: if raw_colors == 0 { "none" } else { "raw" }.into(),
+                colors: raw_colors,
+                color_bytes: 4 * raw_colors,
+                raw_color_bytes: 3 * raw_colors,
                 color_rmse: 0.0,
                 chunks: 0,
             },
@@ -555,10 +561,7 @@ pub fn stats(args: &StatsArgs, quiet: bool) -> Result<()> {
         (palette, ids, 80 + ids.div_ceil(2))
     });
     let dag = file.into_svdag(&args.file)?;
-    let color_count = stored
-        .as_ref()
-        .map_or(dag.colors.len() as u64, |s| s.chunks.color_count());
-    let colors = ColorStats::new(color_count, stored.as_ref());
+    let colors = ColorStats::new(dag.colors.len() as u64, stored.as_ref());
     let (stats, bytes) = if args.quick {
         (dag.stats(), Vec::new())
     } else {

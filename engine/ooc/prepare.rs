@@ -537,6 +537,7 @@ pub fn prepare(
     let q = Quantizer::new(&source.bounds());
     // Buckets by code prefixes, each regenerated from the source when its turn comes.
     let regions = buckets(source, &q, options.bucket_bytes);
+    log::debug!("grouping {total} triangles in {} buckets", regions.len());
     progress.set_length(2 * total);
     progress.set_message("points");
     let geometry_path = dir.join(format::GEOMETRY_FILE);
