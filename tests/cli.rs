@@ -626,3 +626,29 @@ fn bench_pathtrace_keeps_colours_in_the_svdag32_cache_only() {
     assert!(colors("svdag32") > 0);
     assert_eq!(colors("tsvdag-sa-huffman"), 0);
 }
+
+/// The largest mesh resolution, 2^17 (issue 12: "131072 where the scene's DAG fits"): a zero-area
+/// sliver along the main diagonal touches 7 N - 6 voxels (every coordinate m or m + 1); the
+/// streaming build, the file, `stats`, `verify` and the GPU render take its 17 levels.
+#[test]
+fn build_verify_and_render_at_131072() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = write(
+        dir.path(),
+        "diagonal.obj",
+        b"v 0 0 0\nv 1 1 1\nv 0.5 0.5 0.5\nf 1 2 3\n",
+    );
+    let vdag = dir.path().join("diagonal.vdag");
+    voxdag_ok(&["build", s(&obj), "-r", "131072", "-o", s(&vdag), "-q"]);
+    let out = voxdag_ok(&["stats", s(&vdag), "--json", "--quick"]);
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["resolution"], 131072);
+    assert_eq!(json["voxels"], 7 * 131072 - 6);
+    let out = voxdag_ok(&["verify", s(&vdag)]);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("matching the content digest"));
+    let png = dir.path().join("diagonal.png");
+    voxdag_ok(&["render", s(&vdag), "--size", "64x48", "--out", s(&png)]);
+    assert!(png.exists());
+    let refused = voxdag(&["build", s(&obj), "-r", "262144", "-o", s(&vdag), "-q"]);
+    assert_clean_error(&refused, &["262144", "above the maximum 131072"]);
+}

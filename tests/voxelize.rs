@@ -215,7 +215,7 @@ fn coloured_teapot_matches_brute_force() {
 #[test]
 fn bad_resolutions_are_rejected() {
     let m = teapot();
-    for r in [0, 4, 12, 100, 131072] {
+    for r in [0, 4, 12, 100, 262_144] {
         match voxelize(&m, r, &ProgressBar::hidden()) {
             Err(SceneError::BadResolution { resolution, .. }) => assert_eq!(resolution, r),
             other => panic!("resolution {r}: {other:?}"),
@@ -280,12 +280,12 @@ fn degenerate_segments_across_bricks_match_brute_force() {
 }
 
 #[test]
-fn long_diagonal_segment_at_65536_is_fast_and_exact() {
-    // A zero-area sliver along the main diagonal at the largest resolution. Testing every
-    // voxel of its bounding box would take ~10^14 predicate calls; walking the segment visits
-    // a few per voxel it touches. Closed voxel [i, i+1]^3 meets {(s, s, s)} iff every
+fn long_diagonal_segment_at_the_largest_resolution_is_fast_and_exact() {
+    // A zero-area sliver along the main diagonal at the largest resolution (2^17). Testing
+    // every voxel of its bounding box would take ~10^15 predicate calls; walking the segment
+    // visits a few per voxel it touches. Closed voxel [i, i+1]^3 meets {(s, s, s)} iff every
     // coordinate is m or m + 1 for some m.
-    const N: u32 = 65536;
+    const N: u32 = voxdag::scene::voxelize::MAX_VOXELIZE_RESOLUTION;
     let nf = N as f32;
     let t = [[0.0; 3], [nf; 3], [nf * 0.5; 3]];
     let start = std::time::Instant::now();

@@ -68,7 +68,7 @@ enum Command {
 pub struct BuildArgs {
     /// Input scene: .obj, .gltf, .glb or .vox; or a built .vdag to re-encode (no voxelization).
     input: PathBuf,
-    /// Grid resolution N (power of two, 8..=65536). Default: 1024 for meshes, the model's size for .vox.
+    /// Grid resolution N (power of two, 8..=131072). Default: 1024 for meshes, the model's size for .vox.
     #[arg(long, short)]
     resolution: Option<u32>,
     /// Integer scale factor for .vox models.

@@ -301,10 +301,11 @@ pub fn load_vox(path: &Path, opts: &ImportOptions) -> Result<Voxels, SceneError>
             r
         }
         None => {
-            if extent > 65536 {
+            let max = super::voxelize::MAX_VOXELIZE_RESOLUTION;
+            if extent > max as u64 {
                 return Err(SceneError::TooLarge {
                     path: path.to_path_buf(),
-                    reason: format!("scaled extent {extent} exceeds the maximum resolution 65536"),
+                    reason: format!("scaled extent {extent} exceeds the maximum resolution {max}"),
                 });
             }
             extent.max(8).next_power_of_two() as u32

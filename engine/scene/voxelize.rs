@@ -18,21 +18,26 @@ use super::{SceneError, Voxels};
 /// Log2 of the largest brick side used by [`voxelize`].
 const BRICK_LOG: u32 = 7;
 
-/// Checks that `resolution` is a power of two in `8..=65536`.
+/// Largest grid a model is voxelized into: 2^17 per side (Morton codes of 51 bits, 2^10 bricks
+/// per side; the f64 rounding of the predicate stays below 1e-8 voxels). The DAG, the file
+/// format and the renderers take 2^21 (`dag::MAX_RESOLUTION`).
+pub const MAX_VOXELIZE_RESOLUTION: u32 = 1 << 17;
+
+/// Checks that `resolution` is a power of two in `8..=MAX_VOXELIZE_RESOLUTION`.
 pub fn check_resolution(resolution: u32, path: &std::path::Path) -> Result<(), SceneError> {
     let reason = if !resolution.is_power_of_two() {
-        "not a power of two"
+        "not a power of two".to_string()
     } else if resolution < 8 {
-        "below the minimum 8"
-    } else if resolution > 65536 {
-        "above the maximum 65536"
+        "below the minimum 8".to_string()
+    } else if resolution > MAX_VOXELIZE_RESOLUTION {
+        format!("above the maximum {MAX_VOXELIZE_RESOLUTION}")
     } else {
         return Ok(());
     };
     Err(SceneError::BadResolution {
         path: path.to_path_buf(),
         resolution,
-        reason: reason.to_string(),
+        reason,
     })
 }
 
@@ -374,7 +379,7 @@ struct Ctx<'a> {
 }
 
 /// Margin (in voxels) that every candidate range carries beyond the exact geometry, far above
-/// the f64 rounding error of the predicate and the ranges (below 1e-9 voxels at N = 65536).
+/// the f64 rounding error of the predicate and the ranges (below 1e-8 voxels at N = 2^17).
 const MARGIN: f64 = 1e-3;
 
 /// True for a triangle whose normal is zero (a segment or a point) or not finite. Such a
@@ -499,7 +504,7 @@ fn for_candidates(t: &GridTriangle, lo: [u32; 3], hi: [u32; 3], mut f: impl FnMu
         return;
     }
     // The normal test passes only if n.c lies in [pmin - r, pmax + r] (up to rounding, which is
-    // below 1e-9 voxels at 65536; the margin is 1e-3 voxels).
+    // below 1e-8 voxels at 2^17; the margin is 1e-3 voxels).
     let p = [dot(n, t.v[0]), dot(n, t.v[1]), dot(n, t.v[2])];
     let pmin = p[0].min(p[1]).min(p[2]) - t.n_rad;
     let pmax = p[0].max(p[1]).max(p[2]) + t.n_rad;
@@ -645,7 +650,7 @@ fn voxelize_brick(ctx: &Ctx, scratch: &mut Scratch, brick: u64, tri_ids: &[u64])
     (codes, colors)
 }
 
-/// Conservative surface voxelization at `resolution` (power of two, 8..=65536), multithreaded
+/// Conservative surface voxelization at `resolution` (power of two, 8..=131072), multithreaded
 /// with rayon; `progress` counts bricks. Output is sorted by Morton code and unique. Colour
 /// rule: among the triangles intersecting a voxel, the one whose closest point to the voxel
 /// centre is nearest (ties: lowest triangle index), sampled at that closest point.
