@@ -190,8 +190,10 @@ pub fn edit(args: &EditArgs) -> Result<()> {
     }
     let replay = Replay::load(&args.replay)?;
     // A material scene (`build --materials`) is edited with its materials (docs/materials.md).
-    let mut file = VdagFile::load(&args.scene)?;
+    // Colours are not edited (dropped on save, below): chunked ones stay encoded.
+    let mut file = VdagFile::load_encoded_colors(&args.scene)?;
     let materials = file.materials.take();
+    let has_colors = !file.colors.is_empty() || file.stored_colors.is_some();
     let svdag = file.into_svdag(&args.scene)?;
     if let Some(m) = &materials {
         if args.material as usize >= m.palette.len() {
@@ -206,7 +208,7 @@ pub fn edit(args: &EditArgs) -> Result<()> {
     let replay_depth = args.replay_depth.unwrap_or(depth);
     // Every line is checked before the first edit: a bad line applies nothing.
     let steps = replay.steps(svdag.resolution, replay_depth, args.material)?;
-    if !svdag.colors.is_empty() {
+    if has_colors {
         log::warn!(
             "{}: the edited scene is saved without its colours (materials come with `build \
              --materials`)",

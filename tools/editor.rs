@@ -262,7 +262,8 @@ fn load_scene(path: &Path, resolution: Option<u32>) -> Result<(Svdag, Option<Mat
         if resolution.is_some() {
             bail!("--resolution is for meshes; {} is a .vdag", path.display());
         }
-        let mut file = VdagFile::load(path)?;
+        // Colours are dropped: chunked ones are checked but never decoded all at once.
+        let mut file = VdagFile::load_encoded_colors(path)?;
         let materials = file.materials.take();
         (file.into_svdag(path)?, materials)
     } else {

@@ -146,7 +146,7 @@ fn newer(a: &Path, b: &Path) -> bool {
 
 /// The DAG and materials of an autosave file (what `load_scene` reads from a `.vdag`).
 fn load_autosave(path: &Path) -> Result<(Svdag, Option<Materials>)> {
-    let mut file = VdagFile::load(path)?;
+    let mut file = VdagFile::load_encoded_colors(path)?;
     let materials = file.materials.take();
     let mut dag = file.into_svdag(path)?;
     dag.colors.clear();
