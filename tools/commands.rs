@@ -362,7 +362,9 @@ fn transcode(args: &BuildArgs, quiet: bool) -> Result<()> {
         );
     }
     let start = Instant::now();
-    let mut file = VdagFile::load(&args.input)?;
+    // Chunked colours go to the new file as they are stored (the colour order is the same for
+    // every node encoding): checked, never all decoded.
+    let mut file = VdagFile::load_encoded_colors(&args.input)?;
     let materials = file.materials.take();
     let stored_colors = file.stored_colors.take();
     let digest = file.digest;

@@ -9,7 +9,7 @@ use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::path::Path;
 
-use super::digest::{attributes_hash, ContentDigest, CONTENT_DIGEST_LEN};
+use super::digest::{attributes_hash, chunked_colors_hash, ContentDigest, CONTENT_DIGEST_LEN};
 use super::encode::{
     EncodeError, EncodedDag, EncodingKind, SsvdagEncoding, TsvdagEncoding, VoxelDigest,
 };
@@ -856,7 +856,7 @@ impl Svdag {
             resolution: self.resolution,
             color_format,
             count: self.words.len() as u64,
-            color_count: self.colors.len() as u64,
+            color_count: color_count(&self.colors, stored),
         };
         let digest = digest.map(digest_bytes);
         let mut sections = vec![
@@ -1002,7 +1002,12 @@ impl VdagFile {
         }
         let mut content = ContentDigest::of(&self.encoded, &self.colors)
             .map_err(|e| io::Error::other(format!("content digest: {e}")))?;
-        content.colors = attributes_hash(&self.colors, materials);
+        content.colors = match self.stored_colors.as_ref() {
+            // Loaded with the colours kept encoded: hash them from the chunks.
+            Some(s) if self.colors.is_empty() => chunked_colors_hash(&s.chunks)
+                .map_err(|e| io::Error::other(format!("content digest of the colours: {e}")))?,
+            _ => attributes_hash(&self.colors, materials),
+        };
         if materials.is_some_and(|m| m.ids.len() as u64 != content.voxels) {
             return Err(io::Error::other(format!(
                 "{} material ids for {} voxels",
@@ -1034,7 +1039,7 @@ impl VdagFile {
             resolution: self.encoded.resolution(),
             color_format,
             count: payload.len() as u64,
-            color_count: self.colors.len() as u64,
+            color_count: color_count(&self.colors, self.stored_colors.as_ref()),
         };
         let mut sections = vec![
             (SECTION_COLORS, Data::U32(raw_colors)),
@@ -1264,6 +1269,12 @@ impl VdagFile {
                 reason: format!("decoding {}: {e}", self.encoded.kind().name()),
             })
     }
+}
+
+/// Colours a file holds: the stored chunks' count, else the raw colours (a file loaded with its
+/// colours kept encoded has no raw ones).
+fn color_count(colors: &[u32], stored: Option<&StoredColors>) -> u64 {
+    stored.map_or(colors.len() as u64, |s| s.chunks.color_count())
 }
 
 /// The stored content digest (section 7) of a parsed file, if any.
