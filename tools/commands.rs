@@ -9,7 +9,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
 use voxdag::atomic_file::{check_output_path, write_atomic};
 use voxdag::attr::{ColorCodec, LosslessVariant, Materials, StoredColors};
-use voxdag::dag::digest::{attributes_hash, chunked_colors_hash, ContentDigest};
+use voxdag::dag::digest::ContentDigest;
 use voxdag::dag::encode::{
     DigestBuilder, EncodedDag, SsvdagEncoding, TransformGraph, TsvdagEncoding, TsvdagOptions,
     VoxelDigest,
@@ -685,24 +685,9 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
     }
     let mut digest = ContentDigest::of(&file.encoded, &file.colors)
         .with_context(|| format!("{name}: traversing the {kind} encoding"))?;
-    let encoded_only = file
-        .stored_colors
-        .as_ref()
-        .filter(|_| file.colors.is_empty());
-    digest.colors = match encoded_only {
-        Some(s) => chunked_colors_hash(&s.chunks)
-            .with_context(|| format!("{name}: decoding the colour chunks"))?,
-        None => attributes_hash(&file.colors, file.materials.as_ref()),
-    };
-    if let Some(s) = encoded_only {
-        if s.chunks.color_count() != digest.voxels {
-            bail!(
-                "{name}: {} colours for {} decoded voxels",
-                s.chunks.color_count(),
-                digest.voxels
-            );
-        }
-    }
+    digest.colors = file
+        .attributes_hash()
+        .with_context(|| format!("{name}: decoding the colour chunks"))?;
     if let Some(m) = file.materials.as_ref() {
         if m.ids.len() as u64 != digest.voxels {
             bail!(
@@ -712,10 +697,10 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
             );
         }
     }
-    if !file.colors.is_empty() && file.colors.len() as u64 != digest.voxels {
+    let colors = file.color_count();
+    if colors != 0 && colors != digest.voxels {
         bail!(
-            "{name}: {} colours for {} decoded voxels",
-            file.colors.len(),
+            "{name}: {colors} colours for {} decoded voxels",
             digest.voxels
         );
     }

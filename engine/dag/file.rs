@@ -987,6 +987,21 @@ pub struct VdagFile {
 }
 
 impl VdagFile {
+    /// The content digest's colour field of this file's attributes: its materials, its decoded
+    /// colours, or (loaded with [`VdagFile::load_encoded_colors`]) its chunks, decoded a batch
+    /// at a time.
+    pub fn attributes_hash(&self) -> Result<u64, AttrError> {
+        match &self.stored_colors {
+            Some(s) if self.colors.is_empty() => chunked_colors_hash(&s.chunks),
+            _ => Ok(attributes_hash(&self.colors, self.materials.as_ref())),
+        }
+    }
+
+    /// Colours the file holds: its chunks' count, else its raw colours.
+    pub fn color_count(&self) -> u64 {
+        color_count(&self.colors, self.stored_colors.as_ref())
+    }
+
     /// Serialises the file to a writer.
     /// Every file written here stores the content digest (section 7) of its nodes and its
     /// decoded colours.
@@ -1002,12 +1017,9 @@ impl VdagFile {
         }
         let mut content = ContentDigest::of(&self.encoded, &self.colors)
             .map_err(|e| io::Error::other(format!("content digest: {e}")))?;
-        content.colors = match self.stored_colors.as_ref() {
-            // Loaded with the colours kept encoded: hash them from the chunks.
-            Some(s) if self.colors.is_empty() => chunked_colors_hash(&s.chunks)
-                .map_err(|e| io::Error::other(format!("content digest of the colours: {e}")))?,
-            _ => attributes_hash(&self.colors, materials),
-        };
+        content.colors = self
+            .attributes_hash()
+            .map_err(|e| io::Error::other(format!("content digest of the colours: {e}")))?;
         if materials.is_some_and(|m| m.ids.len() as u64 != content.voxels) {
             return Err(io::Error::other(format!(
                 "{} material ids for {} voxels",
@@ -1039,7 +1051,7 @@ impl VdagFile {
             resolution: self.encoded.resolution(),
             color_format,
             count: payload.len() as u64,
-            color_count: color_count(&self.colors, self.stored_colors.as_ref()),
+            color_count: self.color_count(),
         };
         let mut sections = vec![
             (SECTION_COLORS, Data::U32(raw_colors)),
