@@ -11,7 +11,7 @@ use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 use gpu_allocator::{AllocationSizes, AllocatorDebugSettings, MemoryLocation};
 
-use super::release::{FreeBuffers, Garbage, Recorder};
+use super::release::{FreeBuffers, Garbage, KeptBuffer, Recorder};
 use super::ring::{Ring, RingAlloc, RingKind};
 use super::{vk_err, GpuError, MemLocation};
 
@@ -1016,12 +1016,9 @@ impl GpuContext {
     }
 
     /// A dropped buffer of size class `class` in `location` whose last use has completed: its
-    /// Vulkan buffer, allocation and device address.
-    pub(crate) fn reuse_buffer(
-        &self,
-        class: u64,
-        location: MemLocation,
-    ) -> Option<(vk::Buffer, gpu_allocator::vulkan::Allocation, u64)> {
+    /// Vulkan buffer, allocation and device address. Releases what has completed first (without
+    /// it, the 1 500-edit teapot replay ran 8-25 % slower: fewer buffers came back in time).
+    pub(crate) fn reuse_buffer(&self, class: u64, location: MemLocation) -> Option<KeptBuffer> {
         self.maintain();
         self.free_buffers().take(class, location)
     }

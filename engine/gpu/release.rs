@@ -28,7 +28,7 @@ pub(crate) struct Recyclable {
     /// The size class (the Vulkan buffer's size).
     pub(crate) class: u64,
     /// Memory location it was allocated for.
-    pub(crate) location: super::MemLocation,
+    pub(crate) location: MemLocation,
     /// Its device address.
     pub(crate) address: u64,
 }
@@ -57,7 +57,7 @@ pub(crate) enum Garbage {
 const FREE_BUFFER_BUDGET: u64 = 64 << 20;
 
 /// A kept buffer: the Vulkan buffer, its allocation and its device address.
-type KeptBuffer = (vk::Buffer, Allocation, u64);
+pub(crate) type KeptBuffer = (vk::Buffer, Allocation, u64);
 
 /// Dropped buffers kept for reuse, per size class and memory location (most recently kept
 /// first out, so a steady loop of creating and dropping reuses the same few).
