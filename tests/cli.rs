@@ -1,6 +1,8 @@
 //! The `voxdag` CLI end to end: good input gives the documented outputs, bad input gives one-line
 //! errors naming the path or the reason, a non-zero exit, no panic and no partial output file.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -14,13 +16,7 @@ fn voxdag(args: &[&str]) -> Output {
 
 /// Runs voxdag and asserts it succeeded (stderr in the message otherwise).
 fn voxdag_ok(args: &[&str]) -> Output {
-    let out = voxdag(args);
-    assert!(
-        out.status.success(),
-        "voxdag {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
+    common::assert_cli_ok(args, voxdag(args))
 }
 
 /// Asserts a clean failure: non-zero exit, one `error:` line containing every `needle`, no panic.

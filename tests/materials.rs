@@ -40,12 +40,7 @@ fn s(p: &Path) -> &str {
 }
 
 fn cli_ok(args: &[&str]) -> String {
-    let out = voxdag_cli(args);
-    assert!(
-        out.status.success(),
-        "voxdag {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = common::assert_cli_ok(args, voxdag_cli(args));
     String::from_utf8_lossy(&out.stdout).into()
 }
 

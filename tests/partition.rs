@@ -22,12 +22,7 @@ fn s(p: &Path) -> &str {
 
 /// Runs the CLI, asserting success.
 fn ok(args: &[&str]) -> String {
-    let out = voxdag_cli(args);
-    assert!(
-        out.status.success(),
-        "voxdag {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = common::assert_cli_ok(args, voxdag_cli(args));
     String::from_utf8_lossy(&out.stdout).to_string()
 }
 

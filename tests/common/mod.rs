@@ -54,6 +54,17 @@ pub fn voxdag_cli(args: &[&str]) -> std::process::Output {
         .expect("run voxdag")
 }
 
+/// Asserts that the `voxdag` run of `args` that printed `out` succeeded (its stderr in the message
+/// otherwise); returns `out`.
+pub fn assert_cli_ok(args: &[&str], out: std::process::Output) -> std::process::Output {
+    assert!(
+        out.status.success(),
+        "voxdag {args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
 /// A GPU context with validation on; fails (never skips) when no Vulkan device exists.
 pub fn gpu() -> Arc<GpuContext> {
     ensure_runtime_dir();
