@@ -455,6 +455,29 @@ fn cli_generate_prepare_render() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    let forest_dir = dir.join("forest");
+    let out = common::voxdag_cli(&[
+        "-q",
+        "ooc",
+        "generate",
+        "--kind",
+        "forest",
+        "--triangles",
+        "30k",
+        "--meshes",
+        avocado.to_str().unwrap(),
+        "--batch-triangles",
+        "4000",
+        "-o",
+        forest_dir.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let forest = OocScene::open(&forest_dir).unwrap();
+    assert!(forest.triangles >= 30_000, "{}", forest.triangles);
     let inst = dir.join("instances.txt");
     std::fs::write(&inst, "# two copies\n0 10 0 0 0\n0 10 5 0 0 90\n").unwrap();
     let prepared_dir = dir.join("prepared");
@@ -675,4 +698,59 @@ fn bucketed_grouping_keeps_every_triangle_once() {
     assert!(a == b, "the bucketed scene holds other triangles");
     let points = |d: &Path| OocScene::open(d).unwrap().points.len();
     assert!(points(&cut) > points(&whole), "the buckets cut points");
+}
+
+/// The forest scene (procedural trees: thin branches, leaf clusters): its proxies are
+/// conservative on every leaf, the out-of-core image equals the in-core one with proxies on
+/// and off, and the proxies cull rays that cross the trees' points between the leaves.
+#[test]
+fn forest_renders_as_in_core_and_its_proxies_are_conservative() {
+    let source = SceneSource::forest(vec![avocado()], 200_000, 4).unwrap();
+    let trees = source.meshes.len() - 1;
+    assert!(trees >= 4, "{trees} tree variants");
+    let dir = prepared(&source, "forest", 4000, &[64]);
+    let scene = OocScene::open(&dir).unwrap();
+    assert!(scene.triangles >= 200_000, "{}", scene.triangles);
+    assert_eq!(check_conservative(&dir, 64) as u64, scene.triangles);
+    let proxies = ProxySet::read(&dir.join("proxies-64.bin"), scene.points.len() as u32).unwrap();
+    // Look across a grove (the first tree's) from close by, so that rays cross its points.
+    let tree = source
+        .instances
+        .iter()
+        .find(|i| i.mesh > 0)
+        .expect("a tree")
+        .transform;
+    let at = [
+        tree[0][3] as f32,
+        tree[1][3] as f32 + 10.0,
+        tree[2][3] as f32,
+    ];
+    let base = RenderOptions {
+        width: 40,
+        height: 30,
+        spp: 2,
+        seed: 9,
+        max_bounces: 2,
+        rays_in_flight: 1024,
+        eye: Some([at[0] - 60.0, at[1] + 15.0, at[2] - 60.0]),
+        target: Some(at),
+        ..Default::default()
+    };
+    let (reference, _) = render_in_core(&scene, &base, &ProgressBar::hidden()).unwrap();
+    let largest = scene.points.iter().map(|p| p.bytes()).max().unwrap();
+    let opts = RenderOptions {
+        memory_budget: proxies.bytes() + 4 * largest,
+        ..base.clone()
+    };
+    let mut read = Vec::new();
+    for set in [None, Some(&proxies)] {
+        let (image, stats) =
+            render_out_of_core(&scene, set, &opts, &ProgressBar::hidden()).unwrap();
+        assert_eq!(bits(&image), bits(&reference), "proxies {}", set.is_some());
+        if set.is_some() {
+            assert!(stats.proxy_culls > 0, "{stats:?}");
+        }
+        read.push(stats.disk_bytes_read);
+    }
+    assert!(read[1] < read[0], "bytes read off / on: {read:?}");
 }

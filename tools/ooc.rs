@@ -6,8 +6,8 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand, ValueEnum};
 use voxdag::ooc::prepare::{Instance, SourceMesh};
 use voxdag::ooc::{
-    format, prepare, render_in_core, render_out_of_core, Eviction, OocScene, PrepareOptions,
-    ProxySet, RenderOptions, SceneSource, Schedule,
+    format, prepare, render_in_core, render_out_of_core, Eviction, GeneratedScene, OocScene,
+    PrepareOptions, ProxySet, RenderOptions, SceneSource, Schedule,
 };
 use voxdag::scene::{self, ImportOptions};
 
@@ -60,14 +60,55 @@ pub struct GenerateArgs {
     /// Triangles to generate (about; the last mesh copy may overshoot).
     #[arg(long, value_parser = parse_count)]
     triangles: u64,
+    #[command(flatten)]
+    scene: GeneratedSceneArgs,
+    #[command(flatten)]
+    layout: LayoutArgs,
+}
+
+/// Which scene `ooc generate` and `bench ooc` generate, from what.
+#[derive(Args)]
+pub struct GeneratedSceneArgs {
+    /// Scene kind: `landscape` (terrain and scattered mesh copies) or `forest` (terrain,
+    /// groves of procedural trees and mesh copies).
+    #[arg(long, value_enum, default_value = "landscape")]
+    kind: SceneKindArg,
     /// Seed of the terrain and the placements.
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Meshes to copy (default: bunny, dragon, buddha, horse and teapot of the shared data set).
     #[arg(long, value_delimiter = ',')]
     meshes: Vec<PathBuf>,
-    #[command(flatten)]
-    layout: LayoutArgs,
+}
+
+impl GeneratedSceneArgs {
+    /// The scene's source of about `triangles` triangles (the meshes loaded).
+    pub fn source(&self, triangles: u64) -> Result<SceneSource> {
+        let paths = if self.meshes.is_empty() {
+            default_meshes()?
+        } else {
+            self.meshes.clone()
+        };
+        let kind = match self.kind {
+            SceneKindArg::Landscape => GeneratedScene::Landscape,
+            SceneKindArg::Forest => GeneratedScene::Forest,
+        };
+        Ok(SceneSource::generate(
+            kind,
+            load_meshes(&paths)?,
+            triangles,
+            self.seed,
+        )?)
+    }
+}
+
+/// `--kind` of a generated scene.
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum SceneKindArg {
+    /// Terrain and scattered copies of the meshes.
+    Landscape,
+    /// Terrain, groves of procedural trees (vegetation) and copies of the meshes.
+    Forest,
 }
 
 /// A switch (`--proxies`: queue rays only at points whose proxy they touch, or at every point
@@ -198,12 +239,7 @@ pub fn run(command: OocCommand, quiet: bool) -> Result<()> {
             write_scene(&source, &args.layout, quiet)
         }
         OocCommand::Generate(args) => {
-            let paths = if args.meshes.is_empty() {
-                default_meshes()?
-            } else {
-                args.meshes.clone()
-            };
-            let source = SceneSource::landscape(load_meshes(&paths)?, args.triangles, args.seed)?;
+            let source = args.scene.source(args.triangles)?;
             write_scene(&source, &args.layout, quiet)
         }
         OocCommand::Render(args) => render(&args, quiet),

@@ -11,6 +11,7 @@
 //! point's SVDAG proxy, which skips loads of geometry the ray would miss. See
 //! `docs/out-of-core.md`.
 
+pub mod forest;
 pub mod format;
 pub mod geom;
 pub mod prepare;
@@ -22,7 +23,7 @@ use std::path::Path;
 use crate::dag::DagError;
 
 pub use format::{OocScene, PointEntry};
-pub use prepare::{prepare, PrepareOptions, PrepareSummary, SceneSource, Terrain};
+pub use prepare::{prepare, GeneratedScene, PrepareOptions, PrepareSummary, SceneSource, Terrain};
 pub use proxy::{Grid, ProxySet};
 pub use render::{
     render_in_core, render_out_of_core, Eviction, Image, RenderOptions, RenderStats, Resident,

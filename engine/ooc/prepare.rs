@@ -44,7 +44,7 @@ impl SourceMesh {
         })
     }
 
-    fn bounds(&self) -> Aabb {
+    pub(super) fn bounds(&self) -> Aabb {
         let mut b = Aabb::EMPTY;
         for p in &self.positions {
             b.grow(*p);
@@ -74,6 +74,37 @@ impl Instance {
             b.grow(q.map(|v| v + v.abs() * 1e-6 + 1e-6));
         }
         b
+    }
+
+    /// A copy of the mesh `mesh` (bounds `mb`) standing at `at`: scaled so that its largest
+    /// extent is `extent`, rotated by `angle` about y around its centre, its lowest point
+    /// sunk `sink` below `at`.
+    pub fn standing(
+        mesh: u32,
+        mb: &Aabb,
+        extent: f64,
+        angle: f64,
+        at: [f64; 3],
+        sink: f64,
+    ) -> Instance {
+        let ext = (0..3)
+            .map(|a| (mb.hi[a] - mb.lo[a]) as f64)
+            .fold(0.0, f64::max)
+            .max(1e-9);
+        let scale = extent / ext;
+        let c = mb.center();
+        let (s, co) = (angle.sin() * scale, angle.cos() * scale);
+        let [x, y, z] = at;
+        // p' = R_y(angle) * scale * (p - centre_xz, p.y - min y) + (x, y - sink, z)
+        let (cx, cz, miny) = (c[0] as f64, c[2] as f64, mb.lo[1] as f64);
+        Instance {
+            mesh,
+            transform: [
+                [co, 0.0, s, x - co * cx - s * cz],
+                [0.0, scale, 0.0, y - scale * miny - sink],
+                [-s, 0.0, co, z + s * cx - co * cz],
+            ],
+        }
     }
 
     fn apply(&self, p: [f32; 3]) -> [f32; 3] {
@@ -106,7 +137,7 @@ pub fn mix64(mut z: u64) -> u64 {
 }
 
 /// A uniform value in [0, 1) from a hash.
-fn unit(h: u64) -> f64 {
+pub(super) fn unit(h: u64) -> f64 {
     (h >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
 }
 
@@ -155,6 +186,15 @@ impl Terrain {
             out.push([b, c, d]);
         }
     }
+}
+
+/// The generated test scenes (`voxdag ooc generate --kind`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GeneratedScene {
+    /// Terrain and scattered copies of the meshes ([`SceneSource::landscape`]).
+    Landscape,
+    /// Terrain, groves of procedural trees and copies of the meshes ([`SceneSource::forest`]).
+    Forest,
 }
 
 /// Everything a scene is made of, generated on demand in chunks (never all at once).
@@ -262,6 +302,19 @@ impl SceneSource {
         terrain + copies
     }
 
+    /// The generated test scene `kind` of about `triangles` triangles from `meshes` and `seed`.
+    pub fn generate(
+        kind: GeneratedScene,
+        meshes: Vec<SourceMesh>,
+        triangles: u64,
+        seed: u64,
+    ) -> Result<SceneSource, OocError> {
+        match kind {
+            GeneratedScene::Landscape => SceneSource::landscape(meshes, triangles, seed),
+            GeneratedScene::Forest => SceneSource::forest(meshes, triangles, seed),
+        }
+    }
+
     /// A landscape: a terrain of about a tenth of `triangles`, the rest copies of `meshes`
     /// (scaled, rotated about y and set on the terrain), all from `seed`.
     pub fn landscape(
@@ -269,57 +322,63 @@ impl SceneSource {
         triangles: u64,
         seed: u64,
     ) -> Result<SceneSource, OocError> {
+        let mut scene = SceneSource::terrain_for(meshes, triangles, seed)?;
+        let bounds: Vec<Aabb> = scene.meshes.iter().map(SourceMesh::bounds).collect();
+        let mut total = scene.triangle_count();
+        let mut k = 0u64;
+        while total < triangles {
+            let (mesh, instance) = scattered_copy(&bounds, &scene.terrain.unwrap(), seed, k);
+            scene.instances.push(instance);
+            total += scene.meshes[mesh].triangles.len() as u64;
+            k += 1;
+        }
+        Ok(scene)
+    }
+
+    /// The generated scenes' start: `meshes` with no copies yet, and a terrain of about a
+    /// tenth of `triangles` over a 1000-unit square.
+    pub(super) fn terrain_for(
+        meshes: Vec<SourceMesh>,
+        triangles: u64,
+        seed: u64,
+    ) -> Result<SceneSource, OocError> {
         if meshes.is_empty() || meshes.iter().any(|m| m.triangles.is_empty()) {
             return Err(OocError::Invalid(
-                "the landscape needs meshes with triangles".into(),
+                "the generated scenes need meshes with triangles".into(),
             ));
         }
         let terrain_tris = (triangles / 10).max(2);
         let cells = ((terrain_tris as f64 / 2.0).sqrt().ceil() as u32).max(1);
-        let size = 1000.0;
-        let terrain = Terrain {
-            cells,
-            size,
-            height: 60.0,
-            seed,
-        };
-        let bounds: Vec<Aabb> = meshes.iter().map(SourceMesh::bounds).collect();
-        let mut instances = Vec::new();
-        let mut total = 2 * cells as u64 * cells as u64;
-        let mut k = 0u64;
-        while total < triangles {
-            let h = |d: u64| unit(mix64(seed ^ mix64(k * 16 + d)));
-            let mesh = (h(0) * meshes.len() as f64) as usize % meshes.len();
-            let mb = &bounds[mesh];
-            let ext = (0..3)
-                .map(|a| (mb.hi[a] - mb.lo[a]) as f64)
-                .fold(0.0, f64::max)
-                .max(1e-9);
-            let scale = size * (0.01 + 0.03 * h(1)) / ext;
-            let angle = h(2) * std::f64::consts::TAU;
-            let (x, z) = (h(3) * size, h(4) * size);
-            let y = terrain.height_at(x, z);
-            let c = mb.center();
-            let (s, co) = (angle.sin() * scale, angle.cos() * scale);
-            // p' = R_y(angle) * scale * (p - centre_xz, p.y - min y) + (x, y, z)
-            let (cx, cz, miny) = (c[0] as f64, c[2] as f64, mb.lo[1] as f64);
-            instances.push(Instance {
-                mesh: mesh as u32,
-                transform: [
-                    [co, 0.0, s, x - co * cx - s * cz],
-                    [0.0, scale, 0.0, y - scale * miny - 0.002 * size],
-                    [-s, 0.0, co, z + s * cx - co * cz],
-                ],
-            });
-            total += meshes[mesh].triangles.len() as u64;
-            k += 1;
-        }
         Ok(SceneSource {
             meshes,
-            instances,
-            terrain: Some(terrain),
+            instances: Vec::new(),
+            terrain: Some(Terrain {
+                cells,
+                size: 1000.0,
+                height: 60.0,
+                seed,
+            }),
         })
     }
+}
+
+/// The landscape's `k`-th copy: one of the meshes with `bounds` (chosen from `seed` and `k`),
+/// its largest extent 1-4 % of the terrain's size, rotated about y and set on the terrain.
+pub(super) fn scattered_copy(
+    bounds: &[Aabb],
+    terrain: &Terrain,
+    seed: u64,
+    k: u64,
+) -> (usize, Instance) {
+    let h = |d: u64| unit(mix64(seed ^ mix64(k * 16 + d)));
+    let mesh = (h(0) * bounds.len() as f64) as usize % bounds.len();
+    let size = terrain.size;
+    let extent = size * (0.01 + 0.03 * h(1));
+    let angle = h(2) * std::f64::consts::TAU;
+    let (x, z) = (h(3) * size, h(4) * size);
+    let at = [x, terrain.height_at(x, z), z];
+    let copy = Instance::standing(mesh as u32, &bounds[mesh], extent, angle, at, 0.002 * size);
+    (mesh, copy)
 }
 
 /// Options of [`prepare`].

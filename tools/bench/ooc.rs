@@ -1,5 +1,5 @@
 //! `voxdag bench ooc`: out-of-core path tracing with and without SVDAG proxies on a generated
-//! landscape. Figure 6.3: disk bytes read (and wall time) with and without proxies at several
+//! scene (`--kind landscape|forest`). Figure 6.3: disk bytes read (and wall time) with and without proxies at several
 //! memory budgets; Figure 6.2: proxy memory and batching events per proxy resolution. Every
 //! proxies-on image is checked bit for bit against the proxies-off image of the same budget.
 
@@ -11,31 +11,27 @@ use indicatif::ProgressBar;
 use serde::Serialize;
 use voxdag::ooc::{
     format, prepare, render_out_of_core, OocScene, PrepareOptions, ProxySet, RenderOptions,
-    RenderStats, SceneSource,
+    RenderStats,
 };
 
 use super::write_outputs;
 use crate::commands::peak_rss_bytes;
-use crate::ooc::{default_meshes, load_meshes};
+use crate::ooc::GeneratedSceneArgs;
 
 /// Arguments of `voxdag bench ooc`.
 #[derive(Args)]
 pub struct BenchOocArgs {
-    /// Triangles of the generated landscape.
+    /// Triangles of the generated scene.
     #[arg(long, default_value_t = 4_000_000)]
     triangles: u64,
-    /// Seed of the landscape.
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
+    #[command(flatten)]
+    generated: GeneratedSceneArgs,
     /// Triangles per batching point.
     #[arg(long, default_value_t = 50_000)]
     batch_triangles: u32,
     /// Scene directory: reused when it holds a scene, else generated there.
     #[arg(long, default_value = "out/bench-ooc-scene")]
     scene: PathBuf,
-    /// Meshes to copy (default: the shared data set's scanned meshes).
-    #[arg(long, value_delimiter = ',')]
-    meshes: Vec<PathBuf>,
     /// Memory budgets as fractions of the geometry file (Figure 6.3).
     #[arg(long, value_delimiter = ',', default_value = "0.05,0.1,0.25,0.5")]
     budgets: Vec<f64>,
@@ -115,12 +111,7 @@ pub fn bench_ooc(args: &BenchOocArgs, quiet: bool) -> Result<()> {
     }
     let mut prepare_s = None;
     if !args.scene.join(format::INDEX_FILE).is_file() {
-        let paths = if args.meshes.is_empty() {
-            default_meshes()?
-        } else {
-            args.meshes.clone()
-        };
-        let source = SceneSource::landscape(load_meshes(&paths)?, args.triangles, args.seed)?;
+        let source = args.generated.source(args.triangles)?;
         let options = PrepareOptions {
             batch_triangles: args.batch_triangles,
             proxy_resolutions: resolutions.clone(),
