@@ -49,10 +49,14 @@ impl Stream {
     }
 }
 
-/// Appends a prism of `sides` faces (no caps) from `a` (radius `ra`) to `b` (radius `rb`).
+/// Appends a prism of `sides` faces (no caps) from `a` (radius `ra`) to `b` (radius `rb`);
+/// nothing when `a` and `b` coincide.
 fn prism(mesh: &mut SourceMesh, a: [f64; 3], b: [f64; 3], ra: f64, rb: f64, sides: u32) {
     let d = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
     let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    if len < 1e-9 {
+        return; // no axis: nothing to draw
+    }
     let d = d.map(|v| v / len);
     let helper = if d[0].abs() < 0.9 {
         [1.0, 0.0, 0.0]
