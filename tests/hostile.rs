@@ -518,6 +518,106 @@ fn colored() -> Svdag {
     Svdag::from_voxels(&v).unwrap()
 }
 
+/// `verify --against` compares colours and materials too (raw and chunked, a chunk at a time):
+/// equal files pass, the first differing colour or material id is named with its voxel, and a
+/// file without the other's attributes is refused.
+#[test]
+fn verify_against_compares_colours_and_materials() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = |name: &str| dir.path().join(name);
+    let save = |name: &str,
+                dag: &Svdag,
+                stored: Option<voxdag::attr::StoredColors>,
+                materials: Option<voxdag::attr::Materials>| {
+        VdagFile {
+            colors: if stored.is_some() || materials.is_some() {
+                Vec::new()
+            } else {
+                dag.colors.clone()
+            },
+            digest: None,
+            encoded: EncodedDag::Svdag32(dag.clone()),
+            stored_colors: stored,
+            materials,
+        }
+        .save(&path(name))
+        .unwrap();
+    };
+    let dag = colored();
+    let n = dag.colors.len();
+    let k = n / 2 + 3;
+    let mut changed = dag.clone();
+    changed.colors[k] ^= 0x00ff_0000;
+    let hidden = indicatif::ProgressBar::hidden();
+    let chunks = |d: &Svdag| {
+        voxdag::attr::StoredColors::encode(d, voxdag::attr::ColorCodec::Raw, Some(1), &hidden)
+            .unwrap()
+    };
+    save("raw.vdag", &dag, None, None);
+    save("chunked.vdag", &dag, Some(chunks(&dag)), None);
+    save("changed.vdag", &changed, None, None);
+    let mut bare = dag.clone();
+    bare.colors.clear();
+    save("bare.vdag", &bare, None, None);
+    let p = |name: &str| path(name).to_str().unwrap().to_string();
+    for (a, b) in [("raw.vdag", "chunked.vdag"), ("chunked.vdag", "raw.vdag")] {
+        let o = run(&["verify", &p(a), "--against", &p(b)]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let ours = format!("{:08x}", dag.colors[k]);
+    let theirs = format!("{:08x}", changed.colors[k]);
+    for a in ["raw.vdag", "chunked.vdag"] {
+        let o = run(&["verify", &p(a), "--against", &p("changed.vdag")]);
+        let at = format!("first differing colour: voxel {k} (");
+        expect(&o, 1, &[&at, &ours, &theirs]);
+    }
+    expect(
+        &run(&["verify", &p("bare.vdag"), "--against", &p("raw.vdag")]),
+        1,
+        &["same voxels", "has no colours", "has colours"],
+    );
+    // Materials: a changed id is named; a changed palette is reported as such.
+    let ids: Vec<u8> = (0..n).map(|i| (i % 3) as u8).collect();
+    let palette = vec![0xff00_00ff, 0xff00_ff00, 0xffff_0000];
+    let materials =
+        |ids: Vec<u8>, palette: Vec<u32>| Some(voxdag::attr::Materials { palette, ids });
+    save(
+        "m.vdag",
+        &bare,
+        None,
+        materials(ids.clone(), palette.clone()),
+    );
+    let mut other_ids = ids.clone();
+    other_ids[k] = (other_ids[k] + 1) % 3;
+    save(
+        "m-ids.vdag",
+        &bare,
+        None,
+        materials(other_ids, palette.clone()),
+    );
+    let mut other_palette = palette.clone();
+    other_palette[1] = 0xff80_8080;
+    save("m-palette.vdag", &bare, None, materials(ids, other_palette));
+    let o = run(&["verify", &p("m.vdag"), "--against", &p("m.vdag")]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let at = format!("first differing material: voxel {k} (");
+    expect(
+        &run(&["verify", &p("m.vdag"), "--against", &p("m-ids.vdag")]),
+        1,
+        &[&at],
+    );
+    expect(
+        &run(&["verify", &p("m.vdag"), "--against", &p("m-palette.vdag")]),
+        1,
+        &["different palettes"],
+    );
+    expect(
+        &run(&["verify", &p("m.vdag"), "--against", &p("raw.vdag")]),
+        1,
+        &["has materials", "has colours"],
+    );
+}
+
 fn fix_crc(b: &mut [u8]) {
     let n = b.len();
     let crc = crc32fast::hash(&b[..n - 4]);

@@ -668,16 +668,12 @@ const LEGACY_MAX_VOXELS: u64 = 1 << 32;
 
 /// `voxdag verify`: decodes the stored nodes and colours and compares them with the content
 /// digest written with the file (O(stored nodes) for svdag32 and ssvdag); `--against` also
-/// compares with another file, voxel by voxel where their digests differ. A file without a
+/// compares voxels and colours (or materials) with another file, naming the first difference. A file without a
 /// content digest is checked as far as it can be and reported [`Unproven`] (exit 2).
 pub fn verify(args: &VerifyArgs) -> Result<()> {
     // Chunked colours are hashed a batch of chunks at a time, never all decoded at once
-    // (sponza-crytek at 32768: 40 GB decoded); `--against` compares decoded colours.
-    let (file, stored) = if args.against.is_some() {
-        VdagFile::load_with_digest(&args.file)?
-    } else {
-        VdagFile::load_encoded_colors_with_digest(&args.file)?
-    };
+    // (sponza-crytek at 32768: 40 GB decoded), here and in `--against`.
+    let (file, stored) = VdagFile::load_encoded_colors_with_digest(&args.file)?;
     let name = args.file.display();
     let kind = file.encoded.kind().name();
     if let EncodedDag::Svdag32(dag) = &file.encoded {
@@ -732,7 +728,7 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
         None => Some(legacy_check(&file, &name.to_string(), digest.voxels)?),
     };
     if let Some(other) = &args.against {
-        compare_voxels(&file, &args.file, other)?;
+        compare_against(&file, &digest, &args.file, other)?;
     }
     if let Some(what) = unproven {
         return Err(Unproven(format!(
@@ -806,15 +802,130 @@ fn legacy_check(file: &VdagFile, name: &str, voxels: u64) -> Result<String> {
     ))
 }
 
-/// `verify --against`: equal content digests prove equal voxels; otherwise the first differing
-/// voxel is found by enumerating both files.
-fn compare_voxels(file: &VdagFile, path: &Path, other: &Path) -> Result<()> {
-    let reference = VdagFile::load(other)?;
-    let a = ContentDigest::of(&file.encoded, &[])?;
-    let b = ContentDigest::of(&reference.encoded, &[])?;
-    if a == b {
+/// `verify --against`: `file` (whose content digest is `digest`) holds the same voxels and the
+/// same colours or materials as `other`. Equal digests prove it; where they differ, the first
+/// differing voxel, colour or material id is named. Neither file's colours are decoded at once.
+fn compare_against(
+    file: &VdagFile,
+    digest: &ContentDigest,
+    path: &Path,
+    other: &Path,
+) -> Result<()> {
+    let reference = VdagFile::load_encoded_colors(other)?;
+    let theirs = ContentDigest::of(&reference.encoded, &[])?;
+    if (digest.voxels, digest.dag) != (theirs.voxels, theirs.dag) {
+        return first_differing_voxel(file, path, &reference, other);
+    }
+    let attributes = |f: &VdagFile| match (&f.materials, f.color_count()) {
+        (Some(_), _) => "materials",
+        (None, 0) => "no colours",
+        (None, _) => "colours",
+    };
+    let (ours, kind) = (attributes(file), attributes(&reference));
+    if ours != kind {
+        bail!(
+            "same voxels, but {} has {ours} and {} has {kind}",
+            path.display(),
+            other.display()
+        );
+    }
+    let theirs = reference
+        .attributes_hash()
+        .with_context(|| format!("{}: decoding the colour chunks", other.display()))?;
+    if ours == "no colours" || theirs == digest.colors {
         return Ok(());
     }
+    let voxel = |index: u64| -> Result<String> {
+        let code = file.encoded.voxels().nth(index as usize).transpose()?;
+        let [x, y, z] = voxdag::scene::morton::decode(code.unwrap_or_default());
+        Ok(format!("voxel {index} ({x}, {y}, {z})"))
+    };
+    if let (Some(a), Some(b)) = (&file.materials, &reference.materials) {
+        if a.palette != b.palette {
+            bail!(
+                "same voxels, different palettes: {:08x?} in {}, {:08x?} in {}",
+                a.palette,
+                path.display(),
+                b.palette,
+                other.display()
+            );
+        }
+        if let Some(i) = a.ids.iter().zip(&b.ids).position(|(x, y)| x != y) {
+            bail!(
+                "first differing material: {}: id {} in {}, {} in {}",
+                voxel(i as u64)?,
+                a.ids[i],
+                path.display(),
+                b.ids[i],
+                other.display()
+            );
+        }
+    }
+    let (mut x, mut y) = (ColorCursor::new(file), ColorCursor::new(&reference));
+    let mut index = 0u64;
+    while let (Some(a), Some(b)) = (x.next()?, y.next()?) {
+        if a != b {
+            bail!(
+                "first differing colour: {}: {a:08x} in {}, {b:08x} in {}",
+                voxel(index)?,
+                path.display(),
+                other.display()
+            );
+        }
+        index += 1;
+    }
+    bail!("the attribute hashes differ, but every decoded colour and id is equal")
+}
+
+/// The decoded colours of a file in order, one chunk decoded at a time.
+struct ColorCursor<'a> {
+    file: &'a VdagFile,
+    next_chunk: usize,
+    buffer: Vec<u32>,
+    at: usize,
+}
+
+impl<'a> ColorCursor<'a> {
+    fn new(file: &'a VdagFile) -> ColorCursor<'a> {
+        ColorCursor {
+            file,
+            next_chunk: 0,
+            buffer: Vec::new(),
+            at: 0,
+        }
+    }
+
+    /// The next colour (`None` after the last).
+    fn next(&mut self) -> Result<Option<u32>> {
+        let Some(stored) = self
+            .file
+            .stored_colors
+            .as_ref()
+            .filter(|_| self.file.colors.is_empty())
+        else {
+            self.at += 1;
+            return Ok(self.file.colors.get(self.at - 1).copied());
+        };
+        while self.at == self.buffer.len() {
+            if self.next_chunk == stored.chunks.chunk_count() {
+                return Ok(None);
+            }
+            self.buffer = stored.chunks.decode_chunk(self.next_chunk)?;
+            self.next_chunk += 1;
+            self.at = 0;
+        }
+        self.at += 1;
+        Ok(Some(self.buffer[self.at - 1]))
+    }
+}
+
+/// The first voxel where two files with different voxel digests differ (enumerating both).
+fn first_differing_voxel(
+    file: &VdagFile,
+    path: &Path,
+    reference: &VdagFile,
+    other: &Path,
+) -> Result<()> {
     let mut x_it = file.encoded.voxels();
     let mut y_it = reference.encoded.voxels();
     loop {

@@ -180,7 +180,8 @@ pub enum TransformsArg {
 pub struct VerifyArgs {
     /// The .vdag file.
     file: PathBuf,
-    /// Also compare voxel by voxel with another .vdag file (reports the first differing voxel).
+    /// Also compare the voxels and colours (or materials) with another .vdag file (reports the
+    /// first differing voxel, colour or material id).
     #[arg(long)]
     against: Option<PathBuf>,
 }
