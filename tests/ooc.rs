@@ -70,6 +70,11 @@ fn combos<A: Copy, B: Copy, C: Copy>(a: [A; 3], b: [B; 2], c: [C; 2]) -> Vec<(A,
     out
 }
 
+/// Runs the CLI and asserts success.
+fn voxdag_ok(args: &[&str]) -> std::process::Output {
+    common::assert_cli_ok(args, common::voxdag_cli(args))
+}
+
 fn bits(image: &voxdag::ooc::Image) -> Vec<[u32; 3]> {
     image.pixels.iter().map(|p| p.map(f32::to_bits)).collect()
 }
@@ -433,7 +438,7 @@ fn cli_generate_prepare_render() {
     let dir = scratch("cli");
     let avocado = common::repo().join("assets/avocado/Avocado.gltf");
     let scene_dir = dir.join("scene");
-    let out = common::voxdag_cli(&[
+    voxdag_ok(&[
         "-q",
         "ooc",
         "generate",
@@ -450,13 +455,8 @@ fn cli_generate_prepare_render() {
         "-o",
         scene_dir.to_str().unwrap(),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let forest_dir = dir.join("forest");
-    let out = common::voxdag_cli(&[
+    voxdag_ok(&[
         "-q",
         "ooc",
         "generate",
@@ -471,17 +471,12 @@ fn cli_generate_prepare_render() {
         "-o",
         forest_dir.to_str().unwrap(),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let forest = OocScene::open(&forest_dir).unwrap();
     assert!(forest.triangles >= 30_000, "{}", forest.triangles);
     let inst = dir.join("instances.txt");
     std::fs::write(&inst, "# two copies\n0 10 0 0 0\n0 10 5 0 0 90\n").unwrap();
     let prepared_dir = dir.join("prepared");
-    let out = common::voxdag_cli(&[
+    voxdag_ok(&[
         "-q",
         "ooc",
         "prepare",
@@ -493,11 +488,6 @@ fn cli_generate_prepare_render() {
         "-o",
         prepared_dir.to_str().unwrap(),
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let mut images = Vec::new();
     for (name, ext, extra) in [
         ("in", "png", vec!["--in-core"]),
@@ -556,12 +546,7 @@ fn cli_generate_prepare_render() {
             report.to_str().unwrap(),
         ];
         args.extend(extra);
-        let out = common::voxdag_cli(&args);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        voxdag_ok(&args);
         let json: serde_json::Value =
             serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
         for key in [
