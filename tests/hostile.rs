@@ -563,6 +563,9 @@ fn verify_against_compares_colours_and_materials() {
     for (a, b) in [("raw.vdag", "chunked.vdag"), ("chunked.vdag", "raw.vdag")] {
         let o = run(&["verify", &p(a), "--against", &p(b)]);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        let same = format!("; the same voxels and colours as {}", p(b));
+        assert!(stdout.contains(&same), "{stdout}");
     }
     let ours = format!("{:08x}", dag.colors[k]);
     let theirs = format!("{:08x}", changed.colors[k]);

@@ -727,9 +727,14 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
         Some(_) => None,
         None => Some(legacy_check(&file, &name.to_string(), digest.voxels)?),
     };
-    if let Some(other) = &args.against {
-        compare_against(&file, &digest, &args.file, other)?;
-    }
+    let against = match &args.against {
+        Some(other) => format!(
+            "; the same voxels and {} as {}",
+            compare_against(&file, &digest, &args.file, other)?,
+            other.display()
+        ),
+        None => String::new(),
+    };
     if let Some(what) = unproven {
         return Err(Unproven(format!(
             "no digest: the voxels are not proven ({name}: {what})"
@@ -755,7 +760,7 @@ pub fn verify(args: &VerifyArgs) -> Result<()> {
         },
     };
     println!(
-        "ok: {name} ({kind}, {} voxels, digest {}{colors}, matching the content digest)",
+        "ok: {name} ({kind}, {} voxels, digest {}{colors}, matching the content digest{against})",
         digest.voxels,
         hex128(digest.dag)
     );
@@ -805,16 +810,17 @@ fn legacy_check(file: &VdagFile, name: &str, voxels: u64) -> Result<String> {
 /// `verify --against`: `file` (whose content digest is `digest`) holds the same voxels and the
 /// same colours or materials as `other`. Equal digests prove it; where they differ, the first
 /// differing voxel, colour or material id is named. Neither file's colours are decoded at once.
+/// Returns what was compared besides the voxels ("colours", "materials" or "no colours").
 fn compare_against(
     file: &VdagFile,
     digest: &ContentDigest,
     path: &Path,
     other: &Path,
-) -> Result<()> {
+) -> Result<&'static str> {
     let reference = VdagFile::load_encoded_colors(other)?;
     let theirs = ContentDigest::of(&reference.encoded, &[])?;
     if (digest.voxels, digest.dag) != (theirs.voxels, theirs.dag) {
-        return first_differing_voxel(file, path, &reference, other);
+        first_differing_voxel(file, path, &reference, other)?;
     }
     let attributes = |f: &VdagFile| match (&f.materials, f.color_count()) {
         (Some(_), _) => "materials",
@@ -833,7 +839,7 @@ fn compare_against(
         .attributes_hash()
         .with_context(|| format!("{}: decoding the colour chunks", other.display()))?;
     if ours == "no colours" || theirs == digest.colors {
-        return Ok(());
+        return Ok(ours);
     }
     let voxel = |index: u64| -> Result<String> {
         let code = file.encoded.voxels().nth(index as usize).transpose()?;
@@ -919,7 +925,7 @@ impl<'a> ColorCursor<'a> {
     }
 }
 
-/// The first voxel where two files with different voxel digests differ (enumerating both).
+/// The first voxel where two files differ, as an error (enumerating both; `Ok` when none does).
 fn first_differing_voxel(
     file: &VdagFile,
     path: &Path,
