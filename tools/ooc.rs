@@ -20,7 +20,8 @@ use crate::commands::{
 pub enum OocCommand {
     /// Group mesh triangles into batching points and write a scene directory with SVDAG proxies.
     Prepare(PrepareArgs),
-    /// Generate a landscape scene directory (terrain plus transformed mesh copies), streaming.
+    /// Generate a test scene directory (a landscape of mesh copies on a terrain, or a forest),
+    /// streaming.
     Generate(GenerateArgs),
     /// Path-trace a scene directory out of core under a memory budget (or in core).
     Render(OocRenderArgs),
@@ -69,8 +70,7 @@ pub struct GenerateArgs {
 /// Which scene `ooc generate` and `bench ooc` generate, from what.
 #[derive(Args)]
 pub struct GeneratedSceneArgs {
-    /// Scene kind: `landscape` (terrain and scattered mesh copies) or `forest` (terrain,
-    /// groves of procedural trees and mesh copies).
+    /// Scene kind.
     #[arg(long, value_enum, default_value = "landscape")]
     kind: SceneKindArg,
     /// Seed of the terrain and the placements.
