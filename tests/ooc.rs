@@ -739,3 +739,73 @@ fn forest_renders_as_in_core_and_its_proxies_are_conservative() {
     }
     assert!(read[1] < read[0], "bytes read off / on: {read:?}");
 }
+
+/// `bench ooc` on a tiny forest: Figures 6.3 and 6.2 and the policy table (four policies, the
+/// same in both modes, one image), whose best-against-best ratio pairs each mode's fewest bytes.
+#[test]
+fn bench_ooc_reports_figures_and_policies() {
+    let dir = scratch("bench");
+    let avocado = common::repo().join("assets/avocado/Avocado.gltf");
+    let (json, md) = (dir.join("b.json"), dir.join("b.md"));
+    let scene_dir = dir.join("scene");
+    voxdag_ok(&[
+        "-q",
+        "bench",
+        "ooc",
+        "--kind",
+        "forest",
+        "--triangles",
+        "40000",
+        "--meshes",
+        avocado.to_str().unwrap(),
+        "--batch-triangles",
+        "2000",
+        "--scene",
+        scene_dir.to_str().unwrap(),
+        "--budgets",
+        "0.25",
+        "--proxy-resolution",
+        "16",
+        "--resolutions",
+        "16,32",
+        "--policy-budget",
+        "0.3",
+        "--size",
+        "16x12",
+        "--spp",
+        "1",
+        "--json",
+        json.to_str().unwrap(),
+        "--markdown",
+        md.to_str().unwrap(),
+    ]);
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    assert_eq!(report["budgets"].as_array().unwrap().len(), 1);
+    assert_eq!(report["resolutions"].as_array().unwrap().len(), 2);
+    let policies = report["policies"].as_array().unwrap();
+    let names: Vec<String> = policies
+        .iter()
+        .map(|p| format!("{} {}", p["eviction"], p["schedule"]))
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "\"demand\" \"net\"",
+            "\"demand\" \"fullest\"",
+            "\"lru\" \"net\"",
+            "\"lru\" \"fullest\""
+        ]
+    );
+    let bytes = |mode: &str| {
+        policies
+            .iter()
+            .map(|p| p[mode]["disk_bytes_read"].as_u64().unwrap())
+            .min()
+            .unwrap()
+    };
+    let best = bytes("off") as f64 / bytes("on") as f64;
+    let reported = report["best_against_best"].as_f64().unwrap();
+    assert!((reported - best).abs() < 1e-9, "{reported} vs {best}");
+    let text = std::fs::read_to_string(&md).unwrap();
+    assert!(text.contains("Each mode at its best policy"), "{text}");
+}

@@ -1,7 +1,9 @@
 //! `voxdag bench ooc`: out-of-core path tracing with and without SVDAG proxies on a generated
 //! scene (`--kind landscape|forest`). Figure 6.3: disk bytes read (and wall time) with and without proxies at several
-//! memory budgets; Figure 6.2: proxy memory and batching events per proxy resolution. Every
-//! proxies-on image is checked bit for bit against the proxies-off image of the same budget.
+//! memory budgets; Figure 6.2: proxy memory and batching events per proxy resolution; a policy
+//! table: every eviction and schedule policy in both modes at one budget, and each mode at its
+//! best policy against the other's. Every proxies-on image is checked bit for bit against the
+//! proxies-off image of the same budget (and, in the policy table, against every other).
 
 use std::path::{Path, PathBuf};
 
@@ -10,8 +12,8 @@ use clap::Args;
 use indicatif::ProgressBar;
 use serde::Serialize;
 use voxdag::ooc::{
-    format, prepare, render_out_of_core, OocScene, PrepareOptions, ProxySet, RenderOptions,
-    RenderStats,
+    format, prepare, render_out_of_core, Eviction, OocScene, PrepareOptions, ProxySet,
+    RenderOptions, RenderStats, Schedule,
 };
 
 use super::write_outputs;
@@ -44,6 +46,10 @@ pub struct BenchOocArgs {
     /// Budget fraction of Figure 6.2.
     #[arg(long, default_value_t = 0.25)]
     resolution_budget: f64,
+    /// Budget fraction of the policy table (every eviction and schedule policy, the same in
+    /// both modes: how much of the ratio is the baseline's policy).
+    #[arg(long, default_value_t = 0.25)]
+    policy_budget: f64,
     /// Image size WIDTHxHEIGHT.
     #[arg(long, default_value = "128x96", value_parser = crate::commands::parse_size)]
     size: (u32, u32),
@@ -87,6 +93,16 @@ struct ResolutionRow {
     stats: Option<RenderStats>,
 }
 
+/// One policy of the policy table: both modes with the same eviction and schedule.
+#[derive(Serialize)]
+struct PolicyRow {
+    eviction: Eviction,
+    schedule: Schedule,
+    off: RenderStats,
+    on: RenderStats,
+    disk_ratio: f64,
+}
+
 /// The whole run.
 #[derive(Serialize)]
 struct OocReport {
@@ -100,6 +116,10 @@ struct OocReport {
     spp: u32,
     budgets: Vec<BudgetRow>,
     resolutions: Vec<ResolutionRow>,
+    policy_budget: u64,
+    policies: Vec<PolicyRow>,
+    /// Bytes without proxies at that mode's best policy over bytes with them at theirs.
+    best_against_best: Option<f64>,
     peak_rss_bytes: u64,
 }
 
@@ -128,13 +148,15 @@ pub fn bench_ooc(args: &BenchOocArgs, quiet: bool) -> Result<()> {
     }
     let scene = OocScene::open(&args.scene)?;
     let n = scene.points.len() as u32;
-    let render = |budget: u64, proxies: Option<&ProxySet>| {
+    let render_with = |budget: u64, proxies: Option<&ProxySet>, eviction, schedule| {
         let opts = RenderOptions {
             width: args.size.0,
             height: args.size.1,
             spp: args.spp,
             memory_budget: budget,
             rays_in_flight: args.rays_in_flight,
+            eviction,
+            schedule,
             ..Default::default()
         };
         let bar = if quiet {
@@ -143,6 +165,9 @@ pub fn bench_ooc(args: &BenchOocArgs, quiet: bool) -> Result<()> {
             crate::commands::progress_bar(false)
         };
         render_out_of_core(&scene, proxies, &opts, &bar)
+    };
+    let render = |budget: u64, proxies: Option<&ProxySet>| {
+        render_with(budget, proxies, Eviction::default(), Schedule::default())
     };
     let main_proxies = ProxySet::read(
         &args.scene.join(format::proxy_file(args.proxy_resolution)),
@@ -249,6 +274,68 @@ pub fn bench_ooc(args: &BenchOocArgs, quiet: bool) -> Result<()> {
             stats,
         });
     }
+    let policy_budget = (scene.geometry_bytes as f64 * args.policy_budget) as u64;
+    let mut policies = Vec::new();
+    if main_proxies.bytes() < policy_budget {
+        md += &format!(
+            "\nPolicies (budget {:.0} MiB = {} of the geometry, proxies {}^3; the same policy in both modes):\n\n\
+             | eviction, schedule | disk MiB off | disk MiB on | off/on | wall s off | wall s on | events off | events on |\n|---|---|---|---|---|---|---|---|\n",
+            policy_budget as f64 / 1048576.0,
+            args.policy_budget,
+            args.proxy_resolution
+        );
+        let mut reference = None;
+        for eviction in [Eviction::Demand, Eviction::Lru] {
+            for schedule in [Schedule::Net, Schedule::Fullest] {
+                let (off_image, off) = render_with(policy_budget, None, eviction, schedule)?;
+                let (on_image, on) =
+                    render_with(policy_budget, Some(&main_proxies), eviction, schedule)?;
+                let reference = reference.get_or_insert_with(|| off_image.clone());
+                if off_image != *reference || on_image != *reference {
+                    bail!("{eviction:?}, {schedule:?}: the image differs from the first policy's");
+                }
+                let disk_ratio = off.disk_bytes_read as f64 / on.disk_bytes_read.max(1) as f64;
+                md += &format!(
+                    "| {}, {} | {:.1} | {:.1} | {disk_ratio:.2}x | {:.2} | {:.2} | {} | {} |\n",
+                    policy_name(eviction, schedule).0,
+                    policy_name(eviction, schedule).1,
+                    off.disk_bytes_read as f64 / 1048576.0,
+                    on.disk_bytes_read as f64 / 1048576.0,
+                    off.wall_s,
+                    on.wall_s,
+                    off.batching_events,
+                    on.batching_events
+                );
+                policies.push(PolicyRow {
+                    eviction,
+                    schedule,
+                    off,
+                    on,
+                    disk_ratio,
+                });
+            }
+        }
+    }
+    let best = |mode: fn(&PolicyRow) -> &RenderStats| {
+        policies
+            .iter()
+            .min_by_key(|p| mode(p).disk_bytes_read)
+            .map(|p| (p, mode(p).disk_bytes_read))
+    };
+    let best_against_best = match (best(|p| &p.off), best(|p| &p.on)) {
+        (Some((off, off_bytes)), Some((on, on_bytes))) => {
+            let ratio = off_bytes as f64 / on_bytes.max(1) as f64;
+            let (e_off, s_off) = policy_name(off.eviction, off.schedule);
+            let (e_on, s_on) = policy_name(on.eviction, on.schedule);
+            md += &format!(
+                "\nEach mode at its best policy: without proxies {e_off}, {s_off} ({:.1} MiB), with proxies {e_on}, {s_on} ({:.1} MiB): {ratio:.2}x.\n",
+                off_bytes as f64 / 1048576.0,
+                on_bytes as f64 / 1048576.0
+            );
+            Some(ratio)
+        }
+        _ => None,
+    };
     print!("{md}");
     let report = OocReport {
         triangles: scene.triangles,
@@ -261,7 +348,23 @@ pub fn bench_ooc(args: &BenchOocArgs, quiet: bool) -> Result<()> {
         spp: args.spp,
         budgets,
         resolutions: rows,
+        policy_budget,
+        policies,
+        best_against_best,
         peak_rss_bytes: peak_rss_bytes(),
     };
     write_outputs(&args.json, &report, &args.markdown, &md)
+}
+
+/// The command-line names of a policy (`--eviction`, `--schedule`).
+fn policy_name(eviction: Eviction, schedule: Schedule) -> (&'static str, &'static str) {
+    let e = match eviction {
+        Eviction::Demand => "demand",
+        Eviction::Lru => "lru",
+    };
+    let s = match schedule {
+        Schedule::Net => "net",
+        Schedule::Fullest => "fullest",
+    };
+    (e, s)
 }
