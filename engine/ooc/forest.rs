@@ -9,7 +9,7 @@
 //! once and instanced thousands of times, as vegetation is in production scenes.
 
 use super::geom::Aabb;
-use super::prepare::{mix64, scattered_copy, unit, Instance, SceneSource, SourceMesh, Terrain};
+use super::prepare::{mix64, unit, Instance, SceneSource, SourceMesh, Terrain};
 use super::OocError;
 
 /// Tree variants per scene (each a mesh instanced many times).
@@ -180,13 +180,7 @@ impl SceneSource {
             total += scene.meshes[variant].triangles.len() as u64;
             trees += 1;
         }
-        let mut k = 0u64;
-        while total < triangles {
-            let (mesh, instance) = scattered_copy(&bounds[..scanned], &terrain, seed, k);
-            scene.instances.push(instance);
-            total += scene.meshes[mesh].triangles.len() as u64;
-            k += 1;
-        }
+        scene.scatter_copies(&bounds[..scanned], seed, triangles);
         Ok(scene)
     }
 }

@@ -324,15 +324,31 @@ impl SceneSource {
     ) -> Result<SceneSource, OocError> {
         let mut scene = SceneSource::terrain_for(meshes, triangles, seed)?;
         let bounds: Vec<Aabb> = scene.meshes.iter().map(SourceMesh::bounds).collect();
-        let mut total = scene.triangle_count();
+        scene.scatter_copies(&bounds, seed, triangles);
+        Ok(scene)
+    }
+
+    /// Adds the landscape's copies of the first `bounds.len()` meshes (bounds `bounds`) until
+    /// the scene holds `triangles`: the `k`-th copy is a mesh chosen from `seed` and `k`, its
+    /// largest extent 1-4 % of the terrain's size, rotated about y and set on the terrain.
+    pub(super) fn scatter_copies(&mut self, bounds: &[Aabb], seed: u64, triangles: u64) {
+        let terrain = self.terrain.expect("generated scenes have a terrain");
+        let size = terrain.size;
+        let mut total = self.triangle_count();
         let mut k = 0u64;
         while total < triangles {
-            let (mesh, instance) = scattered_copy(&bounds, &scene.terrain.unwrap(), seed, k);
-            scene.instances.push(instance);
-            total += scene.meshes[mesh].triangles.len() as u64;
+            let h = |d: u64| unit(mix64(seed ^ mix64(k * 16 + d)));
+            let mesh = (h(0) * bounds.len() as f64) as usize % bounds.len();
+            let extent = size * (0.01 + 0.03 * h(1));
+            let angle = h(2) * std::f64::consts::TAU;
+            let (x, z) = (h(3) * size, h(4) * size);
+            let at = [x, terrain.height_at(x, z), z];
+            let copy =
+                Instance::standing(mesh as u32, &bounds[mesh], extent, angle, at, 0.002 * size);
+            self.instances.push(copy);
+            total += self.meshes[mesh].triangles.len() as u64;
             k += 1;
         }
-        Ok(scene)
     }
 
     /// The generated scenes' start: `meshes` with no copies yet, and a terrain of about a
@@ -360,25 +376,6 @@ impl SceneSource {
             }),
         })
     }
-}
-
-/// The landscape's `k`-th copy: one of the meshes with `bounds` (chosen from `seed` and `k`),
-/// its largest extent 1-4 % of the terrain's size, rotated about y and set on the terrain.
-pub(super) fn scattered_copy(
-    bounds: &[Aabb],
-    terrain: &Terrain,
-    seed: u64,
-    k: u64,
-) -> (usize, Instance) {
-    let h = |d: u64| unit(mix64(seed ^ mix64(k * 16 + d)));
-    let mesh = (h(0) * bounds.len() as f64) as usize % bounds.len();
-    let size = terrain.size;
-    let extent = size * (0.01 + 0.03 * h(1));
-    let angle = h(2) * std::f64::consts::TAU;
-    let (x, z) = (h(3) * size, h(4) * size);
-    let at = [x, terrain.height_at(x, z), z];
-    let copy = Instance::standing(mesh as u32, &bounds[mesh], extent, angle, at, 0.002 * size);
-    (mesh, copy)
 }
 
 /// Options of [`prepare`].
