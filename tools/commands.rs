@@ -8,7 +8,7 @@ use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde::{Deserialize, Serialize};
 use voxdag::atomic_file::{check_output_path, write_atomic};
-use voxdag::attr::{ColorCodec, LosslessVariant, Materials, StoredColors};
+use voxdag::attr::{ChunkedColors, ColorCodec, LosslessVariant, Materials, StoredColors};
 use voxdag::dag::digest::ContentDigest;
 use voxdag::dag::encode::{
     DigestBuilder, EncodedDag, SsvdagEncoding, TransformGraph, TsvdagEncoding, TsvdagOptions,
@@ -883,42 +883,34 @@ fn compare_against(
     bail!("the attribute hashes differ, but every decoded colour and id is equal")
 }
 
-/// The decoded colours of a file in order, one chunk decoded at a time.
+/// The decoded colours of a file in order: its raw colours, or its chunks decoded one at a time.
 struct ColorCursor<'a> {
-    file: &'a VdagFile,
-    next_chunk: usize,
-    buffer: Vec<u32>,
+    /// The chunks still to decode (`None`: the raw colours are all in `buffer`).
+    chunks: Option<(&'a ChunkedColors, usize)>,
+    buffer: std::borrow::Cow<'a, [u32]>,
     at: usize,
 }
 
 impl<'a> ColorCursor<'a> {
     fn new(file: &'a VdagFile) -> ColorCursor<'a> {
         ColorCursor {
-            file,
-            next_chunk: 0,
-            buffer: Vec::new(),
+            chunks: file.encoded_only_colors().map(|c| (c, 0)),
+            buffer: std::borrow::Cow::Borrowed(&file.colors),
             at: 0,
         }
     }
 
     /// The next colour (`None` after the last).
     fn next(&mut self) -> Result<Option<u32>> {
-        let Some(stored) = self
-            .file
-            .stored_colors
-            .as_ref()
-            .filter(|_| self.file.colors.is_empty())
-        else {
-            self.at += 1;
-            return Ok(self.file.colors.get(self.at - 1).copied());
-        };
         while self.at == self.buffer.len() {
-            if self.next_chunk == stored.chunks.chunk_count() {
-                return Ok(None);
+            match &mut self.chunks {
+                Some((chunks, next)) if *next < chunks.chunk_count() => {
+                    self.buffer = chunks.decode_chunk(*next)?.into();
+                    *next += 1;
+                    self.at = 0;
+                }
+                _ => return Ok(None),
             }
-            self.buffer = stored.chunks.decode_chunk(self.next_chunk)?;
-            self.next_chunk += 1;
-            self.at = 0;
         }
         self.at += 1;
         Ok(Some(self.buffer[self.at - 1]))

@@ -991,10 +991,19 @@ impl VdagFile {
     /// colours, or (loaded with [`VdagFile::load_encoded_colors`]) its chunks, decoded a batch
     /// at a time.
     pub fn attributes_hash(&self) -> Result<u64, AttrError> {
-        match &self.stored_colors {
-            Some(s) if self.colors.is_empty() => chunked_colors_hash(&s.chunks),
-            _ => Ok(attributes_hash(&self.colors, self.materials.as_ref())),
+        match self.encoded_only_colors() {
+            Some(chunks) => chunked_colors_hash(chunks),
+            None => Ok(attributes_hash(&self.colors, self.materials.as_ref())),
         }
+    }
+
+    /// The colour chunks when they are the only form of the colours held (loaded with
+    /// [`VdagFile::load_encoded_colors`]); `None` when the colours are decoded or absent.
+    pub fn encoded_only_colors(&self) -> Option<&ChunkedColors> {
+        self.stored_colors
+            .as_ref()
+            .filter(|_| self.colors.is_empty())
+            .map(|s| &s.chunks)
     }
 
     /// Colours the file holds: its chunks' count, else its raw colours.
