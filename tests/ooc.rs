@@ -808,4 +808,13 @@ fn bench_ooc_reports_figures_and_policies() {
     assert!((reported - best).abs() < 1e-9, "{reported} vs {best}");
     let text = std::fs::read_to_string(&md).unwrap();
     assert!(text.contains("Each mode at its best policy"), "{text}");
+    // The table names the policies as the JSON and the CLI do.
+    for row in [
+        "| demand, net |",
+        "| demand, fullest |",
+        "| lru, net |",
+        "| lru, fullest |",
+    ] {
+        assert!(text.contains(row), "{row}: {text}");
+    }
 }

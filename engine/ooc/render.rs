@@ -103,6 +103,14 @@ pub enum Schedule {
 }
 
 impl Schedule {
+    /// The policy's name, as `--schedule` and the report spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Schedule::Fullest => "fullest",
+            Schedule::Net => "net",
+        }
+    }
+
     /// The point to load among `(point, queued rays, demand)` of the non-empty queues: the
     /// largest `queued` (fullest) or `queued - demand` (net); the lowest id on ties.
     pub fn choose(self, queues: impl IntoIterator<Item = (u32, u32, u32)>) -> Option<u32> {
@@ -129,6 +137,14 @@ pub struct Resident {
 }
 
 impl Eviction {
+    /// The policy's name, as `--eviction` and the report spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Eviction::Lru => "lru",
+            Eviction::Demand => "demand",
+        }
+    }
+
     /// The point to evict among `resident`: the smallest `last_used` (LRU) or the smallest
     /// `(demand, last_used)` (demand); the lowest id on ties. `None` when nothing is resident.
     pub fn victim(self, resident: impl IntoIterator<Item = Resident>) -> Option<u32> {

@@ -297,8 +297,8 @@ pub fn bench_ooc(args: &BenchOocArgs, quiet: bool) -> Result<()> {
                 let disk_ratio = off.disk_bytes_read as f64 / on.disk_bytes_read.max(1) as f64;
                 md += &format!(
                     "| {}, {} | {:.1} | {:.1} | {disk_ratio:.2}x | {:.2} | {:.2} | {} | {} |\n",
-                    policy_name(eviction, schedule).0,
-                    policy_name(eviction, schedule).1,
+                    eviction.name(),
+                    schedule.name(),
                     off.disk_bytes_read as f64 / 1048576.0,
                     on.disk_bytes_read as f64 / 1048576.0,
                     off.wall_s,
@@ -325,11 +325,13 @@ pub fn bench_ooc(args: &BenchOocArgs, quiet: bool) -> Result<()> {
     let best_against_best = match (best(|p| &p.off), best(|p| &p.on)) {
         (Some((off, off_bytes)), Some((on, on_bytes))) => {
             let ratio = off_bytes as f64 / on_bytes.max(1) as f64;
-            let (e_off, s_off) = policy_name(off.eviction, off.schedule);
-            let (e_on, s_on) = policy_name(on.eviction, on.schedule);
             md += &format!(
-                "\nEach mode at its best policy: without proxies {e_off}, {s_off} ({:.1} MiB), with proxies {e_on}, {s_on} ({:.1} MiB): {ratio:.2}x.\n",
+                "\nEach mode at its best policy: without proxies {}, {} ({:.1} MiB), with proxies {}, {} ({:.1} MiB): {ratio:.2}x.\n",
+                off.eviction.name(),
+                off.schedule.name(),
                 off_bytes as f64 / 1048576.0,
+                on.eviction.name(),
+                on.schedule.name(),
                 on_bytes as f64 / 1048576.0
             );
             Some(ratio)
@@ -354,17 +356,4 @@ pub fn bench_ooc(args: &BenchOocArgs, quiet: bool) -> Result<()> {
         peak_rss_bytes: peak_rss_bytes(),
     };
     write_outputs(&args.json, &report, &args.markdown, &md)
-}
-
-/// The command-line names of a policy (`--eviction`, `--schedule`).
-fn policy_name(eviction: Eviction, schedule: Schedule) -> (&'static str, &'static str) {
-    let e = match eviction {
-        Eviction::Demand => "demand",
-        Eviction::Lru => "lru",
-    };
-    let s = match schedule {
-        Schedule::Net => "net",
-        Schedule::Fullest => "fullest",
-    };
-    (e, s)
 }
