@@ -9,6 +9,8 @@ use std::collections::{HashMap, HashSet};
 use proptest::prelude::*;
 use voxdag::dag::transform::{Transform, TransformSet, TRANSFORM_COUNT};
 use voxdag::dag::{symmetry_counts, CanonicalDag, Invariance, Ssvdag, Svdag};
+use voxdag::gpu::test_layouts::DecodeTestPush;
+use voxdag::gpu::{shaders, ComputePipelineDesc, MemLocation};
 use voxdag::scene::morton;
 use voxdag::scene::Voxels;
 
@@ -419,6 +421,105 @@ fn leaf_bit_permutation_matches_voxel_transform() {
             assert_eq!(t.inverse().apply_leaf(t.apply_leaf(mask)), mask);
         }
     }
+}
+
+/// The GPU's transform arithmetic (`shaders/glsl/render/xform.glsl`, which the transformed
+/// formats' traversal uses) equals `Transform` for all 48 transforms: leaves (every single
+/// voxel and random masks), child masks, stored octants, compositions with every transform and
+/// translations (`T(p + tr) = T(p) + tr'`).
+#[test]
+fn gpu_transform_arithmetic_equals_cpu() {
+    const OUT_WORDS: usize = 8;
+    let mut rng = Rng(0x51ed_2701_ab3c_9d44);
+    // Records: leaf (2 words), child mask | octant << 8 | composed transform << 16, translation.
+    let mut records: Vec<[u32; 4]> = Vec::new();
+    for r in 0..256usize {
+        let leaf = if r < 64 {
+            1u64 << r
+        } else {
+            rng.next() & rng.next()
+        };
+        let word = rng.next();
+        let tr: [i8; 3] = std::array::from_fn(|a| ((word >> (8 * a)) % 31) as i8 - 15);
+        records.push([
+            leaf as u32,
+            (leaf >> 32) as u32,
+            (r as u32 & 0xff) | ((r as u32 % 8) << 8) | ((r as u32 % 48) << 16),
+            u32::from_le_bytes([tr[0] as u8, tr[1] as u8, tr[2] as u8, 0]),
+        ]);
+    }
+    let ctx = common::gpu();
+    let cases = records.len() * TRANSFORM_COUNT;
+    let pipeline = ctx
+        .create_compute_pipeline(&ComputePipelineDesc {
+            name: "test transform arithmetic",
+            spirv: shaders::TEST_XFORM,
+            spec_constants: &[],
+            push_constant_size: std::mem::size_of::<DecodeTestPush>() as u32,
+            storage_image: false,
+        })
+        .unwrap();
+    let input: Vec<u32> = records.iter().flatten().copied().collect();
+    let input = ctx.upload("transform test records", &input).unwrap();
+    let out = ctx
+        .create_buffer(
+            "transform test results",
+            (cases * OUT_WORDS * 4) as u64,
+            MemLocation::GpuOnly,
+        )
+        .unwrap();
+    let push = bytemuck::bytes_of(&DecodeTestPush {
+        chunk_addr: input.address(),
+        out_addr: out.address(),
+        count: cases as u32,
+        pad: 0,
+    })
+    .to_vec();
+    let mut cmd = ctx.begin_commands("transform test").unwrap();
+    cmd.dispatch(&pipeline, [(cases as u32).div_ceil(64), 1, 1], &push, None)
+        .unwrap();
+    cmd.submit().unwrap();
+    let got = ctx.download::<u32>(&out).unwrap();
+    for (r, record) in records.iter().enumerate() {
+        let leaf = record[0] as u64 | (record[1] as u64) << 32;
+        let mask = (record[2] & 0xff) as u8;
+        let octant = ((record[2] >> 8) & 7) as usize;
+        let inner = Transform::from_index((record[2] >> 16) as usize).unwrap();
+        let tr = record[3].to_le_bytes().map(|b| b as i8 as i32);
+        for t in Transform::all() {
+            let case = r * TRANSFORM_COUNT + t.index();
+            let words = &got[case * OUT_WORDS..(case + 1) * OUT_WORDS];
+            let what = format!("transform {}, record {r}", t.index());
+            assert_eq!(
+                words[0] as u64 | (words[1] as u64) << 32,
+                t.apply_leaf(leaf),
+                "leaf: {what}"
+            );
+            assert_eq!(
+                words[2],
+                t.apply_child_mask(mask) as u32,
+                "child mask: {what}"
+            );
+            assert_eq!(
+                words[3] as usize,
+                t.inverse().apply_octant(octant),
+                "stored octant: {what}"
+            );
+            assert_eq!(
+                words[4] as usize,
+                t.compose(inner).index(),
+                "compose: {what}"
+            );
+            let p = [20u32, 21, 22];
+            let moved: [u32; 3] = std::array::from_fn(|a| (p[a] as i32 + tr[a]) as u32);
+            let (tp, tq) = (t.apply_point(p, 64), t.apply_point(moved, 64));
+            let want: [i32; 3] = std::array::from_fn(|a| tq[a] as i32 - tp[a] as i32);
+            let seen = [words[5] as i32, words[6] as i32, words[7] as i32];
+            assert_eq!(seen, want, "translation {tr:?}: {what}");
+        }
+    }
+    ctx.wait_idle().unwrap();
+    assert_eq!(ctx.validation_errors(), 0, "validation messages (see log)");
 }
 
 // ---------------------------------------------------------------- count tests

@@ -24,13 +24,13 @@ gpu_shared! {
         pub seed: uint,
     }
 
-    /// Push constants of the colour-decoder test shaders (`test/*_decode.comp`).
+    /// Push constants of the decoder test shaders (`test/*_decode.comp`, `test/xform.comp`).
     pub struct DecodeTestPush {
-        /// The encoded chunk's words.
+        /// The input words (an encoded colour chunk; the transform test's records).
         pub chunk_addr: uint64_t,
-        /// One RGBA8 word per colour.
+        /// The output words (one RGBA8 word per colour; 8 words per transform test case).
         pub out_addr: uint64_t,
-        /// Colours to decode.
+        /// Colours to decode, transform cases to run.
         pub count: uint,
         /// Padding to 8 bytes.
         pub pad: uint,

@@ -73,122 +73,7 @@ uint dag_level_tables(uint record_y) {
     return record_y & ((1u << DAG_TABLE_BITS_SHIFT) - 1u);
 }
 
-// Transform group (engine/dag/transform.rs) computed with integer arithmetic rather than the
-// info block's tables: on lavapipe every buffer load is a scalar loop over the 8 SIMD lanes that
-// runs whether or not a lane needs it, while these few vector operations cost far less
-// (docs/pathtracing.md, "Where the time goes on lavapipe"). They equal `Transform::compose`,
-// `inverse`, `apply_octant`, `apply_child_mask` and `apply_leaf` for all 48 transforms.
-// Transform t = 8 * permutation + mirror bits; output axis i reads input axis
-// `PERMUTATIONS[t >> 3][i]`, then mirror bit i flips it.
-
-// Output axis i of transform t reads input axis `xform_axis(t, i)` (2 bits per permutation).
-uint xform_axis(uint t, uint i) {
-    uint packed = i == 0u ? 0xa50u : (i == 1u ? 0x489u : 0x126u);
-    return (packed >> (2u * (t >> 3u))) & 3u;
-}
-
-// The octant bits o permuted by t's permutation (no mirror).
-uint xform_permute_bits(uint t, uint o) {
-    return ((o >> xform_axis(t, 0u)) & 1u) | (((o >> xform_axis(t, 1u)) & 1u) << 1u) |
-           (((o >> xform_axis(t, 2u)) & 1u) << 2u);
-}
-
-uint xform_octant(uint t, uint o) {
-    return xform_permute_bits(t, o) ^ (t & 7u);
-}
-
-// The stored octant s with `xform_octant(t, s) == c`.
-uint xform_stored_octant(uint t, uint c) {
-    uint x = c ^ (t & 7u);
-    return ((x & 1u) << xform_axis(t, 0u)) | (((x >> 1u) & 1u) << xform_axis(t, 1u)) |
-           (((x >> 2u) & 1u) << xform_axis(t, 2u));
-}
-
-uint xform_compose(uint a, uint b) {
-    uint c0 = xform_axis(b, xform_axis(a, 0u));
-    uint c1 = xform_axis(b, xform_axis(a, 1u));
-    uint c2 = xform_axis(b, xform_axis(a, 2u));
-    uint perm = 2u * c0 + (c1 > c2 ? 1u : 0u);
-    return 8u * perm + ((a & 7u) ^ xform_permute_bits(a, b & 7u));
-}
-
-uint xform_inverse(uint t) {
-    uint p = t >> 3u;
-    uint q = p == 3u ? 4u : (p == 4u ? 3u : p);
-    uint m = t & 7u;
-    uint mb = ((m & 1u) << xform_axis(t, 0u)) | (((m >> 1u) & 1u) << xform_axis(t, 1u)) |
-              (((m >> 2u) & 1u) << xform_axis(t, 2u));
-    return 8u * q + mb;
-}
-
-// Delta swap: exchanges the bits of x selected by mask with those `shift` above them.
-uint xform_delta_swap(uint x, uint mask, uint shift) {
-    uint d = ((x >> shift) ^ x) & mask;
-    return x ^ d ^ (d << shift);
-}
-
-uint64_t xform_delta_swap64(uint64_t x, uint64_t mask, uint shift) {
-    uint64_t d = ((x >> shift) ^ x) & mask;
-    return x ^ d ^ (d << shift);
-}
-
-// Index-bit transpositions realising permutation p: first (2 bits per p) then second;
-// code 1 swaps index bits 0 and 1, 2 swaps 1 and 2, 3 swaps 0 and 2.
-#define XFORM_FIRST_SWAP 0xe58u
-#define XFORM_SECOND_SWAP 0x180u
-
-// The mask of child octants (bit o) seen through t: bit `xform_octant(t, o)` of the result.
-uint xform_child_mask(uint t, uint mask) {
-    uint p = t >> 3u;
-    uint m = mask;
-    for (uint k = 0u; k < 2u; k++) {
-        uint code = ((k == 0u ? XFORM_FIRST_SWAP : XFORM_SECOND_SWAP) >> (2u * p)) & 3u;
-        uint sel = code == 1u ? 0x22u : (code == 2u ? 0x0cu : (code == 3u ? 0x0au : 0u));
-        m = xform_delta_swap(m, sel, code);
-    }
-    m = (t & 1u) != 0u ? xform_delta_swap(m, 0x55u, 1u) : m;
-    m = (t & 2u) != 0u ? xform_delta_swap(m, 0x33u, 2u) : m;
-    m = (t & 4u) != 0u ? xform_delta_swap(m, 0x0fu, 4u) : m;
-    return m;
-}
-
-// A 4^3 leaf mask (bit = Morton code sub-block << 3 | voxel) seen through t (`apply_leaf`).
-uvec2 xform_leaf(uint t, uvec2 bits) {
-    uint64_t x = packUint2x32(bits);
-    uint p = t >> 3u;
-    for (uint k = 0u; k < 2u; k++) {
-        uint code = ((k == 0u ? XFORM_FIRST_SWAP : XFORM_SECOND_SWAP) >> (2u * p)) & 3u;
-        uint64_t lo = code == 1u ? 0x2222222222222222ul
-                    : (code == 2u ? 0x0c0c0c0c0c0c0c0cul : (code == 3u ? 0x0a0a0a0a0a0a0a0aul : 0ul));
-        uint64_t hi = code == 1u ? 0x0000ff000000ff00ul
-                    : (code == 2u ? 0x00000000ffff0000ul : (code == 3u ? 0x00000000ff00ff00ul : 0ul));
-        x = xform_delta_swap64(x, lo, code);
-        x = xform_delta_swap64(x, hi, 8u * code);
-    }
-    if ((t & 1u) != 0u) {
-        x = xform_delta_swap64(xform_delta_swap64(x, 0x5555555555555555ul, 1u), 0x00ff00ff00ff00fful, 8u);
-    }
-    if ((t & 2u) != 0u) {
-        x = xform_delta_swap64(xform_delta_swap64(x, 0x3333333333333333ul, 2u), 0x0000ffff0000fffful, 16u);
-    }
-    if ((t & 4u) != 0u) {
-        x = xform_delta_swap64(xform_delta_swap64(x, 0x0f0f0f0f0f0f0f0ful, 4u), 0x00000000fffffffful, 32u);
-    }
-    return unpackUint2x32(x);
-}
-
-// `T(Shift_t(X)) = Shift_t'(T(X))`: the translation seen through t (`transform_translation`).
-// Selects rather than `tr[axis]`: a vector indexed by a value lavapipe cannot fold costs
-// several times more (docs/pathtracing.md).
-int xform_pick(ivec3 v, uint axis) {
-    return axis == 0u ? v.x : (axis == 1u ? v.y : v.z);
-}
-
-ivec3 xform_translation(uint t, ivec3 tr) {
-    ivec3 v = ivec3(xform_pick(tr, xform_axis(t, 0u)), xform_pick(tr, xform_axis(t, 1u)),
-                    xform_pick(tr, xform_axis(t, 2u)));
-    return mix(v, -v, notEqual(uvec3(t) & uvec3(1u, 2u, 4u), uvec3(0u)));
-}
+#include "render/xform.glsl"
 
 #if defined(DAG_FORMAT_SSVDAG) || defined(DAG_FORMAT_TSVDAG)
 #define DAG_ENCODED 1
@@ -284,9 +169,12 @@ uint dag_inner_mask(uint node, uint xform, uint level) {
 void dag_child_masks(uint child, uint xform, uint child_level, out uint mask, out uvec2 leaf,
                      out uint aux) {
     uvec2 pair = dag_word_pair(child_level == 0u ? 2u * child : g_dag_stream_base + (child >> 1u));
-    leaf = xform_leaf(xform, pair);
     aux = (pair.x >> ((child & 1u) << 4u)) & 0xffffu;
-    mask = dag_frame_mask(aux, xform);
+    // The leaf's voxels and the inner node's mask go through one in-byte transform (all lanes
+    // run both cases anyway); only the leaf's sub-blocks move.
+    uvec2 in_bytes = xform_in_bytes(xform, child_level == 0u ? pair : uvec2(dag_header_mask(aux), 0u));
+    leaf = xform_bytes(xform, in_bytes);
+    mask = in_bytes.x;
 }
 
 // Voxels of the children before world octant c of the inner node (node, xform) with header
