@@ -11,8 +11,7 @@ use proptest::prelude::*;
 use voxdag::attr::varbit::{self, BlockColors, VarbitBlock, MACRO_BLOCK_COLORS};
 use voxdag::attr::{dado, AttrError};
 use voxdag::dag::Svdag;
-use voxdag::gpu::test_layouts::DecodeTestPush;
-use voxdag::gpu::{shaders, ComputePipelineDesc, GpuContext, MemLocation};
+use voxdag::gpu::{shaders, GpuContext};
 use voxdag::scene::{self, ImportOptions};
 
 /// Small deterministic generator for test data (xorshift64*).
@@ -151,45 +150,6 @@ fn varbit_corrupt_headers_are_errors() {
     assert!(varbit::decode_all(&words, count + MACRO_BLOCK_COLORS).is_err());
 }
 
-fn decode_on_gpu(ctx: &Arc<GpuContext>, spirv: &[u32], words: &[u32], count: usize) -> Vec<u32> {
-    let pipeline = ctx
-        .create_compute_pipeline(&ComputePipelineDesc {
-            name: "test colour decode",
-            spirv,
-            spec_constants: &[],
-            push_constant_size: std::mem::size_of::<DecodeTestPush>() as u32,
-            storage_image: false,
-        })
-        .unwrap();
-    let chunk = ctx.upload("colour chunk", words).unwrap();
-    let out = ctx
-        .create_buffer(
-            "decoded colours",
-            count.max(1) as u64 * 4,
-            MemLocation::GpuOnly,
-        )
-        .unwrap();
-    let push = bytemuck::bytes_of(&DecodeTestPush {
-        chunk_addr: chunk.address(),
-        out_addr: out.address(),
-        count: count as u32,
-        pad: 0,
-    })
-    .to_vec();
-    let mut cmd = ctx.begin_commands("colour decode").unwrap();
-    cmd.dispatch(
-        &pipeline,
-        [(count as u32).div_ceil(64).max(1), 1, 1],
-        &push,
-        None,
-    )
-    .unwrap();
-    cmd.submit().unwrap();
-    let mut got = ctx.download::<u32>(&out).unwrap();
-    got.truncate(count);
-    got
-}
-
 fn assert_clean(ctx: &Arc<GpuContext>) {
     // Deferred releases wait for the GPU: drain them first.
     ctx.wait_idle().unwrap();
@@ -203,7 +163,7 @@ fn varbit_gpu_decode_equals_cpu() {
     for (count, max_run, seed) in [(1usize, 1u32, 1u64), (50_001, 300, 2), (40_000, 3, 3)] {
         let words = varbit::write(&random_blocks(count, max_run, seed), count).unwrap();
         let cpu = varbit::decode_all(&words, count).unwrap();
-        let gpu = decode_on_gpu(&ctx, shaders::TEST_VARBIT_DECODE, &words, count);
+        let gpu = common::run_test_shader(&ctx, shaders::TEST_VARBIT_DECODE, &words, count, 1);
         assert_eq!(gpu, cpu, "count {count}, runs up to {max_run}");
     }
     assert_clean(&ctx);
@@ -379,7 +339,7 @@ fn palette_gpu_decode_equals_cpu() {
             .map(|_| rng.below(alphabet).wrapping_mul(0x00c0_ffee) | 0xff00_0000)
             .collect();
         let words = dado::encode(&colors);
-        let gpu = decode_on_gpu(&ctx, shaders::TEST_PALETTE_DECODE, &words, count);
+        let gpu = common::run_test_shader(&ctx, shaders::TEST_PALETTE_DECODE, &words, count, 1);
         assert_eq!(gpu, colors, "count {count}, alphabet {alphabet}");
     }
     assert_clean(&ctx);
@@ -393,7 +353,7 @@ fn lossy_gpu_decode_equals_cpu() {
         let count = colors.len();
         let words = encode(&colors, 0.06);
         let cpu = varbit::decode_all(&words, count).unwrap();
-        let gpu = decode_on_gpu(&ctx, shaders::TEST_VARBIT_DECODE, &words, count);
+        let gpu = common::run_test_shader(&ctx, shaders::TEST_VARBIT_DECODE, &words, count, 1);
         assert_eq!(gpu, cpu, "{name}");
     }
     assert_clean(&ctx);

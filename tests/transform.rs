@@ -9,8 +9,7 @@ use std::collections::{HashMap, HashSet};
 use proptest::prelude::*;
 use voxdag::dag::transform::{Transform, TransformSet, TRANSFORM_COUNT};
 use voxdag::dag::{symmetry_counts, CanonicalDag, Invariance, Ssvdag, Svdag};
-use voxdag::gpu::test_layouts::DecodeTestPush;
-use voxdag::gpu::{shaders, ComputePipelineDesc, MemLocation};
+use voxdag::gpu::shaders;
 use voxdag::scene::morton;
 use voxdag::scene::Voxels;
 
@@ -449,37 +448,9 @@ fn gpu_transform_arithmetic_equals_cpu() {
         ]);
     }
     let ctx = common::gpu();
-    let cases = records.len() * TRANSFORM_COUNT;
-    let pipeline = ctx
-        .create_compute_pipeline(&ComputePipelineDesc {
-            name: "test transform arithmetic",
-            spirv: shaders::TEST_XFORM,
-            spec_constants: &[],
-            push_constant_size: std::mem::size_of::<DecodeTestPush>() as u32,
-            storage_image: false,
-        })
-        .unwrap();
     let input: Vec<u32> = records.iter().flatten().copied().collect();
-    let input = ctx.upload("transform test records", &input).unwrap();
-    let out = ctx
-        .create_buffer(
-            "transform test results",
-            (cases * OUT_WORDS * 4) as u64,
-            MemLocation::GpuOnly,
-        )
-        .unwrap();
-    let push = bytemuck::bytes_of(&DecodeTestPush {
-        chunk_addr: input.address(),
-        out_addr: out.address(),
-        count: cases as u32,
-        pad: 0,
-    })
-    .to_vec();
-    let mut cmd = ctx.begin_commands("transform test").unwrap();
-    cmd.dispatch(&pipeline, [(cases as u32).div_ceil(64), 1, 1], &push, None)
-        .unwrap();
-    cmd.submit().unwrap();
-    let got = ctx.download::<u32>(&out).unwrap();
+    let cases = records.len() * TRANSFORM_COUNT;
+    let got = common::run_test_shader(&ctx, shaders::TEST_XFORM, &input, cases, OUT_WORDS);
     for (r, record) in records.iter().enumerate() {
         let leaf = record[0] as u64 | (record[1] as u64) << 32;
         let mask = (record[2] & 0xff) as u8;

@@ -9,7 +9,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use voxdag::dag::Svdag;
-use voxdag::gpu::{GpuContext, GpuOptions};
+use voxdag::gpu::test_layouts::DecodeTestPush;
+use voxdag::gpu::{ComputePipelineDesc, GpuContext, GpuOptions, MemLocation};
 use voxdag::render::RenderOutput;
 use voxdag::scene::{self, ImportOptions};
 
@@ -254,4 +255,53 @@ pub fn has_translated_pointer(e: &voxdag::dag::encode::TsvdagEncoding) -> bool {
             .enumerate()
             .any(|(i, &c)| c != 0 && !starts.contains(&i))
     })
+}
+
+/// Runs a test shader with `DecodeTestPush` push constants (`shaders/glsl/test/*_decode.comp`,
+/// `test/xform.comp`): `count` invocations in workgroups of 64 read `input` and write
+/// `count * words_per_case` output words, which are returned.
+pub fn run_test_shader(
+    ctx: &Arc<GpuContext>,
+    spirv: &[u32],
+    input: &[u32],
+    count: usize,
+    words_per_case: usize,
+) -> Vec<u32> {
+    let pipeline = ctx
+        .create_compute_pipeline(&ComputePipelineDesc {
+            name: "test shader",
+            spirv,
+            spec_constants: &[],
+            push_constant_size: std::mem::size_of::<DecodeTestPush>() as u32,
+            storage_image: false,
+        })
+        .unwrap();
+    let input = ctx.upload("test shader input", input).unwrap();
+    let out_words = count * words_per_case;
+    let out = ctx
+        .create_buffer(
+            "test shader output",
+            out_words.max(1) as u64 * 4,
+            MemLocation::GpuOnly,
+        )
+        .unwrap();
+    let push = bytemuck::bytes_of(&DecodeTestPush {
+        chunk_addr: input.address(),
+        out_addr: out.address(),
+        count: count as u32,
+        pad: 0,
+    })
+    .to_vec();
+    let mut cmd = ctx.begin_commands("test shader").unwrap();
+    cmd.dispatch(
+        &pipeline,
+        [(count as u32).div_ceil(64).max(1), 1, 1],
+        &push,
+        None,
+    )
+    .unwrap();
+    cmd.submit().unwrap();
+    let mut got = ctx.download::<u32>(&out).unwrap();
+    got.truncate(out_words);
+    got
 }
