@@ -599,6 +599,8 @@ fn bench_pathtrace_keeps_colours_in_the_svdag32_cache_only() {
         "32x18",
         "--spp",
         "1",
+        "--rounds",
+        "2",
         "--formats",
         "svdag32,tsvdag-sa-huffman",
         "--cache",
@@ -614,7 +616,40 @@ fn bench_pathtrace_keeps_colours_in_the_svdag32_cache_only() {
     for row in rows {
         assert_eq!(row["gpu_colors"], "raw");
         assert_eq!(row["first_hit_mismatches"], 0);
+        // Two rounds of one sample per tracer: each round's ratio, the median among them.
+        assert_eq!(row["rounds"], 2);
+        for tracer in ["mega", "wave"] {
+            let samples = row[format!("{tracer}_samples_ms")].as_array().unwrap();
+            assert_eq!(samples.len(), 2);
+            let ratios: Vec<f64> = row[format!("{tracer}_vs_svdag32_rounds")]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|r| r.as_f64().unwrap())
+                .collect();
+            assert_eq!(ratios.len(), 2);
+            let ratio = row[format!("{tracer}_vs_svdag32")].as_f64().unwrap();
+            assert!(ratios.contains(&ratio), "{ratio} is one of {ratios:?}");
+            if row["format"] == "svdag32" {
+                assert_eq!(ratios, [1.0, 1.0]);
+            }
+        }
     }
+    assert_clean_error(
+        &voxdag(&[
+            "bench",
+            "pathtrace",
+            "--scenes",
+            vox,
+            "--rounds",
+            "0",
+            "--json",
+            s(&json),
+            "--markdown",
+            s(&md),
+        ]),
+        &["--rounds"],
+    );
     let colors = |format: &str| {
         let file = voxdag::dag::VdagFile::load(&cache.join(format!("ff3-64-{format}.vdag")));
         file.unwrap().colors.len()

@@ -4,6 +4,9 @@
 //! reference path tracer (rayon, all cores) in the same run; rays per second (rays = camera +
 //! bounce + shadow rays, counted by the CPU reference, which traces the same paths). GPU time of
 //! a sample is the sum of its profiled passes; the table reports the median over the samples.
+//! With `--rounds N` every round times every format once, svdag32 first, so each round's ratios
+//! are measured back to back; the table reports the medians over the rounds (a shared machine's
+//! load drifts over minutes: one round's ratios are worth more than one long run per format).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -59,6 +62,11 @@ pub struct BenchPathtraceArgs {
     /// Samples per pixel timed per tracer and format (the median sample is reported).
     #[arg(long, default_value_t = 3)]
     spp: u32,
+    /// Rounds: each times every format once (svdag32 first); the table gives the median over
+    /// the rounds of the ms and of each round's ratio to svdag32, with the ratios' range
+    /// (3-5 on a shared machine, where one run's ratios move by 10 points).
+    #[arg(long, default_value_t = 1)]
+    rounds: u32,
     /// Surface interactions per path.
     #[arg(long, default_value_t = 4)]
     bounces: u32,
@@ -107,12 +115,17 @@ struct PathtraceRow {
     /// Median GPU ms per sample (None: tracer not run).
     mega_ms_per_sample: Option<f64>,
     wave_ms_per_sample: Option<f64>,
-    /// Every sample's GPU ms.
+    /// Every sample's GPU ms, round after round.
     mega_samples_ms: Vec<f64>,
     wave_samples_ms: Vec<f64>,
-    /// Relative to svdag32 in the same run (1.0 = same).
+    /// Rounds timed (`--rounds`).
+    rounds: u32,
+    /// Relative to svdag32 in the same round (1.0 = same), the median over the rounds.
     mega_vs_svdag32: Option<f64>,
     wave_vs_svdag32: Option<f64>,
+    /// Each round's ratio to svdag32.
+    mega_vs_svdag32_rounds: Vec<f64>,
+    wave_vs_svdag32_rounds: Vec<f64>,
     /// CPU reference ms per sample on the scene (svdag32), threads.
     cpu_ms_per_sample: Option<f64>,
     cpu_threads: usize,
@@ -233,7 +246,7 @@ fn gpu_samples(
     s: &PtSettings,
     mode: PtMode,
     label: &str,
-    passes: &mut String,
+    passes: Option<&mut String>,
 ) -> Result<(Vec<f64>, PtImage)> {
     let mut warm = *s;
     warm.spp = 1;
@@ -248,15 +261,49 @@ fn gpu_samples(
         cmd.submit()?;
         samples.push(profiler.resolve()?.iter().map(|p| p.gpu_ms).sum());
     }
-    passes.push_str(&format!("{label} {mode:?}:\n{}", profiler.table()));
+    if let Some(passes) = passes {
+        passes.push_str(&format!("{label} {mode:?}:\n{}", profiler.table()));
+    }
     Ok((samples, target.read(ctx, s.spp)?))
 }
 
-/// The svdag32 run every other format is compared with: its median ms and image.
-struct Base {
-    mega_ms: Option<f64>,
-    wave_ms: Option<f64>,
-    image: PtImage,
+/// One format's timings: per round, every sample's ms of each tracer; the first round's image.
+#[derive(Default)]
+struct Timing {
+    mega: Vec<Vec<f64>>,
+    wave: Vec<Vec<f64>>,
+    image: Option<PtImage>,
+}
+
+impl Timing {
+    /// Each round's median sample of one tracer (empty: not run).
+    fn round_medians(rounds: &[Vec<f64>]) -> Vec<f64> {
+        rounds
+            .iter()
+            .filter(|r| !r.is_empty())
+            .map(|r| median(r))
+            .collect()
+    }
+}
+
+/// A format's row before timing: its name, encoded bytes and colour storage.
+struct FormatEntry {
+    label: String,
+    node_bytes: Option<u64>,
+    gpu_colors: &'static str,
+}
+
+/// The `k`-th format of a round (counting on): added by the first round, found by the others.
+fn format_slot<'e>(
+    entries: &'e mut Vec<(FormatEntry, Timing)>,
+    k: &mut usize,
+    entry: FormatEntry,
+) -> &'e mut (FormatEntry, Timing) {
+    if *k == entries.len() {
+        entries.push((entry, Timing::default()));
+    }
+    *k += 1;
+    &mut entries[*k - 1]
 }
 
 /// What every format of one scene and resolution shares.
@@ -272,51 +319,68 @@ struct RunConfig<'a> {
 }
 
 impl RunConfig<'_> {
-    /// Times the tracers on `scene` (format `format`) and compares with `base` (set by the
-    /// first call: svdag32). First hits are compared on geometry (hit, t, voxel, normal): the
-    /// hash DAG's colour index is a material, not the Morton rank.
-    fn row(
+    /// Times the tracers on `scene` for one round into `timing` (the first round keeps the
+    /// image and the per-pass tables).
+    fn measure(
         &self,
         scene: &GpuScene,
         format: &str,
-        node_bytes: Option<u64>,
-        gpu_colors: &str,
-        base: &mut Option<Base>,
+        timing: &mut Timing,
         passes: &mut String,
-    ) -> Result<PathtraceRow> {
-        let s = self.settings;
+    ) -> Result<()> {
         let label = format!("{} N={} {format}", self.scene, self.resolution);
-        let mut mega = (Vec::new(), None);
-        let mut wave = (Vec::new(), None);
+        let first = timing.image.is_none();
         for &mode in self.modes {
-            let (samples, image) =
-                gpu_samples(self.ctx, self.tracer, scene, s, mode, &label, passes)?;
-            let slot = if mode == PtMode::Megakernel {
-                &mut mega
-            } else {
-                &mut wave
-            };
-            *slot = (samples, Some(image));
+            let (samples, image) = gpu_samples(
+                self.ctx,
+                self.tracer,
+                scene,
+                self.settings,
+                mode,
+                &label,
+                first.then_some(&mut *passes),
+            )?;
+            match mode {
+                PtMode::Megakernel => timing.mega.push(samples),
+                PtMode::Wavefront => timing.wave.push(samples),
+            }
+            if timing.image.is_none() {
+                timing.image = Some(image);
+            }
         }
-        let mega_ms = (!mega.0.is_empty()).then(|| median(&mega.0));
-        let wave_ms = (!wave.0.is_empty()).then(|| median(&wave.0));
-        let image = mega.1.or(wave.1).expect("at least one tracer");
-        let geometry = |h: &voxdag::render::FirstHit| (h.hit, h.t_bits, h.voxel, h.normal);
-        let (mismatches, diff) = match base.as_ref() {
-            None => (0, 0.0),
-            Some(b) => (
-                image
-                    .first_hits
-                    .iter()
-                    .zip(&b.image.first_hits)
-                    .filter(|(x, y)| geometry(x) != geometry(y))
-                    .count(),
-                mean_abs_diff(&image, &b.image),
-            ),
+        Ok(())
+    }
+
+    /// The row of `format` from its timings and svdag32's (`base`). First hits are compared on
+    /// geometry (hit, t, voxel, normal): the hash DAG's colour index is a material, not the
+    /// Morton rank.
+    fn row(&self, format: &FormatEntry, timing: &Timing, base: &Timing) -> PathtraceRow {
+        let s = self.settings;
+        let label = format!("{} N={} {}", self.scene, self.resolution, format.label);
+        let (mega_rounds, wave_rounds) = (
+            Timing::round_medians(&timing.mega),
+            Timing::round_medians(&timing.wave),
+        );
+        let ratios = |rounds: &[f64], base: &[Vec<f64>]| -> Vec<f64> {
+            rounds
+                .iter()
+                .zip(Timing::round_medians(base))
+                .map(|(a, b)| a / b)
+                .collect()
         };
-        let (base_mega, base_wave) = base
-            .as_ref()
-            .map_or((mega_ms, wave_ms), |b| (b.mega_ms, b.wave_ms));
+        let mega_ratios = ratios(&mega_rounds, &base.mega);
+        let wave_ratios = ratios(&wave_rounds, &base.wave);
+        let middle = |v: &[f64]| (!v.is_empty()).then(|| median(v));
+        let (mega_ms, wave_ms) = (middle(&mega_rounds), middle(&wave_rounds));
+        let image = timing.image.as_ref().expect("at least one tracer ran");
+        let base_image = base.image.as_ref().expect("svdag32 ran first");
+        let geometry = |h: &voxdag::render::FirstHit| (h.hit, h.t_bits, h.voxel, h.normal);
+        let mismatches = image
+            .first_hits
+            .iter()
+            .zip(&base_image.first_hits)
+            .filter(|(x, y)| geometry(x) != geometry(y))
+            .count();
         let ratio = |a: Option<f64>, b: Option<f64>| a.zip(b).map(|(a, b)| a / b);
         let ms = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.1}"));
         eprintln!(
@@ -327,11 +391,11 @@ impl RunConfig<'_> {
         );
         let rays = self.rays;
         let mrays = |ms: Option<f64>| ms.filter(|_| rays > 0).map(|m| rays as f64 / m / 1e3);
-        let row = PathtraceRow {
+        PathtraceRow {
             scene: self.scene.to_string(),
             resolution: self.resolution,
-            format: format.to_string(),
-            node_bytes,
+            format: format.label.clone(),
+            node_bytes: format.node_bytes,
             width: s.render.width,
             height: s.render.height,
             spp: s.spp,
@@ -339,10 +403,13 @@ impl RunConfig<'_> {
             rays_per_sample: rays,
             mega_ms_per_sample: mega_ms,
             wave_ms_per_sample: wave_ms,
-            mega_samples_ms: mega.0,
-            wave_samples_ms: wave.0,
-            mega_vs_svdag32: ratio(mega_ms, base_mega),
-            wave_vs_svdag32: ratio(wave_ms, base_wave),
+            mega_samples_ms: timing.mega.concat(),
+            wave_samples_ms: timing.wave.concat(),
+            rounds: timing.mega.len().max(timing.wave.len()) as u32,
+            mega_vs_svdag32: middle(&mega_ratios),
+            wave_vs_svdag32: middle(&wave_ratios),
+            mega_vs_svdag32_rounds: mega_ratios,
+            wave_vs_svdag32_rounds: wave_ratios,
             cpu_ms_per_sample: self.cpu_ms,
             cpu_threads: rayon::current_num_threads(),
             mega_mrays_s: mrays(mega_ms),
@@ -351,17 +418,9 @@ impl RunConfig<'_> {
             mega_over_cpu: ratio(self.cpu_ms, mega_ms),
             wave_over_cpu: ratio(self.cpu_ms, wave_ms),
             first_hit_mismatches: mismatches,
-            image_mean_abs_diff: diff,
-            gpu_colors: gpu_colors.to_string(),
-        };
-        if base.is_none() {
-            *base = Some(Base {
-                mega_ms,
-                wave_ms,
-                image,
-            });
+            image_mean_abs_diff: mean_abs_diff(image, base_image),
+            gpu_colors: format.gpu_colors.to_string(),
         }
-        Ok(row)
     }
 }
 
@@ -369,6 +428,9 @@ impl RunConfig<'_> {
 pub fn bench_pathtrace(args: &BenchPathtraceArgs) -> Result<()> {
     if args.spp == 0 {
         bail!("--spp must be at least 1");
+    }
+    if args.rounds == 0 {
+        bail!("--rounds must be at least 1");
     }
     let mut modes = Vec::new();
     for t in &args.tracers {
@@ -443,33 +505,52 @@ pub fn bench_pathtrace(args: &BenchPathtraceArgs) -> Result<()> {
                 rays,
                 cpu_ms,
             };
-            let mut base: Option<Base> = None;
+            // Encoded once; every round uploads (or loads the hash DAG) one format at a time,
+            // so one format's scene is resident at a time.
+            let mut encoded = Vec::new();
             for format in &order {
-                if format == "hash-dag" {
-                    // The live hash DAG (geometry only), one row per table variant.
-                    for variant in HashVariant::ALL {
-                        let hash = HashDagScene::load(&ctx, &renderer, &dag, variant, None)?;
-                        let label = format!("hash-dag-{}", variant.name());
-                        let row =
-                            run.row(&hash.scene, &label, None, "none", &mut base, &mut passes)?;
-                        rows.push(row);
-                    }
-                    continue;
+                if format != "hash-dag" {
+                    encoded.push(Some(load_encoded(&dag, format, cached(format).as_deref())?));
+                } else {
+                    encoded.push(None);
                 }
-                let encoded = load_encoded(&dag, format, cached(format).as_deref())?;
-                let colors = chunked
+            }
+            let colors = || {
+                chunked
                     .as_ref()
-                    .map_or(ColorSource::Raw(&dag.colors), ColorSource::Chunked);
-                let scene = renderer.upload_encoded(&encoded, colors)?;
-                let row = run.row(
-                    &scene,
-                    format,
-                    Some(encoded.byte_size()),
-                    color_storage,
-                    &mut base,
-                    &mut passes,
-                )?;
-                rows.push(row);
+                    .map_or(ColorSource::Raw(&dag.colors), ColorSource::Chunked)
+            };
+            let mut entries: Vec<(FormatEntry, Timing)> = Vec::new();
+            for _ in 0..args.rounds {
+                let mut k = 0;
+                for (format, enc) in order.iter().zip(&encoded) {
+                    let Some(enc) = enc else {
+                        // The live hash DAG (geometry only), one row per table variant.
+                        for variant in HashVariant::ALL {
+                            let hash = HashDagScene::load(&ctx, &renderer, &dag, variant, None)?;
+                            let entry = FormatEntry {
+                                label: format!("hash-dag-{}", variant.name()),
+                                node_bytes: None,
+                                gpu_colors: "none",
+                            };
+                            let (entry, timing) = format_slot(&mut entries, &mut k, entry);
+                            run.measure(&hash.scene, &entry.label, timing, &mut passes)?;
+                        }
+                        continue;
+                    };
+                    let scene = renderer.upload_encoded(enc, colors())?;
+                    let entry = FormatEntry {
+                        label: format.clone(),
+                        node_bytes: Some(enc.byte_size()),
+                        gpu_colors: color_storage,
+                    };
+                    let (entry, timing) = format_slot(&mut entries, &mut k, entry);
+                    run.measure(&scene, &entry.label, timing, &mut passes)?;
+                }
+            }
+            let base = &entries[0].1;
+            for (entry, timing) in &entries {
+                rows.push(run.row(entry, timing, base));
             }
         }
     }
@@ -489,7 +570,8 @@ pub fn bench_pathtrace(args: &BenchPathtraceArgs) -> Result<()> {
 fn markdown(device: &str, rows: &[PathtraceRow]) -> String {
     let mut md = format!(
         "Path tracing on {device} vs the CPU reference ({} threads): median GPU ms per sample \
-         (sum of the profiled passes), relative to svdag32 in the same run; Mrays/s (camera + \
+         (sum of the profiled passes), relative to svdag32 in the same run (with several \
+         rounds: medians over the rounds, and the range of the rounds' ratios); Mrays/s (camera + \
          bounce + shadow rays, counted by the CPU reference)\n\n\
          | scene | N | format | node bytes | image | spp | bounces | rays/sample | megakernel ms \
          | vs svdag32 | wavefront ms | vs svdag32 | CPU ms | mega Mrays/s | wave Mrays/s \
@@ -500,6 +582,15 @@ fn markdown(device: &str, rows: &[PathtraceRow]) -> String {
     let f1 = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.1}"));
     let f2 = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}"));
     let pct = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:+.1}%", (v - 1.0) * 100.0));
+    // The median ratio, and with several rounds their range.
+    let vs = |v: Option<f64>, rounds: &[f64]| {
+        let lo = rounds.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = rounds.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        match rounds.len() {
+            0 | 1 => pct(v),
+            _ => format!("{} ({}..{})", pct(v), pct(Some(lo)), pct(Some(hi))),
+        }
+    };
     let x = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.2}x"));
     for r in rows {
         md.push_str(&format!(
@@ -514,9 +605,9 @@ fn markdown(device: &str, rows: &[PathtraceRow]) -> String {
             r.bounces,
             r.rays_per_sample,
             f1(r.mega_ms_per_sample),
-            pct(r.mega_vs_svdag32),
+            vs(r.mega_vs_svdag32, &r.mega_vs_svdag32_rounds),
             f1(r.wave_ms_per_sample),
-            pct(r.wave_vs_svdag32),
+            vs(r.wave_vs_svdag32, &r.wave_vs_svdag32_rounds),
             f1(r.cpu_ms_per_sample),
             f2(r.mega_mrays_s),
             f2(r.wave_mrays_s),
