@@ -616,8 +616,17 @@ fn bench_pathtrace_keeps_colours_in_the_svdag32_cache_only() {
     for row in rows {
         assert_eq!(row["gpu_colors"], "raw");
         assert_eq!(row["first_hit_mismatches"], 0);
-        // Two rounds of one sample per tracer: each round's ratio, the median among them.
+        // Two rounds of one sample per tracer: each round's ratio, the median among them; the
+        // CPU reference timed in each round too.
         assert_eq!(row["rounds"], 2);
+        let cpu: Vec<f64> = row["cpu_rounds_ms"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        assert_eq!(cpu.len(), 2);
+        assert!(cpu.contains(&row["cpu_ms_per_sample"].as_f64().unwrap()));
         for tracer in ["mega", "wave"] {
             let samples = row[format!("{tracer}_samples_ms")].as_array().unwrap();
             assert_eq!(samples.len(), 2);

@@ -126,8 +126,10 @@ struct PathtraceRow {
     /// Each round's ratio to svdag32.
     mega_vs_svdag32_rounds: Vec<f64>,
     wave_vs_svdag32_rounds: Vec<f64>,
-    /// CPU reference ms per sample on the scene (svdag32), threads.
+    /// CPU reference ms per sample on the scene (svdag32; the median over the rounds), threads.
     cpu_ms_per_sample: Option<f64>,
+    /// Each round's CPU reference ms per sample.
+    cpu_rounds_ms: Vec<f64>,
     cpu_threads: usize,
     mega_mrays_s: Option<f64>,
     wave_mrays_s: Option<f64>,
@@ -315,7 +317,8 @@ struct RunConfig<'a> {
     scene: &'a str,
     resolution: u32,
     rays: u64,
-    cpu_ms: Option<f64>,
+    /// Each round's CPU reference ms per sample (empty: `--no-cpu`).
+    cpu_rounds_ms: Vec<f64>,
 }
 
 impl RunConfig<'_> {
@@ -391,6 +394,7 @@ impl RunConfig<'_> {
         );
         let rays = self.rays;
         let mrays = |ms: Option<f64>| ms.filter(|_| rays > 0).map(|m| rays as f64 / m / 1e3);
+        let cpu_ms = middle(&self.cpu_rounds_ms);
         PathtraceRow {
             scene: self.scene.to_string(),
             resolution: self.resolution,
@@ -410,13 +414,14 @@ impl RunConfig<'_> {
             wave_vs_svdag32: middle(&wave_ratios),
             mega_vs_svdag32_rounds: mega_ratios,
             wave_vs_svdag32_rounds: wave_ratios,
-            cpu_ms_per_sample: self.cpu_ms,
+            cpu_ms_per_sample: cpu_ms,
+            cpu_rounds_ms: self.cpu_rounds_ms.clone(),
             cpu_threads: rayon::current_num_threads(),
             mega_mrays_s: mrays(mega_ms),
             wave_mrays_s: mrays(wave_ms),
-            cpu_mrays_s: mrays(self.cpu_ms),
-            mega_over_cpu: ratio(self.cpu_ms, mega_ms),
-            wave_over_cpu: ratio(self.cpu_ms, wave_ms),
+            cpu_mrays_s: mrays(cpu_ms),
+            mega_over_cpu: ratio(cpu_ms, mega_ms),
+            wave_over_cpu: ratio(cpu_ms, wave_ms),
             first_hit_mismatches: mismatches,
             image_mean_abs_diff: mean_abs_diff(image, base_image),
             gpu_colors: format.gpu_colors.to_string(),
@@ -481,20 +486,7 @@ pub fn bench_pathtrace(args: &BenchPathtraceArgs) -> Result<()> {
             let mut s = PtSettings::new(RenderSettings::new(w, h, Camera::frame(&dag)));
             s.spp = args.spp;
             s.bounces = args.bounces;
-            let (cpu_ms, rays) = if args.no_cpu {
-                (None, 0)
-            } else {
-                let index = VoxelIndex::new(&dag);
-                let cpu_scene = CpuScene {
-                    dag: &dag,
-                    index: &index,
-                    colors: ColorSource::Raw(&dag.colors),
-                };
-                let start = Instant::now();
-                let cpu = render_pt_cpu(&cpu_scene, &s)?;
-                let ms = start.elapsed().as_secs_f64() * 1e3 / s.spp as f64;
-                (Some(ms), cpu.rays.unwrap_or(0) / s.spp as u64)
-            };
+            let index = (!args.no_cpu).then(|| VoxelIndex::new(&dag));
             let run = RunConfig {
                 ctx: &ctx,
                 tracer: &tracer,
@@ -502,8 +494,8 @@ pub fn bench_pathtrace(args: &BenchPathtraceArgs) -> Result<()> {
                 modes: &modes,
                 scene: name,
                 resolution: dag.resolution,
-                rays,
-                cpu_ms,
+                rays: 0,
+                cpu_rounds_ms: Vec::new(),
             };
             // Encoded once; every round uploads (or loads the hash DAG) one format at a time,
             // so one format's scene is resident at a time.
@@ -521,7 +513,20 @@ pub fn bench_pathtrace(args: &BenchPathtraceArgs) -> Result<()> {
                     .map_or(ColorSource::Raw(&dag.colors), ColorSource::Chunked)
             };
             let mut entries: Vec<(FormatEntry, Timing)> = Vec::new();
+            let (mut rays, mut cpu_rounds_ms) = (0, Vec::new());
             for _ in 0..args.rounds {
+                // The CPU reference in every round too: its ratio is also one of a round's.
+                if let Some(index) = &index {
+                    let cpu_scene = CpuScene {
+                        dag: &dag,
+                        index,
+                        colors: ColorSource::Raw(&dag.colors),
+                    };
+                    let start = Instant::now();
+                    let cpu = render_pt_cpu(&cpu_scene, &s)?;
+                    cpu_rounds_ms.push(start.elapsed().as_secs_f64() * 1e3 / s.spp as f64);
+                    rays = cpu.rays.unwrap_or(0) / s.spp as u64;
+                }
                 let mut k = 0;
                 for (format, enc) in order.iter().zip(&encoded) {
                     let Some(enc) = enc else {
@@ -548,6 +553,11 @@ pub fn bench_pathtrace(args: &BenchPathtraceArgs) -> Result<()> {
                     run.measure(&scene, &entry.label, timing, &mut passes)?;
                 }
             }
+            let run = RunConfig {
+                rays,
+                cpu_rounds_ms,
+                ..run
+            };
             let base = &entries[0].1;
             for (entry, timing) in &entries {
                 rows.push(run.row(entry, timing, base));
