@@ -613,29 +613,23 @@ fn bench_pathtrace_keeps_colours_in_the_svdag32_cache_only() {
     let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
     let rows = report["rows"].as_array().unwrap();
     assert_eq!(rows.len(), 2);
+    let floats = |v: &serde_json::Value| -> Vec<f64> {
+        let values = v.as_array().unwrap().iter();
+        values.map(|x| x.as_f64().unwrap()).collect()
+    };
     for row in rows {
         assert_eq!(row["gpu_colors"], "raw");
         assert_eq!(row["first_hit_mismatches"], 0);
         // Two rounds of one sample per tracer: each round's ratio, the median among them; the
         // CPU reference timed in each round too.
         assert_eq!(row["rounds"], 2);
-        let cpu: Vec<f64> = row["cpu_rounds_ms"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_f64().unwrap())
-            .collect();
+        let cpu = floats(&row["cpu_rounds_ms"]);
         assert_eq!(cpu.len(), 2);
         assert!(cpu.contains(&row["cpu_ms_per_sample"].as_f64().unwrap()));
         for tracer in ["mega", "wave"] {
             let samples = row[format!("{tracer}_samples_ms")].as_array().unwrap();
             assert_eq!(samples.len(), 2);
-            let ratios: Vec<f64> = row[format!("{tracer}_vs_svdag32_rounds")]
-                .as_array()
-                .unwrap()
-                .iter()
-                .map(|r| r.as_f64().unwrap())
-                .collect();
+            let ratios = floats(&row[format!("{tracer}_vs_svdag32_rounds")]);
             assert_eq!(ratios.len(), 2);
             let ratio = row[format!("{tracer}_vs_svdag32")].as_f64().unwrap();
             assert!(ratios.contains(&ratio), "{ratio} is one of {ratios:?}");

@@ -288,24 +288,27 @@ impl Timing {
     }
 }
 
-/// A format's row before timing: its name, encoded bytes and colour storage.
+/// The CPU reference's timings: each round's ms per sample, and its rays per sample.
+#[derive(Default)]
+struct CpuTiming {
+    rounds_ms: Vec<f64>,
+    rays: u64,
+}
+
+/// Where a row's scene comes from in every round.
+enum FormatSource {
+    /// Uploaded from its encoding.
+    Encoded(EncodedDag),
+    /// The live hash DAG with this table layout, loaded from the svdag32.
+    Hash(HashVariant),
+}
+
+/// One row's format: its name, encoded bytes, colour storage and scene source.
 struct FormatEntry {
     label: String,
     node_bytes: Option<u64>,
     gpu_colors: &'static str,
-}
-
-/// The `k`-th format of a round (counting on): added by the first round, found by the others.
-fn format_slot<'e>(
-    entries: &'e mut Vec<(FormatEntry, Timing)>,
-    k: &mut usize,
-    entry: FormatEntry,
-) -> &'e mut (FormatEntry, Timing) {
-    if *k == entries.len() {
-        entries.push((entry, Timing::default()));
-    }
-    *k += 1;
-    &mut entries[*k - 1]
+    source: FormatSource,
 }
 
 /// What every format of one scene and resolution shares.
@@ -316,9 +319,6 @@ struct RunConfig<'a> {
     modes: &'a [PtMode],
     scene: &'a str,
     resolution: u32,
-    rays: u64,
-    /// Each round's CPU reference ms per sample (empty: `--no-cpu`).
-    cpu_rounds_ms: Vec<f64>,
 }
 
 impl RunConfig<'_> {
@@ -357,7 +357,13 @@ impl RunConfig<'_> {
     /// The row of `format` from its timings and svdag32's (`base`). First hits are compared on
     /// geometry (hit, t, voxel, normal): the hash DAG's colour index is a material, not the
     /// Morton rank.
-    fn row(&self, format: &FormatEntry, timing: &Timing, base: &Timing) -> PathtraceRow {
+    fn row(
+        &self,
+        format: &FormatEntry,
+        timing: &Timing,
+        base: &Timing,
+        cpu: &CpuTiming,
+    ) -> PathtraceRow {
         let s = self.settings;
         let label = format!("{} N={} {}", self.scene, self.resolution, format.label);
         let (mega_rounds, wave_rounds) = (
@@ -392,9 +398,9 @@ impl RunConfig<'_> {
             ms(mega_ms),
             ms(wave_ms)
         );
-        let rays = self.rays;
+        let rays = cpu.rays;
         let mrays = |ms: Option<f64>| ms.filter(|_| rays > 0).map(|m| rays as f64 / m / 1e3);
-        let cpu_ms = middle(&self.cpu_rounds_ms);
+        let cpu_ms = middle(&cpu.rounds_ms);
         PathtraceRow {
             scene: self.scene.to_string(),
             resolution: self.resolution,
@@ -415,7 +421,7 @@ impl RunConfig<'_> {
             mega_vs_svdag32_rounds: mega_ratios,
             wave_vs_svdag32_rounds: wave_ratios,
             cpu_ms_per_sample: cpu_ms,
-            cpu_rounds_ms: self.cpu_rounds_ms.clone(),
+            cpu_rounds_ms: cpu.rounds_ms.clone(),
             cpu_threads: rayon::current_num_threads(),
             mega_mrays_s: mrays(mega_ms),
             wave_mrays_s: mrays(wave_ms),
@@ -494,26 +500,33 @@ pub fn bench_pathtrace(args: &BenchPathtraceArgs) -> Result<()> {
                 modes: &modes,
                 scene: name,
                 resolution: dag.resolution,
-                rays: 0,
-                cpu_rounds_ms: Vec::new(),
             };
             // Encoded once; every round uploads (or loads the hash DAG) one format at a time,
             // so one format's scene is resident at a time.
-            let mut encoded = Vec::new();
+            let mut formats = Vec::new();
             for format in &order {
-                if format != "hash-dag" {
-                    encoded.push(Some(load_encoded(&dag, format, cached(format).as_deref())?));
-                } else {
-                    encoded.push(None);
+                if format == "hash-dag" {
+                    // The live hash DAG (geometry only), one row per table variant.
+                    for variant in HashVariant::ALL {
+                        formats.push(FormatEntry {
+                            label: format!("hash-dag-{}", variant.name()),
+                            node_bytes: None,
+                            gpu_colors: "none",
+                            source: FormatSource::Hash(variant),
+                        });
+                    }
+                    continue;
                 }
+                let encoded = load_encoded(&dag, format, cached(format).as_deref())?;
+                formats.push(FormatEntry {
+                    label: format.clone(),
+                    node_bytes: Some(encoded.byte_size()),
+                    gpu_colors: color_storage,
+                    source: FormatSource::Encoded(encoded),
+                });
             }
-            let colors = || {
-                chunked
-                    .as_ref()
-                    .map_or(ColorSource::Raw(&dag.colors), ColorSource::Chunked)
-            };
-            let mut entries: Vec<(FormatEntry, Timing)> = Vec::new();
-            let (mut rays, mut cpu_rounds_ms) = (0, Vec::new());
+            let mut timings: Vec<Timing> = formats.iter().map(|_| Timing::default()).collect();
+            let mut cpu = CpuTiming::default();
             for _ in 0..args.rounds {
                 // The CPU reference in every round too: its ratio is also one of a round's.
                 if let Some(index) = &index {
@@ -523,44 +536,29 @@ pub fn bench_pathtrace(args: &BenchPathtraceArgs) -> Result<()> {
                         colors: ColorSource::Raw(&dag.colors),
                     };
                     let start = Instant::now();
-                    let cpu = render_pt_cpu(&cpu_scene, &s)?;
-                    cpu_rounds_ms.push(start.elapsed().as_secs_f64() * 1e3 / s.spp as f64);
-                    rays = cpu.rays.unwrap_or(0) / s.spp as u64;
+                    let traced = render_pt_cpu(&cpu_scene, &s)?;
+                    cpu.rounds_ms
+                        .push(start.elapsed().as_secs_f64() * 1e3 / s.spp as f64);
+                    cpu.rays = traced.rays.unwrap_or(0) / s.spp as u64;
                 }
-                let mut k = 0;
-                for (format, enc) in order.iter().zip(&encoded) {
-                    let Some(enc) = enc else {
-                        // The live hash DAG (geometry only), one row per table variant.
-                        for variant in HashVariant::ALL {
-                            let hash = HashDagScene::load(&ctx, &renderer, &dag, variant, None)?;
-                            let entry = FormatEntry {
-                                label: format!("hash-dag-{}", variant.name()),
-                                node_bytes: None,
-                                gpu_colors: "none",
-                            };
-                            let (entry, timing) = format_slot(&mut entries, &mut k, entry);
-                            run.measure(&hash.scene, &entry.label, timing, &mut passes)?;
+                for (format, timing) in formats.iter().zip(&mut timings) {
+                    match &format.source {
+                        FormatSource::Hash(variant) => {
+                            let hash = HashDagScene::load(&ctx, &renderer, &dag, *variant, None)?;
+                            run.measure(&hash.scene, &format.label, timing, &mut passes)?;
                         }
-                        continue;
-                    };
-                    let scene = renderer.upload_encoded(enc, colors())?;
-                    let entry = FormatEntry {
-                        label: format.clone(),
-                        node_bytes: Some(enc.byte_size()),
-                        gpu_colors: color_storage,
-                    };
-                    let (entry, timing) = format_slot(&mut entries, &mut k, entry);
-                    run.measure(&scene, &entry.label, timing, &mut passes)?;
+                        FormatSource::Encoded(encoded) => {
+                            let colors = chunked
+                                .as_ref()
+                                .map_or(ColorSource::Raw(&dag.colors), ColorSource::Chunked);
+                            let scene = renderer.upload_encoded(encoded, colors)?;
+                            run.measure(&scene, &format.label, timing, &mut passes)?;
+                        }
+                    }
                 }
             }
-            let run = RunConfig {
-                rays,
-                cpu_rounds_ms,
-                ..run
-            };
-            let base = &entries[0].1;
-            for (entry, timing) in &entries {
-                rows.push(run.row(entry, timing, base));
+            for (format, timing) in formats.iter().zip(&timings) {
+                rows.push(run.row(format, timing, &timings[0], &cpu));
             }
         }
     }
