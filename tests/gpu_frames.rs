@@ -13,8 +13,8 @@ use voxdag::attr::lossless::LosslessVariant;
 use voxdag::attr_gpu::lossless::LosslessGpu;
 use voxdag::gpu::test_layouts::{ChainPush, FillPush, ImagePush};
 use voxdag::gpu::{
-    shaders, ComputePipeline, ComputePipelineDesc, FrameRing, GpuContext, GpuError, GpuOptions,
-    GpuStats, MemLocation, Readback, REQUIRED_FEATURES,
+    shaders, BindingKind, Bound, ComputePipeline, ComputePipelineDesc, FrameRing, GpuContext,
+    GpuError, GpuOptions, GpuStats, MemLocation, Readback, REQUIRED_FEATURES,
 };
 use voxdag::hash::dedup::GpuDedup;
 use voxdag::hash::gc::GpuGarbageCollector;
@@ -38,7 +38,7 @@ fn pipeline(ctx: &Arc<GpuContext>, name: &str, spirv: &[u32], spec: &[u32]) -> C
         spec_constants: spec,
         // Shared by `test/chain.comp` and `test/fill.comp`, whose push blocks have the same size.
         push_constant_size: std::mem::size_of::<ChainPush>() as u32,
-        storage_image: false,
+        bindings: &[],
     })
     .unwrap()
 }
@@ -84,7 +84,7 @@ fn a_chain_of_1000_dependent_passes_in_one_submission_matches_the_cpu() {
                     count: n,
                     pass_index: p,
                 }),
-                None,
+                &[],
             )
             .unwrap();
             cmd.barrier();
@@ -160,7 +160,7 @@ fn deferred_release_1000_frames_with_3_in_flight() {
                     count,
                     seed: f,
                 }),
-                None,
+                &[],
             )
             .unwrap();
             cmd.copy_buffer(&buf, 0, &results, f as u64 * 4, 4).unwrap();
@@ -211,7 +211,7 @@ fn more_than_64_image_dispatches_in_one_recording() {
                 spirv: shaders::TEST_IMAGE,
                 spec_constants: &[],
                 push_constant_size: std::mem::size_of::<ImagePush>() as u32,
-                storage_image: true,
+                bindings: &[BindingKind::StorageImage],
             })
             .unwrap();
         let dispatches = 300u32;
@@ -228,7 +228,7 @@ fn more_than_64_image_dispatches_in_one_recording() {
                 &pipeline,
                 [w.div_ceil(8), h.div_ceil(8), 1],
                 &push,
-                Some(image),
+                &[Bound::Image(image)],
             )
             .unwrap();
             cmd.barrier();

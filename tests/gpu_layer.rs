@@ -6,8 +6,8 @@ use std::sync::Arc;
 use voxdag::dag::{Svdag, VoxelIndex};
 use voxdag::gpu::test_layouts::{FillPush, ImagePush};
 use voxdag::gpu::{
-    shaders, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, GpuOptions, MemLocation,
-    Profiler,
+    shaders, BindingKind, Bound, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError,
+    GpuOptions, MemLocation, Profiler,
 };
 use voxdag::render::gpu::GpuRenderer;
 use voxdag::render::{render_cpu, Camera, RenderOutput, RenderSettings};
@@ -39,7 +39,7 @@ fn fill_pipeline(ctx: &Arc<GpuContext>, name: &str, spec: [u32; 2]) -> ComputePi
         spirv: shaders::TEST_FILL,
         spec_constants: &spec,
         push_constant_size: std::mem::size_of::<FillPush>() as u32,
-        storage_image: false,
+        bindings: &[],
     })
     .unwrap()
 }
@@ -202,11 +202,10 @@ fn fill_shader_spec_and_push_constants_and_subgroup_size() {
             // Fewer groups than needed: the shader's grid-stride loop covers the rest.
             let groups = (count / wg / 3).max(1);
             let push = fill_push(out.address(), aux.address(), count, seed);
-            cmd.dispatch(&pipeline, [groups, 1, 1], &push, None)
-                .unwrap();
+            cmd.dispatch(&pipeline, [groups, 1, 1], &push, &[]).unwrap();
             // Wrong push-constant size is rejected.
             assert!(cmd
-                .dispatch(&pipeline, [1, 1, 1], &push[..16], None)
+                .dispatch(&pipeline, [1, 1, 1], &push[..16], &[])
                 .is_err());
             cmd.submit().unwrap();
             let got = ctx.download::<u32>(&out).unwrap();
@@ -255,7 +254,7 @@ fn commands_record_and_submit_from_several_threads_at_once() {
                             pipeline,
                             [8 + t, 1, 1],
                             &fill_push(out.address(), 0, count, seed),
-                            None,
+                            &[],
                         )
                         .unwrap();
                         cmd.submit().unwrap();
@@ -288,7 +287,7 @@ fn buffer_larger_than_max_storage_range_via_device_address() {
             &pipeline,
             [1024, 1, 1],
             &fill_push(big.address(), 0, count, 1),
-            None,
+            &[],
         )
         .unwrap();
         cmd.submit().unwrap();
@@ -318,7 +317,7 @@ fn storage_image_readback() {
                 spirv: shaders::TEST_IMAGE,
                 spec_constants: &[],
                 push_constant_size: std::mem::size_of::<ImagePush>() as u32,
-                storage_image: true,
+                bindings: &[BindingKind::StorageImage],
             })
             .unwrap();
         // A fresh image reads back as zeros.
@@ -331,14 +330,14 @@ fn storage_image_readback() {
         })
         .to_vec();
         assert!(
-            cmd.dispatch(&pipeline, [1, 1, 1], &push, None).is_err(),
+            cmd.dispatch(&pipeline, [1, 1, 1], &push, &[]).is_err(),
             "image missing"
         );
         cmd.dispatch(
             &pipeline,
             [w.div_ceil(8), h.div_ceil(8), 1],
             &push,
-            Some(&image),
+            &[Bound::Image(&image)],
         )
         .unwrap();
         cmd.submit().unwrap();
@@ -352,6 +351,53 @@ fn storage_image_readback() {
             }
         }
         assert!(ctx.create_storage_image("zero", 0, 4).is_err());
+    }
+    assert_clean(&ctx);
+}
+
+/// A uniform texel buffer of word pairs reads back exactly at scattered indices; dispatches
+/// whose resources do not match the pipeline's bindings, and texel buffers of no texels, are
+/// refused.
+#[test]
+fn texel_buffer_fetches_word_pairs() {
+    let ctx = context();
+    {
+        // 7919 is prime, so i -> i * 7919 % count visits every texel once.
+        let (count, seed) = (5000u32, 3u32);
+        let pairs: Vec<[u32; 2]> = (0..count)
+            .map(|i| [i.wrapping_mul(0x9e37_79b9), !i])
+            .collect();
+        let texels = ctx.upload_texels("test texels", &pairs).unwrap();
+        assert_eq!(texels.texels(), count as u64);
+        let out = ctx
+            .create_buffer("texels out", 8 * count as u64, MemLocation::GpuOnly)
+            .unwrap();
+        let pipeline = ctx
+            .create_compute_pipeline(&ComputePipelineDesc {
+                name: "test texels",
+                spirv: shaders::TEST_TEXELS,
+                spec_constants: &[],
+                push_constant_size: std::mem::size_of::<FillPush>() as u32,
+                bindings: &[BindingKind::TexelBuffer],
+            })
+            .unwrap();
+        let push = fill_push(out.address(), 0, count, seed);
+        let image = ctx.create_storage_image("wrong binding", 4, 4).unwrap();
+        let mut cmd = ctx.begin_commands("texels").unwrap();
+        for wrong in [&[][..], &[Bound::Image(&image)][..]] {
+            let e = cmd
+                .dispatch(&pipeline, [1, 1, 1], &push, wrong)
+                .unwrap_err();
+            assert!(e.to_string().contains("TexelBuffer"), "{e}");
+        }
+        cmd.dispatch(&pipeline, [8, 1, 1], &push, &[Bound::Texels(&texels)])
+            .unwrap();
+        cmd.submit().unwrap();
+        let got = ctx.download::<u32>(&out).unwrap();
+        let want: Vec<u32> = pairs.iter().flatten().map(|w| w + seed).collect();
+        let bad = (0..got.len()).position(|i| got[i] != want[i]);
+        assert_eq!(bad, None, "first wrong word");
+        assert!(ctx.upload_texels("none", &[]).is_err());
     }
     assert_clean(&ctx);
 }
@@ -374,7 +420,7 @@ fn profiler_times_each_pass_and_writes_a_trace() {
             cmd.fill_buffer(&out, 0);
             profiler.end_pass(&mut cmd);
             profiler.begin_pass(&mut cmd, "fill");
-            cmd.dispatch(&pipeline, [256, 1, 1], &push, None).unwrap();
+            cmd.dispatch(&pipeline, [256, 1, 1], &push, &[]).unwrap();
             profiler.end_pass(&mut cmd);
             // The GPU work happens between the start of the submit and the end of resolve, and
             // resolve places it on the CPU clock: the passes must lie inside that wall-clock span.
@@ -499,12 +545,12 @@ fn profiler_recovers_from_command_buffers_dropped_unsubmitted() {
             cmd.fill_buffer(&out, 0);
             profiler.end_pass(&mut cmd);
             profiler.begin_pass(&mut cmd, "open, never submitted");
-            cmd.dispatch(&pipeline, [16, 1, 1], &push, None).unwrap();
+            cmd.dispatch(&pipeline, [16, 1, 1], &push, &[]).unwrap();
         }
         for round in 0..2 {
             let mut cmd = ctx.begin_commands("normal").unwrap();
             profiler.begin_pass(&mut cmd, "fill");
-            cmd.dispatch(&pipeline, [16, 1, 1], &push, None).unwrap();
+            cmd.dispatch(&pipeline, [16, 1, 1], &push, &[]).unwrap();
             profiler.end_pass(&mut cmd);
             // Closed but not yet submitted: an error that keeps the pass.
             assert!(profiler.resolve().is_err(), "round {round}");

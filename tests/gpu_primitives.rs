@@ -266,7 +266,7 @@ fn compaction_sizes_an_indirect_dispatch_over_exactly_the_survivors() {
                     spirv: shaders::TEST_INDIRECT_CONSUME,
                     spec_constants: &[group],
                     push_constant_size: std::mem::size_of::<IndirectConsumePush>() as u32,
-                    storage_image: false,
+                    bindings: &[],
                 })
                 .unwrap();
             let v = ctx.upload("values", &values).unwrap();
@@ -304,7 +304,7 @@ fn compaction_sizes_an_indirect_dispatch_over_exactly_the_survivors() {
                 stats: stats.address(),
             })
             .to_vec();
-            cmd.dispatch_indirect(&consume, &count_args, 4, &push, None)
+            cmd.dispatch_indirect(&consume, &count_args, 4, &push, &[])
                 .unwrap();
             cmd.submit().unwrap();
 
@@ -342,7 +342,7 @@ fn dispatch_indirect_checks_its_arguments() {
                 spirv: shaders::TEST_INDIRECT_CONSUME,
                 spec_constants: &[64],
                 push_constant_size: std::mem::size_of::<IndirectConsumePush>() as u32,
-                storage_image: false,
+                bindings: &[],
             })
             .unwrap();
         let args = ctx.upload("args", &[0u32, 0, 1, 1]).unwrap();
@@ -355,14 +355,14 @@ fn dispatch_indirect_checks_its_arguments() {
             (u64::MAX - 3, 32),
             (4, 16),
         ] {
-            let err = cmd.dispatch_indirect(&pipeline, &args, offset, &push[..push_len], None);
+            let err = cmd.dispatch_indirect(&pipeline, &args, offset, &push[..push_len], &[]);
             assert!(
                 matches!(err, Err(GpuError::InvalidArgument(_))),
                 "offset {offset}, {push_len} push bytes: {err:?}"
             );
         }
         // A zero workgroup count dispatches nothing and is valid.
-        cmd.dispatch_indirect(&pipeline, &args, 0, &[0u8; 32], None)
+        cmd.dispatch_indirect(&pipeline, &args, 0, &[0u8; 32], &[])
             .unwrap();
         cmd.submit().unwrap();
     }
@@ -490,7 +490,7 @@ fn primitives_at_this_subgroup_size() {
                 spirv: shaders::TEST_FILL,
                 spec_constants: &[64, 1],
                 push_constant_size: 24,
-                storage_image: false,
+                bindings: &[],
             })
             .unwrap();
         let out = ctx
@@ -505,7 +505,7 @@ fn primitives_at_this_subgroup_size() {
         push.extend_from_slice(&256u32.to_le_bytes());
         push.extend_from_slice(&0u32.to_le_bytes());
         let mut cmd = ctx.begin_commands("subgroup size").unwrap();
-        cmd.dispatch(&fill, [4, 1, 1], &push, None).unwrap();
+        cmd.dispatch(&fill, [4, 1, 1], &push, &[]).unwrap();
         cmd.submit().unwrap();
         let seen = ctx.download::<u32>(&aux).unwrap();
         assert!(

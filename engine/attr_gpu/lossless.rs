@@ -57,7 +57,7 @@ impl LosslessGpu {
                 spirv,
                 spec_constants: &[size, EXTRA_SHIFTS],
                 push_constant_size: push as u32,
-                storage_image: false,
+                bindings: &[],
             })
         };
         Ok(LosslessGpu {
@@ -133,7 +133,7 @@ impl LosslessGpu {
             &self.plan,
             [blocks.div_ceil(WORKGROUP), 1, 1],
             bytemuck::bytes_of(&push),
-            None,
+            &[],
         )?;
         cmd.end_pass(&mut profiler);
         cmd.barrier();
@@ -144,7 +144,7 @@ impl LosslessGpu {
             blocks,
             pad: 0,
         };
-        cmd.dispatch(&self.scan, [1, 1, 1], bytemuck::bytes_of(&push), None)?;
+        cmd.dispatch(&self.scan, [1, 1, 1], bytemuck::bytes_of(&push), &[])?;
         cmd.end_pass(&mut profiler);
         cmd.barrier();
         cmd.readback::<u64>(&scratch.offsets, blocks as u64 * 8, 1)
@@ -177,7 +177,7 @@ impl LosslessGpu {
             &self.write,
             [scratch.blocks.div_ceil(WORKGROUP), 1, 1],
             bytemuck::bytes_of(&push),
-            None,
+            &[],
         )?;
         cmd.end_pass(&mut profiler);
         cmd.barrier();
@@ -312,7 +312,7 @@ impl LosslessGpu {
             count,
             pad: 0,
         };
-        cmd.dispatch(&self.decode, groups, bytemuck::bytes_of(&push), None)?;
+        cmd.dispatch(&self.decode, groups, bytemuck::bytes_of(&push), &[])?;
         cmd.end_pass(&mut profiler);
         cmd.barrier();
         Ok(())

@@ -119,7 +119,7 @@ impl Primitives {
                 spirv,
                 spec_constants: &spec,
                 push_constant_size: push as u32,
-                storage_image: false,
+                bindings: &[],
             })
         };
         let radix = sort::PUSH_SIZE;

@@ -185,7 +185,7 @@ impl Primitives {
             &self.indirect_args,
             [1, 1, 1],
             bytemuck::bytes_of(&push),
-            None,
+            &[],
         )?;
         cmd.end_pass(profiler);
         cmd.barrier();
@@ -248,7 +248,7 @@ impl Primitives {
                 &self.scan_reduce,
                 grid(groups),
                 bytemuck::bytes_of(&push),
-                None,
+                &[],
             )?;
             cmd.end_pass(profiler);
             cmd.barrier();
@@ -284,7 +284,7 @@ impl Primitives {
             &self.scan_block,
             grid(groups),
             bytemuck::bytes_of(&push),
-            None,
+            &[],
         )?;
         cmd.end_pass(profiler);
         cmd.barrier();

@@ -153,7 +153,7 @@ impl Primitives {
                 &self.radix_hist[w],
                 grid(tiles),
                 bytemuck::bytes_of(&push),
-                None,
+                &[],
             )?;
             cmd.end_pass(&mut profiler);
             cmd.barrier();
@@ -163,7 +163,7 @@ impl Primitives {
                 &self.radix_scatter[w],
                 grid(tiles),
                 bytemuck::bytes_of(&push),
-                None,
+                &[],
             )?;
             cmd.end_pass(&mut profiler);
             cmd.barrier();

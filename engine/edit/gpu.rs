@@ -295,7 +295,7 @@ impl GpuHashDag {
                 spirv,
                 spec_constants: &[],
                 push_constant_size: std::mem::size_of::<EditPush>() as u32,
-                storage_image: false,
+                bindings: &[],
             })
         };
         let table_addresses = ctx.create_buffer(
@@ -390,7 +390,7 @@ impl GpuHashDag {
                     ..EditPush::default()
                 };
                 cmd.begin_pass(&mut profiler, "edit expand");
-                cmd.dispatch(&hd.expand, groups(count), bytemuck::bytes_of(&push), None)?;
+                cmd.dispatch(&hd.expand, groups(count), bytemuck::bytes_of(&push), &[])?;
                 cmd.end_pass(&mut profiler);
                 cmd.submit_async()?;
                 Some(nodes)
@@ -812,7 +812,7 @@ impl GpuHashDag {
                     &blocks,
                     16 * l as u64 + 4,
                     bytemuck::bytes_of(&push),
-                    None,
+                    &[],
                 )?;
                 cmd.end_pass(profiler);
                 cmd.barrier();
@@ -917,7 +917,7 @@ impl GpuHashDag {
             &self.fill_init,
             groups(push.count),
             bytemuck::bytes_of(&push),
-            None,
+            &[],
         )?;
         cmd.end_pass(profiler);
         cmd.barrier();
@@ -938,7 +938,7 @@ impl GpuHashDag {
                         &self.fill_flood,
                         groups(rows),
                         bytemuck::bytes_of(&flood),
-                        None,
+                        &[],
                     )?;
                     cmd.end_pass(profiler);
                     cmd.barrier();
@@ -1042,7 +1042,7 @@ impl GpuHashDag {
                 ..EditPush::default()
             };
             cmd.begin_pass(profiler, "edit mark");
-            cmd.dispatch(&self.mark, groups(largest), bytemuck::bytes_of(&mark), None)?;
+            cmd.dispatch(&self.mark, groups(largest), bytemuck::bytes_of(&mark), &[])?;
             cmd.end_pass(profiler);
             cmd.barrier();
         }
@@ -1147,7 +1147,7 @@ impl GpuHashDag {
             &self.build_items,
             groups(b.push.count),
             bytemuck::bytes_of(&b.push),
-            None,
+            &[],
         )?;
         cmd.end_pass(profiler);
         cmd.barrier();
@@ -1173,7 +1173,7 @@ impl GpuHashDag {
             &self.resolve,
             groups(b.push.count),
             bytemuck::bytes_of(&resolve),
-            None,
+            &[],
         )?;
         cmd.end_pass(profiler);
         cmd.barrier();
@@ -1441,7 +1441,7 @@ impl ToolPipelines {
             spirv: self.spirv,
             spec_constants: &[tool as u32],
             push_constant_size: std::mem::size_of::<EditPush>() as u32,
-            storage_image: false,
+            bindings: &[],
         })?;
         Ok(cell.get_or_init(|| pipeline))
     }

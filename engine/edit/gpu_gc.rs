@@ -197,7 +197,7 @@ impl GpuHashDag {
                 spirv: shaders::EDIT_GC_TRACE,
                 spec_constants: &[],
                 push_constant_size: std::mem::size_of::<EditPush>() as u32,
-                storage_image: false,
+                bindings: &[],
             })?);
         }
         if self.gc_state.collectors.is_empty() {
@@ -280,7 +280,7 @@ impl GpuHashDag {
                 trace,
                 [count.div_ceil(GROUP).clamp(1, 65_535), 1, 1],
                 bytemuck::bytes_of(&push),
-                None,
+                &[],
             )?;
             cmd.end_pass(&mut profiler);
             cmd.barrier();

@@ -11,13 +11,39 @@ use ash::vk;
 use super::memory::color_range;
 use super::release::{Garbage, Recorder};
 use super::ring::RingKind;
-use super::{vk_err, Buffer, ComputePipeline, GpuContext, GpuError, Image, MemLocation, Profiler};
+use super::{
+    vk_err, BindingKind, Buffer, ComputePipeline, GpuContext, GpuError, Image, MemLocation,
+    Profiler, TexelBuffer,
+};
 
 /// Transfers up to this size go through a staging ring; larger ones (or ones that find the ring
 /// full) get a dedicated staging buffer, released after their submission.
 pub(crate) const RING_MAX_TRANSFER: u64 = 1 << 20;
 /// Descriptor sets in a recorder's first descriptor pool; each further pool doubles.
 const FIRST_DESCRIPTOR_POOL: u32 = 64;
+
+/// Most bindings of one kind a descriptor set may have (sizes the descriptor pools).
+const MAX_BINDINGS: u32 = 2;
+
+/// A resource given to a dispatch for one binding of its pipeline's set 0 (in binding order,
+/// matching [`ComputePipeline::bindings`]).
+#[derive(Clone, Copy, Debug)]
+pub enum Bound<'a> {
+    /// For [`BindingKind::StorageImage`].
+    Image(&'a Image),
+    /// For [`BindingKind::TexelBuffer`].
+    Texels(&'a TexelBuffer),
+}
+
+impl Bound<'_> {
+    /// The binding kind this resource fills.
+    pub fn kind(&self) -> BindingKind {
+        match self {
+            Bound::Image(_) => BindingKind::StorageImage,
+            Bound::Texels(_) => BindingKind::TexelBuffer,
+        }
+    }
+}
 
 /// Lifecycle value of a recorder still recording.
 const RECORDING: u64 = 0;
@@ -271,14 +297,16 @@ impl<'a> Commands<'a> {
         &self.name
     }
 
-    /// Records a compute dispatch of `groups` workgroups with the given push-constant bytes and,
-    /// if the pipeline uses one, the storage image at set 0, binding 0.
+    /// Records a compute dispatch of `groups` workgroups with the given push-constant bytes and
+    /// the resources of the pipeline's set 0 (`bound[i]` at binding i; empty when it has none).
+    /// Like buffers reached through device addresses, the bound resources must stay alive until
+    /// the submission has completed.
     pub fn dispatch(
         &mut self,
         pipeline: &'a ComputePipeline,
         groups: [u32; 3],
         push_constants: &[u8],
-        image: Option<&'a Image>,
+        bound: &[Bound<'_>],
     ) -> Result<(), GpuError> {
         if push_constants.len() as u32 != pipeline.push_constant_size {
             return Err(GpuError::InvalidArgument(format!(
@@ -295,21 +323,17 @@ impl<'a> Commands<'a> {
                 pipeline.name()
             )));
         }
-        let set = match (pipeline.set_layout, image) {
-            (Some(layout), Some(img)) => Some(self.image_set(layout, img)?),
-            (None, None) => None,
-            (Some(_), None) => {
-                return Err(GpuError::InvalidArgument(format!(
-                    "pipeline '{}' needs a storage image",
-                    pipeline.name()
-                )))
-            }
-            (None, Some(_)) => {
-                return Err(GpuError::InvalidArgument(format!(
-                    "pipeline '{}' takes no storage image",
-                    pipeline.name()
-                )))
-            }
+        let kinds: Vec<BindingKind> = bound.iter().map(Bound::kind).collect();
+        if kinds != pipeline.bindings() {
+            return Err(GpuError::InvalidArgument(format!(
+                "pipeline '{}' binds {:?}, the dispatch gives {kinds:?}",
+                pipeline.name(),
+                pipeline.bindings()
+            )));
+        }
+        let set = match pipeline.set_layout {
+            Some(layout) => Some(self.descriptor_set(layout, bound)?),
+            None => None,
         };
         let device = &self.ctx.device;
         // SAFETY: recording into our command buffer with objects of this device.
@@ -353,7 +377,7 @@ impl<'a> Commands<'a> {
         args: &'a Buffer,
         offset: u64,
         push_constants: &[u8],
-        image: Option<&'a Image>,
+        bound: &[Bound<'_>],
     ) -> Result<(), GpuError> {
         if !offset.is_multiple_of(4) || offset.checked_add(12).is_none_or(|end| end > args.size()) {
             return Err(GpuError::InvalidArgument(format!(
@@ -366,7 +390,7 @@ impl<'a> Commands<'a> {
         }
         // Zero workgroups: binds the pipeline, descriptor set and push constants (all checked)
         // without dispatching.
-        self.dispatch(pipeline, [0, 0, 0], push_constants, image)?;
+        self.dispatch(pipeline, [0, 0, 0], push_constants, bound)?;
         let barrier = vk::MemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
             .dst_access_mask(vk::AccessFlags::INDIRECT_COMMAND_READ);
@@ -389,12 +413,13 @@ impl<'a> Commands<'a> {
         Ok(())
     }
 
-    /// Allocates and writes a descriptor set binding `image`, from the recorder's descriptor
-    /// pools (a new pool, twice the previous, when they are full: no fixed cap per recording).
-    fn image_set(
+    /// Allocates and writes a descriptor set binding `bound` (binding i = `bound[i]`), from the
+    /// recorder's descriptor pools (a new pool, twice the previous, when they are full: no
+    /// fixed cap per recording).
+    fn descriptor_set(
         &mut self,
         layout: vk::DescriptorSetLayout,
-        image: &Image,
+        bound: &[Bound<'_>],
     ) -> Result<vk::DescriptorSet, GpuError> {
         let device = &self.ctx.device;
         let recorder = self
@@ -414,11 +439,14 @@ impl<'a> Commands<'a> {
                     recorder.current_sets = 0;
                 }
                 if recorder.current_pool == recorder.descriptor_pools.len() {
+                    // Room for every set to hold MAX_BINDINGS descriptors of each kind.
                     let sets = capacity(recorder.descriptor_pools.len());
-                    let sizes = [vk::DescriptorPoolSize {
-                        ty: vk::DescriptorType::STORAGE_IMAGE,
-                        descriptor_count: sets,
-                    }];
+                    let sizes = [BindingKind::StorageImage, BindingKind::TexelBuffer].map(|k| {
+                        vk::DescriptorPoolSize {
+                            ty: k.descriptor_type(),
+                            descriptor_count: sets * MAX_BINDINGS,
+                        }
+                    });
                     let pool = device
                         .create_descriptor_pool(
                             &vk::DescriptorPoolCreateInfo::default()
@@ -449,17 +477,39 @@ impl<'a> Commands<'a> {
                     Err(e) => return Err(vk_err("vkAllocateDescriptorSets")(e)),
                 }
             };
-            let image_info = [vk::DescriptorImageInfo {
-                sampler: vk::Sampler::null(),
-                image_view: image.view,
-                image_layout: vk::ImageLayout::GENERAL,
-            }];
-            let write = vk::WriteDescriptorSet::default()
-                .dst_set(set)
-                .dst_binding(0)
-                .descriptor_type(vk::DescriptorType::STORAGE_IMAGE)
-                .image_info(&image_info);
-            device.update_descriptor_sets(&[write], &[]);
+            let image_infos: Vec<[vk::DescriptorImageInfo; 1]> = bound
+                .iter()
+                .map(|b| match b {
+                    Bound::Image(image) => [vk::DescriptorImageInfo {
+                        sampler: vk::Sampler::null(),
+                        image_view: image.view,
+                        image_layout: vk::ImageLayout::GENERAL,
+                    }],
+                    Bound::Texels(_) => [vk::DescriptorImageInfo::default()],
+                })
+                .collect();
+            let views: Vec<[vk::BufferView; 1]> = bound
+                .iter()
+                .map(|b| match b {
+                    Bound::Texels(t) => [t.view()],
+                    Bound::Image(_) => [vk::BufferView::null()],
+                })
+                .collect();
+            let writes: Vec<vk::WriteDescriptorSet> = bound
+                .iter()
+                .enumerate()
+                .map(|(i, b)| {
+                    let write = vk::WriteDescriptorSet::default()
+                        .dst_set(set)
+                        .dst_binding(i as u32)
+                        .descriptor_type(b.kind().descriptor_type());
+                    match b {
+                        Bound::Image(_) => write.image_info(&image_infos[i]),
+                        Bound::Texels(_) => write.texel_buffer_view(&views[i]),
+                    }
+                })
+                .collect();
+            device.update_descriptor_sets(&writes, &[]);
             Ok(set)
         }
     }

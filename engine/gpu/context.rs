@@ -126,6 +126,8 @@ pub struct DeviceInfo {
     pub max_compute_workgroup_count: [u32; 3],
     /// `maxPushConstantsSize` in bytes.
     pub max_push_constants_size: u32,
+    /// `maxTexelBufferElements`: most texels a texel buffer view may hold.
+    pub max_texel_buffer_elements: u32,
     /// Whether `storageBuffer8BitAccess` was enabled.
     pub storage_buffer_8bit: bool,
     /// Whether `scalarBlockLayout` was enabled.
@@ -616,6 +618,7 @@ impl GpuContext {
             max_compute_workgroup_invocations: limits.max_compute_work_group_invocations,
             max_compute_workgroup_count: limits.max_compute_work_group_count,
             max_push_constants_size: limits.max_push_constants_size,
+            max_texel_buffer_elements: limits.max_texel_buffer_elements,
             storage_buffer_8bit: have12.storage_buffer8_bit_access == vk::TRUE,
             scalar_block_layout: have12.scalar_block_layout == vk::TRUE,
             timeline_semaphores: true,
@@ -979,6 +982,7 @@ impl GpuContext {
                         self.destroy_buffer(raw, allocation);
                     }
                 }
+                Garbage::BufferView(view) => device.destroy_buffer_view(view, None),
                 Garbage::Image(raw, view, allocation) => {
                     device.destroy_image_view(view, None);
                     device.destroy_image(raw, None);
@@ -1142,7 +1146,8 @@ impl GpuContext {
             | vk::BufferUsageFlags::TRANSFER_SRC
             | vk::BufferUsageFlags::TRANSFER_DST
             | vk::BufferUsageFlags::SHADER_DEVICE_ADDRESS
-            | vk::BufferUsageFlags::INDIRECT_BUFFER;
+            | vk::BufferUsageFlags::INDIRECT_BUFFER
+            | vk::BufferUsageFlags::UNIFORM_TEXEL_BUFFER;
         let info = vk::BufferCreateInfo::default()
             .size(size)
             .usage(usage)

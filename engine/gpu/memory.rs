@@ -141,6 +141,50 @@ impl Drop for Buffer {
     }
 }
 
+/// Read-only pairs of 32-bit words that shaders read with `texelFetch` on a `usamplerBuffer`
+/// (an `R32G32_UINT` uniform texel buffer; [`super::pipeline::BindingKind::TexelBuffer`]).
+///
+/// For small tables read at per-invocation indices: lavapipe loads through a buffer address
+/// one invocation at a time (a loop over the SIMD lanes with a branch each), but fetches texels
+/// for all lanes at once (docs/pathtracing.md, "Format tables as texels").
+pub struct TexelBuffer {
+    view: vk::BufferView,
+    buffer: Buffer,
+    texels: u64,
+}
+
+impl std::fmt::Debug for TexelBuffer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TexelBuffer")
+            .field("buffer", &self.buffer)
+            .field("texels", &self.texels)
+            .finish()
+    }
+}
+
+impl TexelBuffer {
+    /// Number of texels (word pairs).
+    pub fn texels(&self) -> u64 {
+        self.texels
+    }
+
+    /// The buffer behind the view.
+    pub fn buffer(&self) -> &Buffer {
+        &self.buffer
+    }
+
+    pub(crate) fn view(&self) -> vk::BufferView {
+        self.view
+    }
+}
+
+impl Drop for TexelBuffer {
+    fn drop(&mut self) {
+        // Queued before the buffer (dropped after this), so destroyed first.
+        self.buffer.ctx.defer(Garbage::BufferView(self.view));
+    }
+}
+
 /// A 2D RGBA8 (unorm) storage image, kept in `GENERAL` layout; bound at set 0, binding 0.
 pub struct Image {
     pub(crate) raw: vk::Image,
@@ -336,6 +380,39 @@ impl GpuContext {
             done += n;
         }
         Ok(out)
+    }
+
+    /// Creates a device-local texel buffer holding `texels` (word pairs; at least one, at most
+    /// `maxTexelBufferElements`).
+    pub fn upload_texels(
+        self: &Arc<Self>,
+        name: &str,
+        texels: &[[u32; 2]],
+    ) -> Result<TexelBuffer, GpuError> {
+        let max = self.info().max_texel_buffer_elements;
+        if texels.is_empty() || texels.len() as u64 > max as u64 {
+            return Err(GpuError::InvalidArgument(format!(
+                "texel buffer '{name}': {} texels, the device takes 1 to {max} \
+                 (maxTexelBufferElements)",
+                texels.len()
+            )));
+        }
+        let buffer = self.upload(name, texels)?;
+        let info = vk::BufferViewCreateInfo::default()
+            .buffer(buffer.raw)
+            .format(vk::Format::R32G32_UINT)
+            .offset(0)
+            .range(buffer.size);
+        // SAFETY: a view of our buffer (created with UNIFORM_TEXEL_BUFFER usage) in a format
+        // whose uniform texel buffer support Vulkan requires; the buffer outlives the view.
+        let view = unsafe { self.device.create_buffer_view(&info, None) }
+            .map_err(vk_err("vkCreateBufferView"))?;
+        self.set_name(view, &format!("{name} (view)"));
+        Ok(TexelBuffer {
+            view,
+            buffer,
+            texels: texels.len() as u64,
+        })
     }
 
     /// Creates a `width` x `height` RGBA8 storage image (transitioned to `GENERAL` layout).

@@ -39,11 +39,11 @@ mod swapchain;
 pub mod test_layouts;
 
 pub use clock::{thread_cpu_time, PhaseClock, PhaseTime};
-pub use commands::{Commands, Readback, Submission};
+pub use commands::{Bound, Commands, Readback, Submission};
 pub use context::{DeviceInfo, DeviceType, GpuContext, GpuOptions, GpuStats, REQUIRED_FEATURES};
 pub use frame::{FrameRing, DEFAULT_FRAMES_IN_FLIGHT};
-pub use memory::{Buffer, Image, MemLocation};
-pub use pipeline::{ComputePipeline, ComputePipelineDesc};
+pub use memory::{Buffer, Image, MemLocation, TexelBuffer};
+pub use pipeline::{BindingKind, ComputePipeline, ComputePipelineDesc};
 pub use profiler::{CpuSpan, PassTiming, Profiler};
 pub use surface::Surface;
 pub use swapchain::{FrameSlot, OverlayFrame, Presenter, PresenterOptions, PresenterStats};

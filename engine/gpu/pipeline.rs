@@ -18,8 +18,27 @@ pub struct ComputePipelineDesc<'a> {
     pub spec_constants: &'a [u32],
     /// Size of the push-constant block in bytes (0 = none; at most `maxPushConstantsSize`).
     pub push_constant_size: u32,
-    /// Whether the shader uses one RGBA8 storage image at `set = 0, binding = 0`.
-    pub storage_image: bool,
+    /// What the shader binds at `set = 0`: entry `i` is binding `i` (empty: no descriptor set).
+    pub bindings: &'a [BindingKind],
+}
+
+/// A descriptor a pipeline binds (one per binding of set 0; the resource is given per dispatch,
+/// `Commands::dispatch`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BindingKind {
+    /// An RGBA8 storage image (`image2D`), an [`super::Image`].
+    StorageImage,
+    /// A uniform texel buffer (`usamplerBuffer`), a [`super::TexelBuffer`].
+    TexelBuffer,
+}
+
+impl BindingKind {
+    pub(crate) fn descriptor_type(self) -> vk::DescriptorType {
+        match self {
+            BindingKind::StorageImage => vk::DescriptorType::STORAGE_IMAGE,
+            BindingKind::TexelBuffer => vk::DescriptorType::UNIFORM_TEXEL_BUFFER,
+        }
+    }
 }
 
 /// A compute pipeline and its layout; released on drop once the GPU is done with it.
@@ -28,6 +47,7 @@ pub struct ComputePipeline {
     pub(crate) layout: vk::PipelineLayout,
     pub(crate) set_layout: Option<vk::DescriptorSetLayout>,
     pub(crate) push_constant_size: u32,
+    pub(crate) bindings: Vec<BindingKind>,
     name: String,
     ctx: Arc<GpuContext>,
 }
@@ -46,9 +66,9 @@ impl ComputePipeline {
         &self.name
     }
 
-    /// Whether the pipeline expects a storage image at set 0, binding 0.
-    pub fn uses_storage_image(&self) -> bool {
-        self.set_layout.is_some()
+    /// What the pipeline binds at set 0, by binding.
+    pub fn bindings(&self) -> &[BindingKind] {
+        &self.bindings
     }
 }
 
@@ -89,12 +109,17 @@ impl GpuContext {
                     None,
                 )
                 .map_err(vk_err("vkCreateShaderModule"))?;
-            let set_layout = if desc.storage_image {
-                let bindings = [vk::DescriptorSetLayoutBinding::default()
-                    .binding(0)
-                    .descriptor_type(vk::DescriptorType::STORAGE_IMAGE)
-                    .descriptor_count(1)
-                    .stage_flags(vk::ShaderStageFlags::COMPUTE)];
+            let set_layout = if !desc.bindings.is_empty() {
+                let bindings: Vec<vk::DescriptorSetLayoutBinding> = (desc.bindings.iter())
+                    .enumerate()
+                    .map(|(i, kind)| {
+                        vk::DescriptorSetLayoutBinding::default()
+                            .binding(i as u32)
+                            .descriptor_type(kind.descriptor_type())
+                            .descriptor_count(1)
+                            .stage_flags(vk::ShaderStageFlags::COMPUTE)
+                    })
+                    .collect();
                 match device.create_descriptor_set_layout(
                     &vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings),
                     None,
@@ -176,6 +201,7 @@ impl GpuContext {
                 layout,
                 set_layout,
                 push_constant_size: desc.push_constant_size,
+                bindings: desc.bindings.to_vec(),
                 name: name.to_string(),
                 ctx: Arc::clone(self),
             })

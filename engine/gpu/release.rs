@@ -37,6 +37,8 @@ pub(crate) struct Recyclable {
 pub(crate) enum Garbage {
     /// A buffer and its memory; with its size class, it goes to the free buffers for reuse.
     Buffer(vk::Buffer, Allocation, Option<Recyclable>),
+    /// A texel buffer's view (its buffer is released on its own).
+    BufferView(vk::BufferView),
     /// An image, its view and its memory.
     Image(vk::Image, vk::ImageView, Allocation),
     /// A pipeline, its layout and its set layout.

@@ -231,7 +231,7 @@ impl GpuDedup {
                 spirv,
                 spec_constants: &spec,
                 push_constant_size: std::mem::size_of::<DedupPush>() as u32,
-                storage_image: false,
+                bindings: &[],
             })
         };
         Ok(GpuDedup {
@@ -407,7 +407,7 @@ impl GpuDedup {
         if let Some(p) = profiler.as_deref_mut() {
             p.begin_pass(cmd, "dedup insert");
         }
-        cmd.dispatch(&self.insert, per_team, bytemuck::bytes_of(&push), None)?;
+        cmd.dispatch(&self.insert, per_team, bytemuck::bytes_of(&push), &[])?;
         if let Some(p) = profiler.as_deref_mut() {
             p.end_pass(cmd);
         }
@@ -415,13 +415,13 @@ impl GpuDedup {
         if let Some(p) = profiler.as_deref_mut() {
             p.begin_pass(cmd, "dedup representatives");
         }
-        cmd.dispatch(&self.min, per_team, bytemuck::bytes_of(&push), None)?;
+        cmd.dispatch(&self.min, per_team, bytemuck::bytes_of(&push), &[])?;
         cmd.barrier();
         cmd.dispatch(
             &self.resolve,
             per_invocation,
             bytemuck::bytes_of(&push),
-            None,
+            &[],
         )?;
         if let Some(p) = profiler {
             p.end_pass(cmd);

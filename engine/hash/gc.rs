@@ -190,7 +190,7 @@ impl GpuGarbageCollector {
                 spirv,
                 spec_constants: &spec,
                 push_constant_size: std::mem::size_of::<super::layout::HashPush>() as u32,
-                storage_image: false,
+                bindings: &[],
             })
         };
         Ok(GpuGarbageCollector {
@@ -311,7 +311,7 @@ impl GpuGarbageCollector {
             &self.mark,
             [mark_groups, 1, 1],
             bytemuck::bytes_of(&push),
-            None,
+            &[],
         )?;
         if let Some(p) = profiler.as_deref_mut() {
             p.end_pass(cmd);
@@ -373,7 +373,7 @@ impl GpuGarbageCollector {
             &self.sweep,
             [sweep_groups, 1, 1],
             bytemuck::bytes_of(push),
-            None,
+            &[],
         )?;
         if let Some(p) = profiler {
             p.end_pass(cmd);

@@ -174,7 +174,7 @@ impl GpuHashTable {
                 spirv,
                 spec_constants: &spec,
                 push_constant_size: std::mem::size_of::<HashPush>() as u32,
-                storage_image: false,
+                bindings: &[],
             })
         };
         let search = pipeline("hash search", shaders::HASH_SEARCH)?;
@@ -310,7 +310,7 @@ impl GpuHashTable {
         push: &HashPush,
     ) -> Result<(), HashError> {
         cmd.begin_pass(profiler, name);
-        cmd.dispatch(pipeline, [groups, 1, 1], bytemuck::bytes_of(push), None)?;
+        cmd.dispatch(pipeline, [groups, 1, 1], bytemuck::bytes_of(push), &[])?;
         cmd.end_pass(profiler);
         Ok(())
     }

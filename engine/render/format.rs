@@ -6,16 +6,22 @@
 //! `GpuRenderer::bind_hash_dag`, nothing is laid out). [`GpuDagData::new`] lays a DAG out for
 //! the other formats without decoding:
 //! - svdag32: `Svdag::words`, `VoxelIndex::node_voxels` plus the voxels before each child
-//!   pointer (at the pointer's word), a one-word info block (unused).
-//! - SSVDAG / TSVDAG: the words are the encoding's leaves (two words each), then (TSVDAG) per
-//!   child level its Huffman decode table (one word per entry, Huffman modes) and pointer table
-//!   (two words per entry, modes with tables), then the node streams (levels 1..=root
-//!   concatenated, two u16 per word); leaves, tables and streams unchanged. `node_voxels` has
-//!   one `u64` per u16 of the streams (`pointer_voxel_counts`: at every pointer the voxels it
-//!   leads to; the colour index sums them); the info block ([`info`] offsets, mirrored by
-//!   `DAG_INFO_*` in the GLSL) holds the coding flags and one 64-bit record per level (where
-//!   its stream and its tables start), so a child fetch reads its level's constants with one
-//!   load (the transforms are computed in the shader).
+//!   pointer (at the pointer's word), a two-word info block (unused).
+//! - SSVDAG / TSVDAG: the words are the encoding's leaves (two words each), then the node
+//!   streams (levels 1..=root concatenated, two u16 per word); leaves and streams unchanged.
+//!   `node_voxels` has one `u64` per u16 of the streams (`pointer_voxel_counts`: at every
+//!   pointer the voxels it leads to; the colour index sums them). The info block ([`info`]
+//!   offsets, mirrored by `DAG_INFO_*` in the GLSL) holds the coding flags and one 64-bit record
+//!   per level (where its stream and its tables start), so a child fetch reads its level's
+//!   constants with one fetch (the transforms are computed in the shader); after it (TSVDAG),
+//!   per child level its Huffman decode table (one word per entry, Huffman modes) and pointer
+//!   table (two words per entry, modes with tables), unchanged.
+//!
+//! The info block with its tables goes to the GPU as a uniform texel buffer of word pairs
+//! (`render/dag_tables.glsl`): the traversal reads it at per-invocation indices, which lavapipe
+//! serves for all SIMD lanes at once from a texel buffer but one lane at a time through a
+//! buffer address (docs/pathtracing.md, "Format tables as texels"). The words and counts stay
+//! behind buffer addresses (they may exceed any descriptor's range).
 
 use crate::dag::encode::{EncodeError, EncodedDag, SsvdagEncoding, TsvdagEncoding};
 use crate::dag::transform::TransformSet;
@@ -34,13 +40,13 @@ pub mod info {
     pub const STREAM_BASE: usize = 2;
     /// The payload's coding word (mask-coded levels, tagged levels << 8).
     pub const CODING: usize = 3;
-    /// Per level l, a record of two words at `LEVELS + 2 l`, read with one 64-bit load per
+    /// Per level l, a record of two words at `LEVELS + 2 l`, read with one texel fetch per
     /// child fetch: the u16 index of the level's stream in the streams (0 for the leaves, which
-    /// pointers index directly), and (TSVDAG) the word offset of the level's tables in the DAG
-    /// words | the index bits of its Huffman decode table << [`TABLE_BITS_SHIFT`]: the pointer
-    /// table starts there, the decode table fills the `1 << bits` words before it.
+    /// pointers index directly), and (TSVDAG) the info word where the level's pointer table
+    /// starts (even) | the index bits of its Huffman decode table << [`TABLE_BITS_SHIFT`]: the
+    /// decode table fills the `1 << bits` words before it.
     pub const LEVELS: usize = 8;
-    /// Words of the block (the Huffman decode tables live in the DAG words).
+    /// Words of the block (the tables follow it).
     pub const LEN: usize = LEVELS + 2 * MAX_LEVELS;
     /// Levels the per-level records hold (root levels up to 19 for 2^21 grids).
     pub const MAX_LEVELS: usize = 24;
@@ -143,7 +149,8 @@ pub struct GpuDagData {
     pub words: Vec<u32>,
     /// Voxel counts for the colour index.
     pub node_voxels: Vec<u64>,
-    /// The format info block.
+    /// The format info block and (TSVDAG) the tables after it; an even number of words (word
+    /// pairs on the GPU).
     pub info: Vec<u32>,
 }
 
@@ -220,8 +227,8 @@ fn tsvdag_data(e: &TsvdagEncoding) -> Result<GpuDagData, EncodeError> {
         TransformSet::All => 3,
     };
     w[info::SET] = set | (e.compact_translations() as u32) << 4;
-    // Per child level: its Huffman decode table (a one-entry table for a level with one
-    // implied symbol or none), then its pointer table.
+    // After the block, per child level: its Huffman decode table (a one-entry table for a
+    // level with one implied symbol or none), then its pointer table at an even word.
     let codes = if e.options.huffman {
         e.huffman_tables()
     } else {
@@ -239,19 +246,23 @@ fn tsvdag_data(e: &TsvdagEncoding) -> Result<GpuDagData, EncodeError> {
                 1 => vec![symbols[0] as u32],
                 _ => vec![0],
             };
-            words.extend(table);
+            // Padding before the table, so that the pointer table after it starts even.
+            if (w.len() + table.len()) % 2 == 1 {
+                w.push(0);
+            }
+            w.extend(table);
         }
-        if words.len() as u64 >= 1 << info::TABLE_BITS_SHIFT {
+        if w.len() as u64 >= 1 << info::TABLE_BITS_SHIFT {
             return Err(EncodeError::TooLarge(format!(
-                "the pointer tables of level {l} start at DAG word {}: the GPU traversal addresses \
-                 at most 2^{} words before the node streams",
-                words.len(),
+                "the pointer table of level {l} starts at info word {}: the GPU traversal \
+                 addresses fewer than 2^{} words of tables",
+                w.len(),
                 info::TABLE_BITS_SHIFT
             )));
         }
-        w[info::LEVELS + 2 * l + 1] = words.len() as u32 | bits << info::TABLE_BITS_SHIFT;
+        w[info::LEVELS + 2 * l + 1] = w.len() as u32 | bits << info::TABLE_BITS_SHIFT;
         if let Some(t) = e.tables.get(l) {
-            words.extend(t.iter().flat_map(|&v| [v as u32, (v >> 32) as u32]));
+            w.extend(t.iter().flat_map(|&v| [v as u32, (v >> 32) as u32]));
         }
     }
     let mask_levels = e
@@ -339,7 +350,7 @@ impl GpuDagData {
             resolution: dag.resolution,
             words: dag.words.clone(),
             node_voxels,
-            info: vec![0],
+            info: vec![0, 0],
         }
     }
 
@@ -381,9 +392,11 @@ mod tests {
         Svdag::from_voxels(&voxels).unwrap()
     }
 
-    /// Every child level's record names its pointer table and, in the `1 << bits` words before
-    /// it, a decode table giving what `Huffman::decode` gives for every index (a level with
-    /// one implied symbol or none: one entry of length 0).
+    /// Every child level's record names its pointer table (at an even info word) and, in the
+    /// `1 << bits` words before it, a decode table giving what `Huffman::decode` gives for every
+    /// index (a level with one implied symbol or none: one entry of length 0); the tables follow
+    /// the info block in level order, with at most one padding word between them; the DAG
+    /// words hold the leaves and the node streams only.
     #[test]
     fn level_records_name_decode_and_pointer_tables() {
         let dag = patterned_dag();
@@ -400,20 +413,22 @@ mod tests {
             )
             .unwrap();
             let data = tsvdag_data(&e).unwrap();
-            let mut previous_end = 2 * e.leaves.len() as u32;
+            let mut previous_end = info::LEN as u32;
             for l in 0..e.levels.len() - 1 {
                 let word = data.info[info::LEVELS + 2 * l + 1];
                 let bits = word >> info::TABLE_BITS_SHIFT;
                 let tables = word & ((1 << info::TABLE_BITS_SHIFT) - 1);
+                assert_eq!(tables % 2, 0, "level {l}: pointer table at an even word");
                 let start = tables - (1 << bits);
-                assert_eq!(
-                    start, previous_end,
+                assert!(
+                    start == previous_end
+                        || (start == previous_end + 1 && data.info[previous_end as usize] == 0),
                     "level {l}: tables packed in level order"
                 );
                 let table = e.tables.get(l).map_or(&[][..], Vec::as_slice);
                 previous_end = tables + 2 * table.len() as u32;
-                let decode = &data.words[start as usize..tables as usize];
-                let pointers = &data.words[tables as usize..previous_end as usize];
+                let decode = &data.info[start as usize..tables as usize];
+                let pointers = &data.info[tables as usize..previous_end as usize];
                 let stored: Vec<u32> = table
                     .iter()
                     .flat_map(|&v| [v as u32, (v >> 32) as u32])
@@ -429,7 +444,8 @@ mod tests {
                     assert_eq!(entry, expected, "level {l}, index {x}");
                 }
             }
-            assert_eq!(data.info[info::STREAM_BASE], previous_end);
+            assert_eq!(data.info.len() as u32, previous_end);
+            assert_eq!(data.info[info::STREAM_BASE], 2 * e.leaves.len() as u32);
             assert!(e.codes.iter().flatten().any(|c| c.single().is_none()));
         }
     }

@@ -25,8 +25,8 @@ use crate::dag::Svdag;
 use crate::edit::gpu::GpuHashDag;
 use crate::edit::item::{Root, MATERIAL_COUNT, MAX_ITEM_WORDS, MIN_ITEM_WORDS, TABLE_COUNT};
 use crate::gpu::{
-    shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, Image,
-    MemLocation, Profiler,
+    shaders, BindingKind, Bound, Buffer, Commands, ComputePipeline, ComputePipelineDesc,
+    GpuContext, GpuError, Image, MemLocation, Profiler, TexelBuffer,
 };
 
 /// Workgroup size of `primary.comp` (specialization constants 0 and 1).
@@ -49,7 +49,8 @@ pub struct GpuRenderer {
 /// words and both chunk tables, `attr::ChunkedColors`).
 pub struct GpuScene {
     pub(super) format: TraversalFormat,
-    pub(super) dag_info: Buffer,
+    /// The format info block and tables (`GpuDagData::info`), word pairs as texels.
+    pub(super) tables: TexelBuffer,
     pub(super) words: Buffer,
     pub(super) node_voxels: Buffer,
     pub(super) color_words: Buffer,
@@ -150,12 +151,12 @@ impl GpuScene {
 
     /// Device memory held by the scene's node data (words, voxel counts, info block), in bytes.
     pub fn dag_bytes(&self) -> u64 {
-        self.words.size() + self.node_voxels.size() + self.dag_info.size()
+        self.words.size() + self.node_voxels.size() + self.tables.buffer().size()
     }
 
     /// Device memory held by the scene's buffers, in bytes.
     pub fn gpu_bytes(&self) -> u64 {
-        self.dag_info.size()
+        self.tables.buffer().size()
             + self.words.size()
             + self.node_voxels.size()
             + self.color_words.size()
@@ -210,7 +211,7 @@ impl GpuRenderer {
                 spirv: shaders::RENDER_PRIMARY_BY_FORMAT[format.index()],
                 spec_constants: &WORKGROUP,
                 push_constant_size: std::mem::size_of::<PrimaryPush>() as u32,
-                storage_image: true,
+                bindings: &[BindingKind::StorageImage, BindingKind::TexelBuffer],
             })?;
             // Another thread may have won the race: its pipeline is the same.
             let _ = slot.set(pipeline);
@@ -317,7 +318,14 @@ impl GpuRenderer {
         self.ensure_pipeline(dag.format)?;
         let words = self.ctx.upload("dag words", &dag.words)?;
         let node_voxels = self.ctx.upload("dag node voxel counts", &dag.node_voxels)?;
-        let dag_info = self.ctx.upload("dag format info", &dag.info)?;
+        let pairs: Vec<[u32; 2]> = dag
+            .info
+            .chunks(2)
+            .map(|p| [p[0], p.get(1).copied().unwrap_or(0)])
+            .collect();
+        let tables = self
+            .ctx
+            .upload_texels("dag format info and tables", &pairs)?;
         // Raw colours are one chunk of the raw format: the shader has a single colour path.
         let (format, words_of_colors, starts, offsets) = match colors {
             ColorSource::Chunked(c) => {
@@ -347,7 +355,7 @@ impl GpuRenderer {
         let chunk_offsets = self.ctx.upload("dag colour chunk offsets", &offsets)?;
         Ok(GpuScene {
             format: dag.format,
-            dag_info,
+            tables,
             words,
             node_voxels,
             color_words,
@@ -495,7 +503,6 @@ impl GpuRenderer {
             chunk_starts: scene.chunk_starts.address(),
             chunk_offsets: scene.chunk_offsets.address(),
             hits: hits.map_or(0, Buffer::address),
-            dag_info: scene.dag_info.address(),
             first_hits: first_hits.map_or(0, Buffer::address),
             color_format: scene.color_format as u32,
             chunk_count: scene.chunk_count,
@@ -505,7 +512,12 @@ impl GpuRenderer {
         let groups = [w.div_ceil(WORKGROUP[0]), h.div_ceil(WORKGROUP[1]), 1];
         // begin_pass orders its begin timestamp before the dispatch (lavapipe flush).
         cmd.begin_pass(&mut profiler, "primary rays");
-        let result = cmd.dispatch(pipeline, groups, bytemuck::bytes_of(&push), Some(target));
+        let result = cmd.dispatch(
+            pipeline,
+            groups,
+            bytemuck::bytes_of(&push),
+            &[Bound::Image(target), Bound::Texels(&scene.tables)],
+        );
         cmd.end_pass(&mut profiler);
         result
     }

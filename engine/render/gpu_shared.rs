@@ -52,8 +52,6 @@ gpu_shared! {
         pub(crate) chunk_offsets: uint64_t,
         /// One hit flag per pixel, or 0: no hit mask (the viewer).
         pub(crate) hits: uint64_t,
-        /// The format info block of the DAG's format (`render::format`; svdag32: one unused word).
-        pub(crate) dag_info: uint64_t,
         /// One `FirstHit` per pixel, or 0: none written.
         pub(crate) first_hits: uint64_t,
         /// `ColorFormat` id.
@@ -164,8 +162,6 @@ gpu_shared! {
         pub(crate) chunk_starts: uint64_t,
         /// Word offset of each colour chunk.
         pub(crate) chunk_offsets: uint64_t,
-        /// The format info block of the DAG's format (`render::format`; svdag32: one unused word).
-        pub(crate) dag_info: uint64_t,
         /// `ColorFormat` id.
         pub(crate) color_format: uint,
         /// Number of colour chunks.

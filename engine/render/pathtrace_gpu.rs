@@ -22,8 +22,8 @@ use super::pathtrace::{srgb_lut, PathTraceError, PtImage, PtSettings};
 use crate::compute::{Primitives, ScanScratch, COUNT_ARGS_BYTES};
 use crate::dag::Svdag;
 use crate::gpu::{
-    shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError,
-    MemLocation, Profiler,
+    shaders, BindingKind, Bound, Buffer, Commands, ComputePipeline, ComputePipelineDesc,
+    GpuContext, GpuError, MemLocation, Profiler,
 };
 
 /// Workgroup size of `pt_mega.comp` (specialization constants 0 and 1).
@@ -175,7 +175,7 @@ impl GpuPathTracer {
             spirv,
             spec_constants: spec,
             push_constant_size: std::mem::size_of::<PtPush>() as u32,
-            storage_image: false,
+            bindings: &[BindingKind::TexelBuffer],
         })
     }
 
@@ -338,7 +338,6 @@ impl GpuPathTracer {
             color_words: scene.color_words.address(),
             chunk_starts: scene.chunk_starts.address(),
             chunk_offsets: scene.chunk_offsets.address(),
-            dag_info: scene.dag_info.address(),
             color_format: scene.color_format as u32,
             chunk_count: scene.chunk_count,
             sample_index: sample,
@@ -346,6 +345,7 @@ impl GpuPathTracer {
             dag_root: scene.dag_root,
             _pad: 0,
         };
+        let tables = [Bound::Texels(&scene.tables)];
         let pixels = target.width * target.height;
         let Some(w) = &target.wave else {
             let groups = [
@@ -355,7 +355,7 @@ impl GpuPathTracer {
             ];
             cmd.begin_pass(&mut profiler, "pt megakernel");
             let mega = self.traversing(pipes, format, false, colors(0))?;
-            let r = cmd.dispatch(mega, groups, bytemuck::bytes_of(&push), None);
+            let r = cmd.dispatch(mega, groups, bytemuck::bytes_of(&push), &tables);
             cmd.end_pass(&mut profiler);
             cmd.barrier();
             return r;
@@ -365,7 +365,7 @@ impl GpuPathTracer {
             &pipes.generate,
             wave_grid(pixels),
             bytemuck::bytes_of(&push),
-            None,
+            &tables,
         );
         cmd.end_pass(&mut profiler);
         r?;
@@ -382,12 +382,12 @@ impl GpuPathTracer {
             cmd.fill_buffer(&w.shadow_count, 0);
             cmd.begin_pass(&mut profiler, "pt extend");
             let extend = self.traversing(pipes, format, true, colors(k))?;
-            let r = cmd.dispatch_indirect(extend, &w.ext_count, 4, push_bytes, None);
+            let r = cmd.dispatch_indirect(extend, &w.ext_count, 4, push_bytes, &tables);
             cmd.end_pass(&mut profiler);
             r?;
             cmd.barrier();
             cmd.begin_pass(&mut profiler, "pt shade");
-            let r = cmd.dispatch_indirect(&pipes.shade, &w.ext_count, 4, push_bytes, None);
+            let r = cmd.dispatch_indirect(&pipes.shade, &w.ext_count, 4, push_bytes, &tables);
             cmd.end_pass(&mut profiler);
             r?;
             self.primitives.record_indirect_args(
@@ -397,7 +397,7 @@ impl GpuPathTracer {
                 profiler.as_deref_mut(),
             )?;
             cmd.begin_pass(&mut profiler, "pt shadow");
-            let r = cmd.dispatch_indirect(&pipes.shadow, &w.shadow_count, 4, push_bytes, None);
+            let r = cmd.dispatch_indirect(&pipes.shadow, &w.shadow_count, 4, push_bytes, &tables);
             cmd.end_pass(&mut profiler);
             r?;
             cmd.barrier();
@@ -421,7 +421,7 @@ impl GpuPathTracer {
             &pipes.accumulate,
             wave_grid(pixels),
             bytemuck::bytes_of(&push),
-            None,
+            &tables,
         );
         cmd.end_pass(&mut profiler);
         cmd.barrier();

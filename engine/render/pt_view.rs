@@ -11,8 +11,8 @@ use super::pathtrace::PtImage;
 use super::pathtrace_gpu::PtTarget;
 use crate::color::linear_to_srgb;
 use crate::gpu::{
-    shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError, Image,
-    Profiler,
+    shaders, BindingKind, Bound, Buffer, Commands, ComputePipeline, ComputePipelineDesc,
+    GpuContext, GpuError, Image, Profiler,
 };
 
 /// Workgroup size of `accum_display.comp`.
@@ -31,7 +31,7 @@ impl PtView {
             spirv: shaders::RENDER_ACCUM_DISPLAY,
             spec_constants: &[],
             push_constant_size: std::mem::size_of::<PtDisplayPush>() as u32,
-            storage_image: true,
+            bindings: &[BindingKind::StorageImage],
         })?;
         Ok(PtView { pipeline })
     }
@@ -90,7 +90,7 @@ impl PtView {
             &self.pipeline,
             groups,
             bytemuck::bytes_of(&push),
-            Some(image),
+            &[Bound::Image(image)],
         );
         cmd.end_pass(&mut profiler);
         r

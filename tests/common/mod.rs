@@ -273,7 +273,7 @@ pub fn run_test_shader(
             spirv,
             spec_constants: &[],
             push_constant_size: std::mem::size_of::<DecodeTestPush>() as u32,
-            storage_image: false,
+            bindings: &[],
         })
         .unwrap();
     let input = ctx.upload("test shader input", input).unwrap();
@@ -297,7 +297,7 @@ pub fn run_test_shader(
         &pipeline,
         [(count as u32).div_ceil(64).max(1), 1, 1],
         &push,
-        None,
+        &[],
     )
     .unwrap();
     cmd.submit().unwrap();

@@ -11,12 +11,14 @@
 //
 // The includer defines, BEFORE including traverse.glsl:
 //   uint dag_word(uint i);            // svdag32: word i of `Svdag::words`; encoded formats:
-//                                     // the leaves (2 words each), pointer tables (2 words per
-//                                     // entry) and node streams (u16 pairs), unchanged
+//                                     // the leaves (2 words each) and node streams (u16
+//                                     // pairs), unchanged
 //   uint64_t dag_node_voxels(uint i); // voxels below the node at word i (svdag32) or at u16
 //                                     // stream index i (encoded; at a translated pointer's
 //                                     // first u16: the voxels of the translated subtree)
-//   uint dag_info(uint i);            // word i of the format info block (DAG_INFO_* below)
+//   uint dag_info(uint i);            // word i of the format info block (DAG_INFO_* below),
+//                                     // followed by the Huffman decode tables and pointer
+//                                     // tables (TSVDAG); render/dag_tables.glsl
 // A node handle is (node, xform): svdag32 a word offset and 0; encoded formats a u16 index in
 // the streams (inner levels) or a leaf index (level 0), and the transform id (SSVDAG: the
 // mirror bits, which are the transform ids 0..7) the stored node is seen through.
@@ -41,8 +43,8 @@
 #define DAG_INFO_STREAM_BASE 2u
 #define DAG_INFO_CODING 3u
 // Per level l, two words at DAG_INFO_LEVELS + 2 l (`info::LEVELS`): the u16 index of its
-// stream (0 for the leaves) and (TSVDAG) the word offset of its tables in the DAG words | the
-// Huffman index bits << DAG_TABLE_BITS_SHIFT.
+// stream (0 for the leaves) and (TSVDAG) the info word of its pointer table | the Huffman index
+// bits << DAG_TABLE_BITS_SHIFT.
 #define DAG_INFO_LEVELS 8u
 #define DAG_TABLE_BITS_SHIFT 28u
 
@@ -68,7 +70,8 @@ uvec2 dag_level(uint l) {
     return dag_info_pair(DAG_INFO_LEVELS + 2u * l);
 }
 
-// Where a level's pointer table starts in the DAG words, from its record's second word.
+// The info word where a level's pointer table starts (even: two words per entry), from its
+// record's second word; its Huffman decode table fills the `1 << bits` words before it.
 uint dag_level_tables(uint record_y) {
     return record_y & ((1u << DAG_TABLE_BITS_SHIFT) - 1u);
 }
@@ -231,7 +234,7 @@ void dag_root(uint root_level, out uint node, out uint xform) {
 uint tsvdag_huffman(uint tables, uint64_t e, out uint len) {
     uint bits = tables >> DAG_TABLE_BITS_SHIFT;
     uint start = dag_level_tables(tables) - (1u << bits);
-    uint entry = dag_word(start + (uint(e) & ((1u << bits) - 1u)));
+    uint entry = dag_info(start + (uint(e) & ((1u << bits) - 1u)));
     len = entry >> 16u;
     return entry & 0xffffu;
 }
@@ -267,7 +270,7 @@ void dag_child(uint node, uint xform, uint aux, uint level, uint c, out uint chi
     }
     if (in_table) {
         uint w = dag_level_tables(level_record.y) + 2u * uint(index);
-        e = packUint2x32(dag_word_pair(w));
+        e = packUint2x32(dag_info_pair(w));
     }
 #endif
     uint t = 0u;

@@ -44,10 +44,6 @@ uint dag_word(uint i) {
     return WordsRef(push.words).w[i];
 }
 
-uint dag_info(uint i) {
-    return WordsRef(push.dag_info).w[i];
-}
-
 // Words i and i + 1 as one 64-bit load (4-byte aligned: x86 lavapipe and GPUs load it as two
 // words' worth; one per-lane loop on lavapipe instead of two).
 layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer WordPairRef {
@@ -59,10 +55,8 @@ uvec2 dag_word_pair(uint i) {
     return unpackUint2x32(WordPairRef(push.words + 4ul * uint64_t(i)).v);
 }
 
-#define DAG_HAS_INFO_PAIR 1
-uvec2 dag_info_pair(uint i) {
-    return unpackUint2x32(WordPairRef(push.dag_info + 4ul * uint64_t(i)).v);
-}
+#define DAG_TABLES_BINDING 1
+#include "render/dag_tables.glsl"
 
 uint64_t dag_node_voxels(uint i) {
     return Words64Ref(push.node_voxels).w[i];

@@ -7,8 +7,9 @@
 // reference reproduces the GPU's paths bit for bit (docs/pathtracing.md).
 //
 // The includer declares nothing: this file declares the push constant block (`PtPush`), the
-// buffer references and the DAG accessors (`dag_word`, `dag_info`, `dag_node_voxels`), then
-// includes colors.glsl and traverse.glsl (so every pt shader has one variant per DAG format).
+// buffer references and the DAG accessors (`dag_word`, `dag_node_voxels`; `dag_info` from
+// dag_tables.glsl at binding 0), then includes colors.glsl and traverse.glsl (so every pt
+// shader has one variant per DAG format).
 #ifndef VOXDAG_RENDER_PT_COMMON_GLSL
 #define VOXDAG_RENDER_PT_COMMON_GLSL
 
@@ -61,10 +62,6 @@ uint dag_word(uint i) {
     return PtWordsRef(push.words).w[i];
 }
 
-uint dag_info(uint i) {
-    return PtWordsRef(push.dag_info).w[i];
-}
-
 // Words i and i + 1 as one 64-bit load (4-byte aligned: x86 lavapipe and GPUs load it as two
 // words' worth; one per-lane loop on lavapipe instead of two).
 layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer PtWordPairRef {
@@ -76,10 +73,8 @@ uvec2 dag_word_pair(uint i) {
     return unpackUint2x32(PtWordPairRef(push.words + 4ul * uint64_t(i)).v);
 }
 
-#define DAG_HAS_INFO_PAIR 1
-uvec2 dag_info_pair(uint i) {
-    return unpackUint2x32(PtWordPairRef(push.dag_info + 4ul * uint64_t(i)).v);
-}
+#define DAG_TABLES_BINDING 0
+#include "render/dag_tables.glsl"
 
 uint64_t dag_node_voxels(uint i) {
     return PtWords64Ref(push.node_voxels).w[i];
