@@ -356,8 +356,8 @@ fn storage_image_readback() {
 }
 
 /// A uniform texel buffer of word pairs reads back exactly at scattered indices; dispatches
-/// whose resources do not match the pipeline's bindings, and texel buffers of no texels, are
-/// refused.
+/// whose resources do not match the pipeline's bindings, texel buffers of no texels and
+/// pipelines with more bindings of a kind than the descriptor pools hold are refused.
 #[test]
 fn texel_buffer_fetches_word_pairs() {
     let ctx = context();
@@ -398,6 +398,14 @@ fn texel_buffer_fetches_word_pairs() {
         let bad = (0..got.len()).position(|i| got[i] != want[i]);
         assert_eq!(bad, None, "first wrong word");
         assert!(ctx.upload_texels("none", &[]).is_err());
+        let too_many = ctx.create_compute_pipeline(&ComputePipelineDesc {
+            name: "three texel buffers",
+            spirv: shaders::TEST_TEXELS,
+            spec_constants: &[],
+            push_constant_size: std::mem::size_of::<FillPush>() as u32,
+            bindings: &[BindingKind::TexelBuffer; 3],
+        });
+        assert!(too_many.is_err());
     }
     assert_clean(&ctx);
 }

@@ -9,6 +9,7 @@ use std::sync::{Arc, Mutex};
 use ash::vk;
 
 use super::memory::color_range;
+use super::pipeline::MAX_BINDINGS_PER_KIND;
 use super::release::{Garbage, Recorder};
 use super::ring::RingKind;
 use super::{
@@ -21,9 +22,6 @@ use super::{
 pub(crate) const RING_MAX_TRANSFER: u64 = 1 << 20;
 /// Descriptor sets in a recorder's first descriptor pool; each further pool doubles.
 const FIRST_DESCRIPTOR_POOL: u32 = 64;
-
-/// Most bindings of one kind a descriptor set may have (sizes the descriptor pools).
-const MAX_BINDINGS: u32 = 2;
 
 /// A resource given to a dispatch for one binding of its pipeline's set 0 (in binding order,
 /// matching [`ComputePipeline::bindings`]).
@@ -439,13 +437,11 @@ impl<'a> Commands<'a> {
                     recorder.current_sets = 0;
                 }
                 if recorder.current_pool == recorder.descriptor_pools.len() {
-                    // Room for every set to hold MAX_BINDINGS descriptors of each kind.
+                    // Room for every set to hold the most descriptors of each kind a pipeline may bind.
                     let sets = capacity(recorder.descriptor_pools.len());
-                    let sizes = [BindingKind::StorageImage, BindingKind::TexelBuffer].map(|k| {
-                        vk::DescriptorPoolSize {
-                            ty: k.descriptor_type(),
-                            descriptor_count: sets * MAX_BINDINGS,
-                        }
+                    let sizes = BindingKind::ALL.map(|k| vk::DescriptorPoolSize {
+                        ty: k.descriptor_type(),
+                        descriptor_count: sets * MAX_BINDINGS_PER_KIND,
                     });
                     let pool = device
                         .create_descriptor_pool(

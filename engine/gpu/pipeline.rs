@@ -22,6 +22,10 @@ pub struct ComputePipelineDesc<'a> {
     pub bindings: &'a [BindingKind],
 }
 
+/// Most bindings of one kind a pipeline may have (the recorders' descriptor pools are sized for
+/// it).
+pub(crate) const MAX_BINDINGS_PER_KIND: u32 = 2;
+
 /// A descriptor a pipeline binds (one per binding of set 0; the resource is given per dispatch,
 /// `Commands::dispatch`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -33,6 +37,9 @@ pub enum BindingKind {
 }
 
 impl BindingKind {
+    /// Every kind.
+    pub(crate) const ALL: [BindingKind; 2] = [BindingKind::StorageImage, BindingKind::TexelBuffer];
+
     pub(crate) fn descriptor_type(self) -> vk::DescriptorType {
         match self {
             BindingKind::StorageImage => vk::DescriptorType::STORAGE_IMAGE,
@@ -99,6 +106,15 @@ impl GpuContext {
                 desc.push_constant_size,
                 self.info().max_push_constants_size
             )));
+        }
+        for kind in BindingKind::ALL {
+            let n = desc.bindings.iter().filter(|&&k| k == kind).count();
+            if n > MAX_BINDINGS_PER_KIND as usize {
+                return Err(GpuError::InvalidArgument(format!(
+                    "pipeline '{name}': {n} bindings of kind {kind:?}, at most \
+                     {MAX_BINDINGS_PER_KIND}"
+                )));
+            }
         }
         let device = &self.device;
         // SAFETY: valid create infos; on error everything created so far is destroyed.
