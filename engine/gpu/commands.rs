@@ -321,8 +321,12 @@ impl<'a> Commands<'a> {
                 pipeline.name()
             )));
         }
-        let kinds: Vec<BindingKind> = bound.iter().map(Bound::kind).collect();
-        if kinds != pipeline.bindings() {
+        if !bound
+            .iter()
+            .map(Bound::kind)
+            .eq(pipeline.bindings().iter().copied())
+        {
+            let kinds: Vec<BindingKind> = bound.iter().map(Bound::kind).collect();
             return Err(GpuError::InvalidArgument(format!(
                 "pipeline '{}' binds {:?}, the dispatch gives {kinds:?}",
                 pipeline.name(),
@@ -484,13 +488,6 @@ impl<'a> Commands<'a> {
                     Bound::Texels(_) => [vk::DescriptorImageInfo::default()],
                 })
                 .collect();
-            let views: Vec<[vk::BufferView; 1]> = bound
-                .iter()
-                .map(|b| match b {
-                    Bound::Texels(t) => [t.view()],
-                    Bound::Image(_) => [vk::BufferView::null()],
-                })
-                .collect();
             let writes: Vec<vk::WriteDescriptorSet> = bound
                 .iter()
                 .enumerate()
@@ -501,7 +498,7 @@ impl<'a> Commands<'a> {
                         .descriptor_type(b.kind().descriptor_type());
                     match b {
                         Bound::Image(_) => write.image_info(&image_infos[i]),
-                        Bound::Texels(_) => write.texel_buffer_view(&views[i]),
+                        Bound::Texels(t) => write.texel_buffer_view(std::slice::from_ref(&t.view)),
                     }
                 })
                 .collect();

@@ -148,7 +148,7 @@ impl Drop for Buffer {
 /// one invocation at a time (a loop over the SIMD lanes with a branch each), but fetches texels
 /// for all lanes at once (docs/pathtracing.md, "Format tables as texels").
 pub struct TexelBuffer {
-    view: vk::BufferView,
+    pub(crate) view: vk::BufferView,
     buffer: Buffer,
     texels: u64,
 }
@@ -171,10 +171,6 @@ impl TexelBuffer {
     /// The buffer behind the view.
     pub fn buffer(&self) -> &Buffer {
         &self.buffer
-    }
-
-    pub(crate) fn view(&self) -> vk::BufferView {
-        self.view
     }
 }
 

@@ -5,7 +5,7 @@
 // The includer defines, BEFORE including this file (details in render/dag_formats.glsl):
 //   uint dag_word(uint i);            // the DAG's words (svdag32: `Svdag::words`)
 //   uint64_t dag_node_voxels(uint i); // voxel counts (svdag32: `VoxelIndex::node_voxels[i]`)
-//   uint dag_info(uint i);            // format info block (unused by svdag32)
+//   #define DAG_TABLES_BINDING B       // set-0 binding of the format info block and tables
 // Provides `struct Hit`,
 //   void traverse_begin(uint root_level); // once per invocation, before any trace_ray
 //   bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit);
@@ -241,8 +241,8 @@ uint traverse_shifted_rank(uint node, uint xform, uint level, ivec3 org, ivec3 c
 }
 #endif
 
-// Per-invocation setup of the format (its constants read once into registers: every load is
-// a scalar loop over the SIMD lanes on lavapipe, so none is repeated per ray or per node).
+// Per-invocation setup of the format (its constants read once into registers: every read costs
+// a gather or a per-lane loop on lavapipe, so none is repeated per ray or per node).
 void traverse_begin(uint root_level) {
     dag_begin(root_level);
 }

@@ -1,9 +1,10 @@
 // The cube's transform group (engine/dag/transform.rs) computed with integer arithmetic, for
 // the traversal of the transformed formats (dag_formats.glsl) and its GPU test
 // (test/xform.comp, tests/transform.rs: equal to `Transform` for all 48 transforms).
-// Arithmetic rather than the info block's tables: on lavapipe every buffer load is a scalar
-// loop over the 8 SIMD lanes that runs whether or not a lane needs it, while these vector
-// operations cost far less (docs/pathtracing.md, "Where the time goes on lavapipe").
+// Arithmetic rather than tables in the info block: measured when the info block was read
+// through a buffer address, which lavapipe loads one SIMD lane at a time, these vector
+// operations cost far less (docs/pathtracing.md, "Where the time goes on lavapipe"); not
+// measured again since the info block became a texel buffer (a gather per read).
 // Transform t = 8 * permutation + mirror bits; output axis i reads input axis
 // `PERMUTATIONS[t >> 3][i]`, then mirror bit i flips it.
 #ifndef VOXDAG_RENDER_XFORM_GLSL
