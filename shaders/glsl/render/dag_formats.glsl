@@ -16,9 +16,9 @@
 //   uint64_t dag_node_voxels(uint i); // voxels below the node at word i (svdag32) or at u16
 //                                     // stream index i (encoded; at a translated pointer's
 //                                     // first u16: the voxels of the translated subtree)
-//   #define DAG_TABLES_BINDING B       // the set-0 binding of the info block and its tables
-//                                     // (render/dag_tables.glsl, included here: `dag_info`,
-//                                     // `dag_info_pair`; DAG_INFO_* below)
+//   uint dag_info(uint i);            // word i of the format info block (DAG_INFO_* below),
+//                                     // followed by the Huffman decode tables and pointer
+//                                     // tables (TSVDAG); render/dag_tables.glsl
 // A node handle is (node, xform): svdag32 a word offset and 0; encoded formats a u16 index in
 // the streams (inner levels) or a leaf index (level 0), and the transform id (SSVDAG: the
 // mirror bits, which are the transform ids 0..7) the stored node is seen through.
@@ -57,7 +57,13 @@ uvec2 dag_word_pair(uint i) {
 }
 #endif
 
-#include "render/dag_tables.glsl"
+// Words i and i + 1 of the info block; DAG_HAS_INFO_PAIR and `uvec2 dag_info_pair(uint i)`
+// likewise.
+#if !defined(DAG_HAS_INFO_PAIR)
+uvec2 dag_info_pair(uint i) {
+    return uvec2(dag_info(i), dag_info(i + 1u));
+}
+#endif
 
 // The record of level l: one load for everything a child fetch needs to know about its level.
 uvec2 dag_level(uint l) {

@@ -5,8 +5,7 @@
 // for all SIMD lanes at once but loads through an address one lane at a time, in a loop with a
 // branch per lane (docs/pathtracing.md, "Format tables as texels").
 //
-// Included by dag_formats.glsl; the includer of traverse.glsl defines DAG_TABLES_BINDING (the
-// binding in set 0).
+// The includer defines DAG_TABLES_BINDING (the binding in set 0) before including this file.
 #ifndef VOXDAG_RENDER_DAG_TABLES_GLSL
 #define VOXDAG_RENDER_DAG_TABLES_GLSL
 
@@ -19,6 +18,7 @@ uint dag_info(uint i) {
 }
 
 // Words i and i + 1 of the info block, i even: one texel.
+#define DAG_HAS_INFO_PAIR 1
 uvec2 dag_info_pair(uint i) {
     return texelFetch(dag_tables, int(i >> 1u)).xy;
 }

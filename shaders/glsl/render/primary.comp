@@ -55,8 +55,8 @@ uvec2 dag_word_pair(uint i) {
     return unpackUint2x32(WordPairRef(push.words + 4ul * uint64_t(i)).v);
 }
 
-// The info block and tables (render/dag_tables.glsl, included by dag_formats.glsl).
 #define DAG_TABLES_BINDING 1
+#include "render/dag_tables.glsl"
 
 uint64_t dag_node_voxels(uint i) {
     return Words64Ref(push.node_voxels).w[i];

@@ -5,7 +5,8 @@
 // The includer defines, BEFORE including this file (details in render/dag_formats.glsl):
 //   uint dag_word(uint i);            // the DAG's words (svdag32: `Svdag::words`)
 //   uint64_t dag_node_voxels(uint i); // voxel counts (svdag32: `VoxelIndex::node_voxels[i]`)
-//   #define DAG_TABLES_BINDING B       // set-0 binding of the format info block and tables
+//   uint dag_info(uint i);            // format info block (unused by svdag32;
+//                                     // render/dag_tables.glsl defines it from a texel buffer)
 // Provides `struct Hit`,
 //   void traverse_begin(uint root_level); // once per invocation, before any trace_ray
 //   bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit);
