@@ -61,8 +61,8 @@ const LEVEL_ADDRESSES: usize = 28;
 const COUNTERS: usize = TABLE_COUNT as usize;
 /// Invocations per workgroup of every edit pass.
 const GROUP: u32 = 64;
-/// Largest batch whose dedup gets a pool that cannot run out (2 x count slabs), so that its
-/// dedup, search, mark and insert share one submission (`merge_items`).
+/// Largest batch whose slab-table dedup gets a pool that cannot run out (2 x count slabs), so
+/// that its dedup, search, mark and insert share one submission (`merge_items`).
 const FUSED_DEDUP_MAX: u32 = 1024;
 
 /// Default [`GpuHashDagConfig::traversal_budget`].
@@ -1278,9 +1278,12 @@ impl GpuHashDag {
         let sizes: Vec<usize> = (0..counts.len()).filter(|&s| counts[s] > 0).collect();
         // A batch of one item is its own representative: no dedup, no mark.
         let deduped: Vec<usize> = sizes.iter().copied().filter(|&s| counts[s] > 1).collect();
-        // Small batches get a dedup pool that cannot run out (2 x count slabs), so the
-        // dedup, search, mark and insert of every size share one submission and one wait.
-        let fused = deduped.iter().all(|&s| counts[s] <= FUSED_DEDUP_MAX);
+        // Batches whose dedup cannot run out (the probe table of single lanes, or a slab table
+        // with a pool of 2 x count slabs, given to small batches) let the dedup, search, mark
+        // and insert of every size share one submission and one wait.
+        let fused = deduped
+            .iter()
+            .all(|&s| counts[s] <= FUSED_DEDUP_MAX || self.dedups[s].never_retries());
         let scratch = deduped
             .iter()
             .map(|&s| {

@@ -680,15 +680,39 @@ impl<'a> Commands<'a> {
 
     /// Fills a whole buffer with a repeated `u32` (size rounded down to 4 bytes).
     pub fn fill_buffer(&mut self, dst: &'a Buffer, value: u32) {
-        self.barrier();
         // The buffer's own size, not the Vulkan buffer's (a reused size class may be larger).
-        let size = dst.size() & !3;
-        if size > 0 {
+        self.fill_raw(dst, 0, dst.size() & !3, value);
+    }
+
+    /// Fills bytes `[offset, offset + len)` of a buffer with a repeated `u32` (both multiples of
+    /// 4 bytes, inside the buffer).
+    pub fn fill_range(
+        &mut self,
+        dst: &'a Buffer,
+        offset: u64,
+        len: u64,
+        value: u32,
+    ) -> Result<(), GpuError> {
+        dst.check_range(offset, len)?;
+        if offset % 4 != 0 || len % 4 != 0 {
+            return Err(GpuError::InvalidArgument(format!(
+                "fill of '{}' at {offset}+{len}: not a multiple of 4 bytes",
+                dst.name()
+            )));
+        }
+        self.fill_raw(dst, offset, len, value);
+        Ok(())
+    }
+
+    /// `vkCmdFillBuffer` of a checked range, between barriers.
+    fn fill_raw(&mut self, dst: &'a Buffer, offset: u64, len: u64, value: u32) {
+        self.barrier();
+        if len > 0 {
             // SAFETY: an in-range fill (a multiple of 4 bytes) of a TRANSFER_DST buffer.
             unsafe {
                 self.ctx
                     .device
-                    .cmd_fill_buffer(self.raw, dst.raw, 0, size, value);
+                    .cmd_fill_buffer(self.raw, dst.raw, offset, len, value);
             }
         }
         self.barrier();

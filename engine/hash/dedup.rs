@@ -3,19 +3,25 @@
 //! reduced to one representative per distinct key, the smallest value among the inputs with that
 //! key, and every input learns its representative.
 //!
-//! Three GPU passes over a slab table that lives for one batch (`shaders/glsl/hash/dedup_*.comp`,
-//! layout in `dedup_common.glsl`, mirrored by [`DedupLayout`]):
+//! Three GPU passes over a table that lives for one batch (`shaders/glsl/hash/dedup_*.comp`,
+//! layouts in `dedup_common.glsl`, mirrored by [`DedupLayout`]).
 //! One team per input in passes 1 and 2: the whole subgroup or a single lane ([`TeamMode`]).
+//! Subgroup teams use a slab table (the dissertation's: 32 slots scanned by 32 lanes at once):
 //! 1. insert: each input checks its bucket's first slab for an equal key (the cheap duplicate
 //!    check) and otherwise inserts its key; duplicates the check misses are inserted again;
 //! 2. min: each input finds the first entry with its key along the chain (the same entry for all
 //!    equal keys) and folds its value into that entry's minimum;
 //! 3. resolve: each input reads its entry's minimum.
 //!
+//! Single lanes (CPU devices) use a probe table: open addressing with linear probing, the key's
+//! hash in the tag, at least twice as many slots as inputs. The passes are the same, along a
+//! probe sequence instead of a chain; a lane reads one tag per probe and compares keys only on
+//! an equal hash (on lavapipe the slab scan's loop of tag and key loads cost ~5x more).
+//!
 //! The result is deterministic (the minimum over all equal keys) although the table's contents
-//! are not; [`dedup_cpu`] is the reference. Overflow slabs come from a bump pool sized for the
-//! worst case; if it still runs out the batch is run again with a bigger pool (never a wrong
-//! answer).
+//! are not; [`dedup_cpu`] is the reference. The slab table's overflow slabs come from a bump
+//! pool sized for the worst case; if it still runs out the batch is run again with a bigger
+//! pool (never a wrong answer). The probe table cannot run out.
 
 use std::sync::Arc;
 
@@ -56,7 +62,8 @@ pub enum DedupError {
 pub struct DedupOutput {
     /// One representative value per input.
     pub representatives: Vec<u32>,
-    /// Table entries made (distinct keys plus the duplicates the first-slab check missed).
+    /// Table entries made (distinct keys plus the duplicates written at the same time, or
+    /// missed by the slab table's first-slab check).
     pub entries: u32,
     /// Times the batch ran (more than 1 when the overflow pool had to grow).
     pub attempts: u32,
@@ -95,11 +102,13 @@ fn check_input(key_len: usize, key_words: usize, values: usize) -> Result<(), De
     Ok(())
 }
 
-/// Word layout of one slab of the dedup table (mirror of `dedup_common.glsl`).
+/// Word layout of the dedup table (mirror of `dedup_common.glsl`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct DedupLayout {
     /// Key size in words.
     pub key_words: u32,
+    /// The probe table (single lanes) instead of the slab table (subgroup teams).
+    pub probe: bool,
 }
 
 impl DedupLayout {
@@ -119,6 +128,17 @@ impl DedupLayout {
     pub fn pool_slabs(count: u32) -> u32 {
         count / 32 + count / 33 + 1
     }
+
+    /// Slots of the probe table for `count` inputs: a power of two, at least twice the inputs
+    /// (linear probing then walks ~1.5 slots on average to a key's copy).
+    pub fn probe_slots(count: u32) -> u32 {
+        (2 * count.max(1)).next_power_of_two()
+    }
+
+    /// Words of the probe table with `slots` slots: tags, values (the zeroed part), keys.
+    pub fn probe_words(self, slots: u32) -> u64 {
+        slots as u64 * (2 + self.key_words as u64)
+    }
 }
 
 /// Hash of a key (the same function as `hash_key` in `dedup_common.glsl`).
@@ -131,16 +151,20 @@ const COUNTER_POOL_USED: usize = 0;
 const COUNTER_ENTRIES: usize = 1;
 const COUNTER_OVERFLOW: usize = 2;
 
-/// Scratch buffers of one dedup batch: the table (buckets + overflow pool), the canonical entry
-/// of every input and the counters.
+/// Scratch buffers of one dedup batch: the table (slabs: buckets + overflow pool; probe: slots),
+/// the canonical entry of every input and the counters.
 #[derive(Debug)]
 pub struct DedupScratch {
     table: Buffer,
     canon: Buffer,
     counters: Buffer,
     count: u32,
+    /// Slab table: buckets; probe table: slots.
     buckets: u32,
+    /// Slab table: overflow slabs; probe table: 0.
     pool_slabs: u32,
+    /// Bytes of the table that start zeroed (slab table: all; probe table: tags and values).
+    zeroed_bytes: u64,
 }
 
 impl DedupScratch {
@@ -182,9 +206,9 @@ pub struct GpuDedup {
     workgroup: u32,
     /// Lanes working on one input (specialization constant 2): the subgroup size or 1.
     team: u32,
-    /// Overflow pool of the first attempt; `None`: [`DedupLayout::pool_slabs`].
+    /// Overflow pool of the first attempt (slab table); `None`: [`DedupLayout::pool_slabs`].
     initial_pool: Option<u32>,
-    /// Bucket count; `None`: [`DedupLayout::buckets`].
+    /// Bucket count (slab table); `None`: [`DedupLayout::buckets`].
     buckets: Option<u32>,
     insert: ComputePipeline,
     min: ComputePipeline,
@@ -236,7 +260,10 @@ impl GpuDedup {
         };
         Ok(GpuDedup {
             ctx: Arc::clone(ctx),
-            layout: DedupLayout { key_words },
+            layout: DedupLayout {
+                key_words,
+                probe: team == 1,
+            },
             workgroup,
             team,
             initial_pool: None,
@@ -248,14 +275,15 @@ impl GpuDedup {
     }
 
     /// Starts every batch with an overflow pool of `slabs` slabs instead of the worst-case
-    /// estimate (a too-small pool makes the batch run again with a bigger one).
+    /// estimate (a too-small pool makes the batch run again with a bigger one). Slab table
+    /// only: the probe table has no pool.
     pub fn with_initial_pool(mut self, slabs: u32) -> GpuDedup {
         self.initial_pool = Some(slabs);
         self
     }
 
     /// Uses `buckets` buckets (at least 1) instead of one per 16 inputs: fewer buckets make
-    /// longer chains and more duplicates that the first-slab check misses.
+    /// longer chains and more duplicates that the first-slab check misses. Slab table only.
     pub fn with_buckets(mut self, buckets: u32) -> GpuDedup {
         self.buckets = Some(buckets.max(1));
         self
@@ -266,9 +294,15 @@ impl GpuDedup {
         self.team
     }
 
-    /// The slab layout of this table.
+    /// The table layout of this dedup.
     pub fn layout(&self) -> DedupLayout {
         self.layout
+    }
+
+    /// Whether a batch always finishes in one attempt (the probe table, which cannot run out):
+    /// its dedup can share a submission with what reads the representatives.
+    pub fn never_retries(&self) -> bool {
+        self.layout.probe
     }
 
     /// Uploads `keys` (`values.len()` keys of `key_words` words) and `values`, runs the passes and
@@ -330,15 +364,23 @@ impl GpuDedup {
             .map(|(e, a, _)| (e, a))
     }
 
-    /// Scratch for a batch of `count` inputs with `pool_slabs` overflow slabs (`None`: the
-    /// configured initial pool, else the worst-case estimate [`DedupLayout::pool_slabs`]).
+    /// Scratch for a batch of `count` inputs with `pool_slabs` overflow slabs (slab table;
+    /// `None`: the configured initial pool, else the worst-case estimate
+    /// [`DedupLayout::pool_slabs`]). The probe table ignores `pool_slabs`.
     pub fn scratch(&self, count: u32, pool_slabs: Option<u32>) -> Result<DedupScratch, DedupError> {
         let n = count.max(1) as u64;
-        let buckets = self.buckets.unwrap_or_else(|| DedupLayout::buckets(count));
-        let pool_slabs = pool_slabs
-            .or(self.initial_pool)
-            .unwrap_or_else(|| DedupLayout::pool_slabs(count));
-        let table_bytes = (buckets as u64 + pool_slabs as u64) * self.layout.slab_words() * 4;
+        let (buckets, pool_slabs, table_bytes, zeroed_bytes) = if self.layout.probe {
+            let slots = DedupLayout::probe_slots(count);
+            let bytes = self.layout.probe_words(slots) * 4;
+            (slots, 0, bytes, slots as u64 * 8)
+        } else {
+            let buckets = self.buckets.unwrap_or_else(|| DedupLayout::buckets(count));
+            let pool_slabs = pool_slabs
+                .or(self.initial_pool)
+                .unwrap_or_else(|| DedupLayout::pool_slabs(count));
+            let bytes = (buckets as u64 + pool_slabs as u64) * self.layout.slab_words() * 4;
+            (buckets, pool_slabs, bytes, bytes)
+        };
         Ok(DedupScratch {
             table: self
                 .ctx
@@ -352,6 +394,7 @@ impl GpuDedup {
             count,
             buckets,
             pool_slabs,
+            zeroed_bytes,
         })
     }
 
@@ -402,7 +445,7 @@ impl GpuDedup {
         let teams_per_group = self.workgroup / self.team;
         let per_team = [count.div_ceil(teams_per_group).min(MAX_WORKGROUPS), 1, 1];
         let per_invocation = [count.div_ceil(self.workgroup).min(MAX_WORKGROUPS), 1, 1];
-        cmd.fill_buffer(&scratch.table, 0);
+        cmd.fill_range(&scratch.table, 0, scratch.zeroed_bytes, 0)?;
         cmd.fill_buffer(&scratch.counters, 0);
         if let Some(p) = profiler.as_deref_mut() {
             p.begin_pass(cmd, "dedup insert");
@@ -449,6 +492,12 @@ impl GpuDedup {
             return Ok(DedupResult::Done {
                 entries: state[COUNTER_ENTRIES],
             });
+        }
+        if self.layout.probe {
+            // The probe table has twice as many slots as inputs: no walk reaches its end.
+            return Err(DedupError::Inconsistent(format!(
+                "overflow state {overflow} in a probe table of {count} inputs"
+            )));
         }
         // Bit 2: a chain walk was cut off (longer than the table: a loop, never a hang).
         // Every input links at most one slab per entry it makes and wastes at most one, so a

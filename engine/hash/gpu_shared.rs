@@ -66,9 +66,11 @@ gpu_shared! {
         pub(crate) keys: uint64_t,
         /// `count` words.
         pub(crate) values: uint64_t,
-        /// `(buckets + pool_slabs) * SLAB_WORDS` words, zeroed.
+        /// Slab table: `(buckets + pool_slabs) * SLAB_WORDS` words, zeroed; probe table:
+        /// `buckets * (2 + KEY_WORDS)` words, the first `2 * buckets` zeroed.
         pub(crate) table: uint64_t,
-        /// `count` words: slab * 32 + slot of the key's first entry.
+        /// `count` words: the key's first entry (slab * 32 + slot, or the probe table's slot;
+        /// between the probe table's passes 1 and 2 the key's hash).
         pub(crate) canon: uint64_t,
         /// `count` words: the representative value per input.
         pub(crate) reps: uint64_t,
@@ -76,9 +78,9 @@ gpu_shared! {
         pub(crate) counters: uint64_t,
         /// Inputs.
         pub(crate) count: uint,
-        /// Buckets (first slabs) of the table.
+        /// Buckets (first slabs) of the slab table; slots of the probe table (a power of two).
         pub(crate) buckets: uint,
-        /// Overflow slabs after the buckets.
+        /// Overflow slabs after the buckets (slab table).
         pub(crate) pool_slabs: uint,
         /// `SLAB_WORDS`, as a plain value for 64-bit address arithmetic.
         pub(crate) slab_words: uint,

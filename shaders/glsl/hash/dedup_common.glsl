@@ -1,13 +1,19 @@
 // Shared by the dedup_*.comp passes: the duplicate-detection table of a temporary SVO
-// (dissertation §4.4.2), driven by engine/hash/dedup.rs (which mirrors this layout).
+// (dissertation §4.4.2), driven by engine/hash/dedup.rs (which mirrors both layouts).
 //
-// Slabs of 32 slots, stored structure-of-arrays so that a scan touches the tags only:
+// Subgroup teams (TEAM > 1) use a slab table: slabs of 32 slots, stored structure-of-arrays so
+// that a scan touches the tags only:
 //   tags[32] | values[32] | keys[32][KEY_WORDS] | next
 // tag: 0 empty, 1 being written, 2 ready (key published). value: bitwise NOT of the smallest
 // value of the inputs with this key (atomicMax on a zeroed word = atomicMin without an init pass).
 // next: slab index of the next slab of the bucket, 0 = none (slab 0 is bucket 0's first slab and is
 // never anyone's successor). Slabs [0, buckets) are the buckets' first slabs; overflow slabs come
 // from a bump pool after them: the table lives for one batch, so it is freed as a whole.
+//
+// Single lanes (TEAM == 1, CPU devices) use a probe table instead (see "Probe table" below):
+// there a load at per-lane addresses is a loop over the lanes and a loop body runs in full on
+// every iteration, so a scan of a slab's ~16 used slots with a key comparison in its body costs
+// far more than the ~2 probes of open addressing with the hash in the tag.
 #extension GL_EXT_buffer_reference : require
 #extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
 #extension GL_KHR_shader_subgroup_basic : require
@@ -123,4 +129,48 @@ uint find_key(Words slab, Words keys, uint i, bool racing) {
         }
     }
     return SLOTS;
+}
+
+// ---- Probe table (single lanes) ----
+// Open addressing with linear probing over `push.buckets` slots (a power of two, at least twice
+// the inputs, so it never fills up):
+//   tags[slots] | values[slots] | keys[slots][KEY_WORDS]
+// tag: 0 empty, 1 being written, else the key's hash with bit 1 set (ready: key published). Only
+// a slot whose tag equals the input's own is compared word by word, so a probe costs one load.
+// values: as in the slab table. Only tags and values are zeroed. Slots are never emptied while a
+// batch runs, so every input finds its key's first copy at or after its home slot before any
+// empty slot: pass 1 inserts there when no ready copy is seen (a copy being written is skipped,
+// making a second copy), pass 2 takes the first copy along the same probe sequence.
+
+// The ready tag of a key with hash `h` (never TAG_EMPTY or TAG_WRITING).
+uint probe_ready_tag(uint h) {
+    return h | 2u;
+}
+
+// Word of the probe table holding word `j` of the key in `slot`.
+uint probe_key_word(uint slot, uint j) {
+    return 2u * push.buckets + slot * KEY_WORDS + j;
+}
+
+// Whether `slot` holds the key of input `i` (the caller checked the tag).
+bool probe_key_equals(Words table, uint slot, Words keys, uint i) {
+    bool equal = true;
+    for (uint j = 0; j < KEY_WORDS; ++j) {
+        equal = equal && table.w[probe_key_word(slot, j)] == keys.w[i * KEY_WORDS + j];
+    }
+    return equal;
+}
+
+// From `slot` on, the first slot whose tag is empty or `ready` (the slots between hold other
+// keys or copies being written); `probes` counts the slots passed and stops the walk at the
+// table's size. A loop of one load per slot: the costly steps stay out of its body.
+uint probe_skip(Words table, uint slot, uint ready, inout uint probes, out uint tag) {
+    uint mask = push.buckets - 1u;
+    tag = table.w[slot];
+    while (tag != TAG_EMPTY && tag != ready && probes < push.buckets) {
+        slot = (slot + 1u) & mask;
+        probes += 1u;
+        tag = table.w[slot];
+    }
+    return slot;
 }

@@ -1,9 +1,11 @@
 #version 460
 // Duplicate-detection table, pass 1 of 3 (see dedup_common.glsl): one team per input.
-// The cheap duplicate check scans the bucket's first slab for a ready slot with an equal key; when
+// Slab table (subgroup teams): the cheap duplicate check scans the bucket's first slab for a ready slot with an equal key; when
 // there is none the key is inserted into the first empty slot of the bucket's chain (claim the
 // tag, write the key, publish the tag). Keys whose duplicate sits in an overflow slab, or is being
 // written at the same time, are inserted again: pass 2 makes all copies agree.
+// Probe table (single lanes): the key is inserted at the first empty slot of its probe sequence
+// unless a ready copy comes first; its hash is kept in canon[i] for pass 2.
 #include "hash/dedup_common.glsl"
 
 // Claims an empty slot of `slab` for the team: SLOTS when the slab is full.
@@ -112,8 +114,50 @@ void insert(uint i) {
     }
 }
 
+void probe_insert(uint i) {
+    Words keys = Words(push.keys);
+    Words table = Words(push.table);
+    uint h = hash_key(keys, i);
+    Words(push.canon).w[i] = h;
+    uint ready = probe_ready_tag(h);
+    uint slot = h & (push.buckets - 1u);
+    uint probes = 0u;
+    while (probes < push.buckets) {
+        uint tag;
+        slot = probe_skip(table, slot, ready, probes, tag);
+        if (tag == TAG_EMPTY) {
+            if (atomicCompSwap(table.w[slot], TAG_EMPTY, TAG_WRITING) == TAG_EMPTY) {
+                for (uint j = 0; j < KEY_WORDS; ++j) {
+                    table.w[probe_key_word(slot, j)] = keys.w[i * KEY_WORDS + j];
+                }
+                // Publishes the key (an atomic: lavapipe orders the stores before it, see
+                // find_key).
+                atomicExchange(table.w[slot], ready);
+                atomicAdd(Words(push.counters).w[COUNTER_ENTRIES], 1);
+                return;
+            }
+            // Taken meanwhile: look at the same slot again.
+            continue;
+        }
+        // A ready tag equal to ours (the walk stops on nothing else before the bound): re-read
+        // atomically before trusting the key words, as find_key does.
+        if (tag == ready && atomicOr(table.w[slot], 0u) == ready
+            && probe_key_equals(table, slot, keys, i)) {
+            return;
+        }
+        slot = (slot + 1u) & (push.buckets - 1u);
+        probes += 1u;
+    }
+    // Never with at least twice as many slots as inputs: flagged, never a wrong answer.
+    atomicOr(Words(push.counters).w[COUNTER_OVERFLOW], OVERFLOW_BROKEN_CHAIN);
+}
+
 void main() {
     for (uint i = team_index(); i < push.count; i += team_count()) {
-        insert(i);
+        if (TEAM == 1u) {
+            probe_insert(i);
+        } else {
+            insert(i);
+        }
     }
 }

@@ -32,8 +32,39 @@ void representative(uint i) {
     }
 }
 
+void probe_representative(uint i) {
+    Words keys = Words(push.keys);
+    Words table = Words(push.table);
+    uint h = Words(push.canon).w[i];
+    uint ready = probe_ready_tag(h);
+    uint slot = h & (push.buckets - 1u);
+    uint probes = 0u;
+    while (probes < push.buckets) {
+        uint tag;
+        slot = probe_skip(table, slot, ready, probes, tag);
+        if (tag == TAG_EMPTY) {
+            break;
+        }
+        if (tag == ready && probe_key_equals(table, slot, keys, i)) {
+            Words(push.canon).w[i] = slot;
+            atomicMax(table.w[push.buckets + slot], ~Words(push.values).w[i]);
+            return;
+        }
+        slot = (slot + 1u) & (push.buckets - 1u);
+        probes += 1u;
+    }
+    // Unreachable after pass 1 (every key has a copy before the first empty slot): flagged.
+    atomicOr(Words(push.counters).w[COUNTER_OVERFLOW],
+             probes < push.buckets ? OVERFLOW_NO_ENTRY : OVERFLOW_BROKEN_CHAIN);
+    Words(push.canon).w[i] = ~0u;
+}
+
 void main() {
     for (uint i = team_index(); i < push.count; i += team_count()) {
-        representative(i);
+        if (TEAM == 1u) {
+            probe_representative(i);
+        } else {
+            representative(i);
+        }
     }
 }

@@ -9,6 +9,11 @@ void resolve(uint i) {
         Words(push.reps).w[i] = ~0u;
         return;
     }
+    if (TEAM == 1u) {
+        // Probe table: canon is the slot.
+        Words(push.reps).w[i] = ~Words(push.table).w[push.buckets + canon];
+        return;
+    }
     Words slab = slab_at(canon / SLOTS);
     Words(push.reps).w[i] = ~slab.w[VALUES_OFFSET + canon % SLOTS];
 }
