@@ -45,8 +45,10 @@ const VALUE_FULL: u32 = 0xF000_0000;
 const VALUE_TEMP: u32 = 0x9000_0000;
 /// Pass flags (GLSL `EDIT_FLAG_*`).
 const FLAG_LEAVES: u32 = 1;
-const FLAG_MATERIALS: u32 = 2;
 const FLAG_RESULT_INDEX: u32 = 8;
+/// `EDIT_TOOL_FROM_FLAGS`: specialization constant 0 of the passes that read the tool from the
+/// flags.
+const TOOL_FROM_FLAGS: u32 = 7;
 /// Shift of the tool kind in the flags of traverse / leaves / fill passes (GLSL
 /// `EDIT_TOOL_SHIFT`).
 const TOOL_SHIFT: u32 = 4;
@@ -289,11 +291,14 @@ impl GpuHashDag {
             tables.push(GpuHashTable::new(ctx, &table_config)?);
             dedups.push(GpuDedup::new(ctx, words)?);
         }
+        // Specialization constants of every edit pass: the tool (read from the flags here) and
+        // whether leaves carry materials (`EDIT_SPEC_*` in edit/common.glsl).
+        let materials = with_materials as u32;
         let pipeline = |name: &str, spirv: &[u32]| {
             ctx.create_compute_pipeline(&ComputePipelineDesc {
                 name,
                 spirv,
-                spec_constants: &[],
+                spec_constants: &[TOOL_FROM_FLAGS, materials],
                 push_constant_size: std::mem::size_of::<EditPush>() as u32,
                 bindings: &[],
             })
@@ -319,8 +324,8 @@ impl GpuHashDag {
             build_items: pipeline("edit build items", shaders::EDIT_BUILD_ITEMS)?,
             mark: pipeline("edit mark", shaders::EDIT_MARK)?,
             resolve: pipeline("edit resolve", shaders::EDIT_RESOLVE)?,
-            traverse: ToolPipelines::new("edit traverse", shaders::EDIT_TRAVERSE),
-            leaves: ToolPipelines::new("edit leaves", shaders::EDIT_LEAVES),
+            traverse: ToolPipelines::new("edit traverse", shaders::EDIT_TRAVERSE, materials),
+            leaves: ToolPipelines::new("edit leaves", shaders::EDIT_LEAVES, materials),
             fill_init: pipeline("edit fill init", shaders::EDIT_FILL_INIT)?,
             fill_flood: pipeline("edit fill flood", shaders::EDIT_FILL_FLOOD)?,
             iota: None,
@@ -610,10 +615,7 @@ impl GpuHashDag {
             4 * TOOL_PARAMS as u64,
             MemLocation::GpuOnly,
         )?;
-        let mut flags = (kind as u32) << TOOL_SHIFT;
-        if materials {
-            flags |= FLAG_MATERIALS;
-        }
+        let flags = (kind as u32) << TOOL_SHIFT;
         let base_push = EditPush {
             src2: param_buf.address(),
             dst2: fill_bitmap.as_ref().map_or(0, |b: &Buffer| b.address()),
@@ -898,11 +900,7 @@ impl GpuHashDag {
             counters: counter.address(),
             tables: self.table_addresses.address(),
             count: volume as u32,
-            flags: if self.with_materials {
-                FLAG_MATERIALS
-            } else {
-                0
-            } | (ToolKind::Fill as u32) << TOOL_SHIFT,
+            flags: (ToolKind::Fill as u32) << TOOL_SHIFT,
             variant: self.config.variant.id(),
             tool: [center[0], center[1], center[2], radius],
             shape: 1,
@@ -1102,9 +1100,6 @@ impl GpuHashDag {
             MemLocation::GpuOnly,
         )?;
         let mut flags = if level.leaves { FLAG_LEAVES } else { 0 };
-        if self.with_materials {
-            flags |= FLAG_MATERIALS;
-        }
         if level.result_index.is_some() {
             flags |= FLAG_RESULT_INDEX;
         }
@@ -1417,15 +1412,18 @@ const TOOL_KINDS: usize = 5;
 struct ToolPipelines {
     name: &'static str,
     spirv: &'static [u32],
+    /// Specialization constant 1: whether leaves carry materials (1) or not (0).
+    materials: u32,
     made: [OnceLock<ComputePipeline>; TOOL_KINDS],
 }
 
 impl ToolPipelines {
-    /// The pass `name` of `spirv`, no pipeline made yet.
-    fn new(name: &'static str, spirv: &'static [u32]) -> ToolPipelines {
+    /// The pass `name` of `spirv` for a scene with or without materials, no pipeline made yet.
+    fn new(name: &'static str, spirv: &'static [u32], materials: u32) -> ToolPipelines {
         ToolPipelines {
             name,
             spirv,
+            materials,
             made: Default::default(),
         }
     }
@@ -1442,7 +1440,7 @@ impl ToolPipelines {
         let pipeline = ctx.create_compute_pipeline(&ComputePipelineDesc {
             name: self.name,
             spirv: self.spirv,
-            spec_constants: &[tool as u32],
+            spec_constants: &[tool as u32, self.materials],
             push_constant_size: std::mem::size_of::<EditPush>() as u32,
             bindings: &[],
         })?;

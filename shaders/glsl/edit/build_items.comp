@@ -3,7 +3,7 @@
 // (engine/edit/item.rs). Nodes whose children are all one empty or full value become EDIT_EMPTY / EDIT_FULL | m in the results; the
 // others append their item to the buffer of its size and leave EDIT_PENDING | size index.
 //   src      temporary nodes (8 child values) or leaves (2 mask words, + 8 material words
-//            with EDIT_FLAG_MATERIALS: nibble v = material of voxel v)
+//            with materials (edit_materials()): nibble v = material of voxel v)
 //   src2     the level below's results (EDIT_TEMP | i children read entry i)
 //   dst      results (one per node; at result_index[i] with EDIT_FLAG_RESULT_INDEX)
 //   dst2     result_index (u32 per node)
@@ -19,7 +19,7 @@ void main() {
     Addresses tables = Addresses(push.tables);
     Words counters = Words(push.counters);
     bool leaves = (push.flags & EDIT_FLAG_LEAVES) != 0u;
-    bool materials = (push.flags & EDIT_FLAG_MATERIALS) != 0u;
+    bool materials = edit_materials();
     uint stride = gl_NumWorkGroups.x * 64u;
     for (uint i = gl_GlobalInvocationID.x; i < push.count; i += stride) {
         uint item[10];

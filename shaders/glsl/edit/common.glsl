@@ -28,7 +28,6 @@ layout(buffer_reference, std430, buffer_reference_align = 16) buffer Entries {
 #define EDIT_INDEX_MASK 0x0FFFFFFFu
 
 #define EDIT_FLAG_LEAVES 1u
-#define EDIT_FLAG_MATERIALS 2u
 #define EDIT_FLAG_RESULT_INDEX 8u
 // The tool of traverse / leaves / fill passes: flags >> EDIT_TOOL_SHIFT & 7 (engine/edit/gpu.rs
 // `ToolKind`).
@@ -98,16 +97,31 @@ uint edit_item_word(uint words, uint slot, uint w) {
     return items + slot * words + w;
 }
 
-// Word w of the item a NodePtr names (push.tables: the nine super-block tables).
-uint edit_read(uint ptr, uint w) {
+// Where the item a NodePtr names lives: its slab's address (two dependent loads to find), its
+// size and its slot. A pass that reads several words of one item finds it once.
+struct EditItem {
+    uint64_t slab;
+    uint words;
+    uint slot;
+};
+
+// The item a NodePtr names (push.tables: the nine super-block tables).
+EditItem edit_item(uint ptr) {
     uint table = ptr >> 28u;
-    uint words = table + 2u;
     uint handle = ptr & EDIT_INDEX_MASK;
     uint slab = handle >> 5u;
+    EditItem item;
+    item.words = table + 2u;
+    item.slot = handle & 31u;
     uint64_t base = Addresses(Addresses(push.tables).a[table]).a[slab / HASH_SLABS_PER_SUPER_BLOCK];
-    uint64_t at = base + uint64_t(HASH_SUPER_BLOCK_BITMASK_WORDS * 4u)
-                + uint64_t(slab % HASH_SLABS_PER_SUPER_BLOCK) * uint64_t(edit_slab_words(words) * 4u);
-    return Words(at).w[edit_item_word(words, handle & 31u, w)];
+    item.slab = base + uint64_t(HASH_SUPER_BLOCK_BITMASK_WORDS * 4u)
+              + uint64_t(slab % HASH_SLABS_PER_SUPER_BLOCK) * uint64_t(edit_slab_words(item.words) * 4u);
+    return item;
+}
+
+// Word w of an item.
+uint edit_item_read(EditItem item, uint w) {
+    return Words(item.slab).w[edit_item_word(item.words, item.slot, w)];
 }
 
 // The eight children of a stored node value (pointer, full or empty) at an inner level.
@@ -116,13 +130,14 @@ void edit_children(uint v, out uint children[8]) {
         for (uint o = 0u; o < 8u; ++o) children[o] = v;
         return;
     }
-    uint header = edit_read(v, 0u);
+    EditItem node = edit_item(v);
+    uint header = edit_item_read(node, 0u);
     uint next = 1u;
     for (uint o = 0u; o < 8u; ++o) {
         if ((header >> o & 1u) == 0u) {
             children[o] = EDIT_EMPTY;
         } else {
-            uint word = edit_read(v, next++);
+            uint word = edit_item_read(node, next++);
             children[o] = (header >> (8u + o) & 1u) != 0u ? EDIT_FULL | word : word;
         }
     }
@@ -146,6 +161,16 @@ layout(constant_id = 0) const uint EDIT_SPEC_TOOL = EDIT_TOOL_FROM_FLAGS;
 
 uint edit_tool() {
     return EDIT_SPEC_TOOL != EDIT_TOOL_FROM_FLAGS ? EDIT_SPEC_TOOL : push.flags >> EDIT_TOOL_SHIFT & 7u;
+}
+
+// Whether the scene's leaves carry materials (one nibble per voxel): specialization constant 1,
+// fixed for a hash DAG's lifetime and given to every edit pipeline (engine/edit/gpu.rs), so a
+// geometry-only scene's passes leave the material code out (lavapipe would run it, masked, for
+// every voxel: half the leaves pass's time).
+layout(constant_id = 1) const uint EDIT_SPEC_MATERIALS = 0u;
+
+bool edit_materials() {
+    return EDIT_SPEC_MATERIALS != 0u;
 }
 
 // `precise`: no fused multiply-add, so the CPU twin's f32 arithmetic gives the same answer bit
@@ -206,7 +231,7 @@ bool edit_cube_all_outside(uvec3 p, uint side) {
 // State of voxel p (grid coordinates) under the stored value v of a level-`level` cube that
 // contains it: EDIT_EMPTY, or the voxel's material.
 uint edit_lookup(uint v, uint level, uvec3 p) {
-    bool materials = (push.flags & EDIT_FLAG_MATERIALS) != 0u;
+    bool materials = edit_materials();
     for (;;) {
         if (v == EDIT_EMPTY) return EDIT_EMPTY;
         if (edit_is_full(v)) return v & 15u;
@@ -215,21 +240,23 @@ uint edit_lookup(uint v, uint level, uvec3 p) {
             uvec3 l = p & 3u;
             uint bit = (l.x & 1u) | (l.y & 1u) << 1u | (l.z & 1u) << 2u
                      | (l.x >> 1u) << 3u | (l.y >> 1u) << 4u | (l.z >> 1u) << 5u;
-            uint lo = edit_read(v, 0u);
-            uint hi = edit_read(v, 1u);
+            EditItem leaf = edit_item(v);
+            uint lo = edit_item_read(leaf, 0u);
+            uint hi = edit_item_read(leaf, 1u);
             uint word = bit < 32u ? lo : hi;
             if ((word >> (bit & 31u) & 1u) == 0u) return EDIT_EMPTY;
             if (!materials) return 0u;
             // Materials are packed by rank among the set bits (item.rs `Leaf`).
             uint rank = bit < 32u ? bitCount(lo & ((1u << bit) - 1u))
                                   : bitCount(lo) + bitCount(hi & ((1u << (bit - 32u)) - 1u));
-            return edit_read(v, 2u + rank / 8u) >> (4u * (rank % 8u)) & 15u;
+            return edit_item_read(leaf, 2u + rank / 8u) >> (4u * (rank % 8u)) & 15u;
         }
         uint s = level + 1u;
         uint o = (p.x >> s & 1u) | (p.y >> s & 1u) << 1u | (p.z >> s & 1u) << 2u;
-        uint header = edit_read(v, 0u);
+        EditItem node = edit_item(v);
+        uint header = edit_item_read(node, 0u);
         if ((header >> o & 1u) == 0u) return EDIT_EMPTY;
-        uint word = edit_read(v, 1u + bitCount(header & ((1u << o) - 1u) & 0xFFu));
+        uint word = edit_item_read(node, 1u + bitCount(header & ((1u << o) - 1u) & 0xFFu));
         v = (header >> (8u + o) & 1u) != 0u ? EDIT_FULL | word : word;
         level--;
     }

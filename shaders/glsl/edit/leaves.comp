@@ -6,7 +6,7 @@
 // each workgroup as a task on the CPU, ~20 us per leaf.)
 //   src      entries (uvec4: min corner, existing value)
 //   dst      temporary leaves, every word written: 2 mask words, + 8 material words (nibble v =
-//            material of voxel v) with EDIT_FLAG_MATERIALS
+//            material of voxel v) with materials (edit_materials())
 //   src2     tool parameters (EDIT_P_*), dst2 the fill's flooded bitmap
 #include "edit/common.glsl"
 layout(local_size_x = 64) in;
@@ -14,16 +14,23 @@ layout(local_size_x = 64) in;
 void main() {
     Entries entries = Entries(push.src);
     Words leaves = Words(push.dst);
-    bool materials = (push.flags & EDIT_FLAG_MATERIALS) != 0u;
+    bool materials = edit_materials();
     uint rec = materials ? 10u : 2u;
     uint stride = gl_NumWorkGroups.x * 64u;
     uint count = edit_count();
     for (uint i = gl_GlobalInvocationID.x; i < count; i += stride) {
         uvec4 e = entries.e[i];
         bool stored = edit_is_ptr(e.w);
-        // The stored leaf's masks (edit_lookup at level 0, read once for the 64 voxels).
-        uint old_lo = stored ? edit_read(e.w, 0u) : 0u;
-        uint old_hi = stored ? edit_read(e.w, 1u) : 0u;
+        // The stored leaf (edit_lookup at level 0), found and its masks read once for the 64
+        // voxels.
+        EditItem old_leaf;
+        uint old_lo = 0u;
+        uint old_hi = 0u;
+        if (stored) {
+            old_leaf = edit_item(e.w);
+            old_lo = edit_item_read(old_leaf, 0u);
+            old_hi = edit_item_read(old_leaf, 1u);
+        }
         uint lo = 0u;
         uint hi = 0u;
         for (uint w = 0u; w < 8u; ++w) {
@@ -42,7 +49,7 @@ void main() {
                     // Materials are packed by rank among the set bits (item.rs `Leaf`).
                     uint rank = v < 32u ? bitCount(old_lo & ((1u << v) - 1u))
                                         : bitCount(old_lo) + bitCount(old_hi & ((1u << (v - 32u)) - 1u));
-                    old = edit_read(e.w, 2u + rank / 8u) >> (4u * (rank % 8u)) & 15u;
+                    old = edit_item_read(old_leaf, 2u + rank / 8u) >> (4u * (rank % 8u)) & 15u;
                 }
                 uint state = edit_new_voxel(e.xyz + local, old);
                 if (state == EDIT_EMPTY) continue;

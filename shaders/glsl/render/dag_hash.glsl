@@ -2,7 +2,7 @@
 // scene of the editor (engine/edit/gpu.rs) traversed in place, items read straight from its
 // nine slab hash tables (one per item size 2..=10 words; item format: engine/edit/item.rs,
 // docs/hash-dag.md; slab layout: shared/hash_layout.h, engine/hash/layout.rs). Twin of
-// `edit_read` in edit/common.glsl with the table variant a run-time value.
+// `edit_item` / `edit_item_read` in edit/common.glsl with the table variant a run-time value.
 //
 // A node handle is a child value of the editor (engine/edit/gpu.rs): a NodePtr
 // `(words - 2) << 28 | slab << 5 | slot` (below HDAG_TAGGED), HDAG_FULL | material (the whole
