@@ -30,6 +30,10 @@ void main() {
         uvec4 e = entries.e[i];
         uint children[8];
         edit_children(e.w, children);
+        // Decide every child first; the subdivided ones then take consecutive entries of the
+        // next level with one atomicAdd (atomics are a loop over the lanes on lavapipe).
+        uint values[8];
+        uint subdivide = 0u;
         for (uint o = 0u; o < 8u; ++o) {
             uvec3 p = e.xyz + child_side * uvec3(o & 1u, o >> 1u & 1u, o >> 2u);
             uint c = children[o];
@@ -43,21 +47,33 @@ void main() {
             } else {
                 keep = edit_is_full(c);
             }
-            uint value = c;
+            values[o] = c;
             if (keep || edit_cube_all_outside(p, child_side)) {
-                value = c;
+                values[o] = c;
             } else if (tool <= EDIT_TOOL_PAINT && (tool != EDIT_TOOL_PAINT || !edit_is_ptr(c))
                        && edit_cube_all_inside(p, child_side)) {
-                value = tool == EDIT_TOOL_REMOVE ? EDIT_EMPTY : full;
+                values[o] = tool == EDIT_TOOL_REMOVE ? EDIT_EMPTY : full;
             } else {
-                uint j = atomicAdd(counters.w[0], 1u);
-                if (j < push.capacity) {
-                    next.e[j] = uvec4(p, c);
-                    atomicMax(counters.w[1], min(j / 64u + 1u, 65535u));
-                }
-                value = EDIT_TEMP | j;
+                subdivide |= 1u << o;
             }
-            nodes.w[i * 8u + o] = value;
+        }
+        uint n = uint(bitCount(subdivide));
+        uint first = n != 0u ? atomicAdd(counters.w[0], n) : 0u;
+        for (uint o = 0u; o < 8u; ++o) {
+            if ((subdivide >> o & 1u) != 0u) {
+                uint j = first + uint(bitCount(subdivide & ((1u << o) - 1u)));
+                if (j < push.capacity) {
+                    uvec3 p = e.xyz + child_side * uvec3(o & 1u, o >> 1u & 1u, o >> 2u);
+                    next.e[j] = uvec4(p, children[o]);
+                }
+                values[o] = EDIT_TEMP | j;
+            }
+            nodes.w[i * 8u + o] = values[o];
+        }
+        if (n != 0u && first < push.capacity) {
+            // The next level's workgroups: up to its last entry written.
+            uint last = min(first + n, push.capacity) - 1u;
+            atomicMax(counters.w[1], min(last / 64u + 1u, 65535u));
         }
     }
 }
