@@ -130,6 +130,20 @@ fn buffer_round_trip_and_range_errors() {
             }
             other => panic!("expected TooLarge, got {other:?}"),
         }
+        // A range fill changes exactly its words; unaligned or outside ranges are errors.
+        let mut cmd = ctx.begin_commands("fill range").unwrap();
+        cmd.fill_range(&buf, 8, 12, 0xabcd).unwrap();
+        assert!(matches!(
+            cmd.fill_range(&buf, 400_008, 8, 0),
+            Err(GpuError::OutOfRange { .. })
+        ));
+        assert!(cmd.fill_range(&buf, 2, 4, 0).is_err());
+        assert!(cmd.fill_range(&buf, 4, 6, 0).is_err());
+        cmd.submit().unwrap();
+        assert_eq!(
+            ctx.read_buffer::<u32>(&buf, 4, 5).unwrap(),
+            vec![data[1], 0xabcd, 0xabcd, 0xabcd, data[5]]
+        );
         // Host-visible buffers are written and read through their mapping.
         let mut host = ctx
             .create_buffer("host", 16, MemLocation::CpuToGpu)

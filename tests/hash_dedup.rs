@@ -192,7 +192,10 @@ fn keys_with_equal_hashes_stay_apart() {
     for team in TEAMS {
         let dedup = GpuDedup::with_team(&ctx, 2, team).unwrap();
         let out = dedup.dedup(&keys, &values, None).unwrap();
-        assert!(out.representatives == expected, "{team:?}: representatives differ");
+        assert!(
+            out.representatives == expected,
+            "{team:?}: representatives differ"
+        );
         check_properties(&keys, 2, &values, &out.representatives);
     }
     assert_eq!(ctx.validation_errors(), 0, "validation messages (see log)");

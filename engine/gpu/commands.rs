@@ -694,7 +694,7 @@ impl<'a> Commands<'a> {
         value: u32,
     ) -> Result<(), GpuError> {
         dst.check_range(offset, len)?;
-        if offset % 4 != 0 || len % 4 != 0 {
+        if !offset.is_multiple_of(4) || !len.is_multiple_of(4) {
             return Err(GpuError::InvalidArgument(format!(
                 "fill of '{}' at {offset}+{len}: not a multiple of 4 bytes",
                 dst.name()
