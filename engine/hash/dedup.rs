@@ -130,9 +130,11 @@ impl DedupLayout {
     }
 
     /// Slots of the probe table for `count` inputs: a power of two, at least twice the inputs
-    /// (linear probing then walks ~1.5 slots on average to a key's copy).
-    pub fn probe_slots(count: u32) -> u32 {
-        (2 * count.max(1)).next_power_of_two()
+    /// (linear probing then walks ~1.5 slots on average to a key's copy); `None` past 2^31.
+    pub fn probe_slots(count: u32) -> Option<u32> {
+        (2 * count.max(1) as u64)
+            .checked_next_power_of_two()
+            .and_then(|slots| u32::try_from(slots).ok())
     }
 
     /// Words of the probe table with `slots` slots: tags, values (the zeroed part), keys.
@@ -370,7 +372,15 @@ impl GpuDedup {
     pub fn scratch(&self, count: u32, pool_slabs: Option<u32>) -> Result<DedupScratch, DedupError> {
         let n = count.max(1) as u64;
         let (buckets, pool_slabs, table_bytes, zeroed_bytes) = if self.layout.probe {
-            let slots = DedupLayout::probe_slots(count);
+            // The shaders index the table's words with 32-bit integers.
+            let slots = DedupLayout::probe_slots(count)
+                .filter(|&slots| self.layout.probe_words(slots) <= u32::MAX as u64)
+                .ok_or_else(|| {
+                    DedupError::InvalidInput(format!(
+                        "{count} inputs of {} words are too many for one probe table",
+                        self.layout.key_words
+                    ))
+                })?;
             let bytes = self.layout.probe_words(slots) * 4;
             (slots, 0, bytes, slots as u64 * 8)
         } else {
@@ -569,5 +579,28 @@ impl GpuDedup {
                 DedupResult::Retry { pool_slabs: p } => pool_slabs = Some(p),
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::DedupLayout;
+
+    #[test]
+    fn probe_tables_have_a_power_of_two_of_at_least_twice_the_inputs() {
+        assert_eq!(DedupLayout::probe_slots(0), Some(2));
+        assert_eq!(DedupLayout::probe_slots(1), Some(2));
+        assert_eq!(DedupLayout::probe_slots(3), Some(8));
+        assert_eq!(DedupLayout::probe_slots(1024), Some(2048));
+        assert_eq!(DedupLayout::probe_slots(1025), Some(4096));
+        assert_eq!(DedupLayout::probe_slots(1 << 30), Some(1 << 31));
+        // 2^32 slots do not fit the shaders' 32-bit slot count.
+        assert_eq!(DedupLayout::probe_slots((1 << 30) + 1), None);
+        assert_eq!(DedupLayout::probe_slots(u32::MAX), None);
+        let layout = DedupLayout {
+            key_words: 10,
+            probe: true,
+        };
+        assert_eq!(layout.probe_words(8), 96);
     }
 }
