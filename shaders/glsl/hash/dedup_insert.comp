@@ -1,9 +1,10 @@
 #version 460
 // Duplicate-detection table, pass 1 of 3 (see dedup_common.glsl): one team per input.
-// Slab table (subgroup teams): the cheap duplicate check scans the bucket's first slab for a ready slot with an equal key; when
-// there is none the key is inserted into the first empty slot of the bucket's chain (claim the
-// tag, write the key, publish the tag). Keys whose duplicate sits in an overflow slab, or is being
-// written at the same time, are inserted again: pass 2 makes all copies agree.
+// Slab table (subgroup teams): the cheap duplicate check scans the bucket's first slab for a
+// ready slot with an equal key; when there is none the key is inserted into the first empty slot
+// of the bucket's chain (claim the tag, write the key, publish the tag). Keys whose duplicate
+// sits in an overflow slab, or is being written at the same time, are inserted again: pass 2
+// makes all copies agree.
 // Probe table (single lanes): the key is inserted at the first empty slot of its probe sequence
 // unless a ready copy comes first; its hash is kept in canon[i] for pass 2.
 #include "hash/dedup_common.glsl"
