@@ -165,8 +165,6 @@ pub struct DedupScratch {
     buckets: u32,
     /// Slab table: overflow slabs; probe table: 0.
     pool_slabs: u32,
-    /// Bytes of the table that start zeroed (slab table: all; probe table: tags and values).
-    zeroed_bytes: u64,
 }
 
 impl DedupScratch {
@@ -371,7 +369,7 @@ impl GpuDedup {
     /// [`DedupLayout::pool_slabs`]). The probe table ignores `pool_slabs`.
     pub fn scratch(&self, count: u32, pool_slabs: Option<u32>) -> Result<DedupScratch, DedupError> {
         let n = count.max(1) as u64;
-        let (buckets, pool_slabs, table_bytes, zeroed_bytes) = if self.layout.probe {
+        let (buckets, pool_slabs, table_bytes) = if self.layout.probe {
             // The shaders index the table's words with 32-bit integers.
             let slots = DedupLayout::probe_slots(count)
                 .filter(|&slots| self.layout.probe_words(slots) <= u32::MAX as u64)
@@ -381,15 +379,14 @@ impl GpuDedup {
                         self.layout.key_words
                     ))
                 })?;
-            let bytes = self.layout.probe_words(slots) * 4;
-            (slots, 0, bytes, slots as u64 * 8)
+            (slots, 0, self.layout.probe_words(slots) * 4)
         } else {
             let buckets = self.buckets.unwrap_or_else(|| DedupLayout::buckets(count));
             let pool_slabs = pool_slabs
                 .or(self.initial_pool)
                 .unwrap_or_else(|| DedupLayout::pool_slabs(count));
             let bytes = (buckets as u64 + pool_slabs as u64) * self.layout.slab_words() * 4;
-            (buckets, pool_slabs, bytes, bytes)
+            (buckets, pool_slabs, bytes)
         };
         Ok(DedupScratch {
             table: self
@@ -404,7 +401,6 @@ impl GpuDedup {
             count,
             buckets,
             pool_slabs,
-            zeroed_bytes,
         })
     }
 
@@ -455,7 +451,14 @@ impl GpuDedup {
         let teams_per_group = self.workgroup / self.team;
         let per_team = [count.div_ceil(teams_per_group).min(MAX_WORKGROUPS), 1, 1];
         let per_invocation = [count.div_ceil(self.workgroup).min(MAX_WORKGROUPS), 1, 1];
-        cmd.fill_range(&scratch.table, 0, scratch.zeroed_bytes, 0)?;
+        // The slab table starts zeroed; of the probe table only the tags and values (the key
+        // words are read only where a published tag says they were written).
+        let zeroed_bytes = if self.layout.probe {
+            2 * scratch.buckets as u64 * 4
+        } else {
+            scratch.table.size()
+        };
+        cmd.fill_range(&scratch.table, 0, zeroed_bytes, 0)?;
         cmd.fill_buffer(&scratch.counters, 0);
         if let Some(p) = profiler.as_deref_mut() {
             p.begin_pass(cmd, "dedup insert");

@@ -16,6 +16,11 @@
 #include "edit/common.glsl"
 layout(local_size_x = 64) in;
 
+// Min corner of child o of the cube at `corner` whose children have side `child_side`.
+uvec3 child_corner(uvec3 corner, uint child_side, uint o) {
+    return corner + child_side * uvec3(o & 1u, o >> 1u & 1u, o >> 2u);
+}
+
 void main() {
     Entries entries = Entries(push.src);
     Words nodes = Words(push.dst);
@@ -35,7 +40,7 @@ void main() {
         uint values[8];
         uint subdivide = 0u;
         for (uint o = 0u; o < 8u; ++o) {
-            uvec3 p = e.xyz + child_side * uvec3(o & 1u, o >> 1u & 1u, o >> 2u);
+            uvec3 p = child_corner(e.xyz, child_side, o);
             uint c = children[o];
             bool keep;
             if (tool == EDIT_TOOL_ADD) {
@@ -49,9 +54,10 @@ void main() {
             }
             values[o] = c;
             if (keep || edit_cube_all_outside(p, child_side)) {
-                values[o] = c;
-            } else if (tool <= EDIT_TOOL_PAINT && (tool != EDIT_TOOL_PAINT || !edit_is_ptr(c))
-                       && edit_cube_all_inside(p, child_side)) {
+                continue;
+            }
+            if (tool <= EDIT_TOOL_PAINT && (tool != EDIT_TOOL_PAINT || !edit_is_ptr(c))
+                && edit_cube_all_inside(p, child_side)) {
                 values[o] = tool == EDIT_TOOL_REMOVE ? EDIT_EMPTY : full;
             } else {
                 subdivide |= 1u << o;
@@ -63,8 +69,7 @@ void main() {
             if ((subdivide >> o & 1u) != 0u) {
                 uint j = first + uint(bitCount(subdivide & ((1u << o) - 1u)));
                 if (j < push.capacity) {
-                    uvec3 p = e.xyz + child_side * uvec3(o & 1u, o >> 1u & 1u, o >> 2u);
-                    next.e[j] = uvec4(p, children[o]);
+                    next.e[j] = uvec4(child_corner(e.xyz, child_side, o), children[o]);
                 }
                 values[o] = EDIT_TEMP | j;
             }
