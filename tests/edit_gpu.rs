@@ -17,7 +17,7 @@ use voxdag::edit::gpu::{GpuDagError, GpuHashDag, GpuHashDagConfig};
 use voxdag::edit::item::Root;
 use voxdag::edit::tool::{self, CopyParams, Shape, Tool, VoxelMap};
 use voxdag::gpu::{GpuContext, Profiler};
-use voxdag::hash::{HashError, HashVariant};
+use voxdag::hash::{HashError, HashVariant, TeamMode};
 use voxdag::scene::{morton, Voxels};
 
 fn assert_clean(ctx: &Arc<GpuContext>) {
@@ -334,6 +334,25 @@ fn random_edits_match_brute_force_with_every_traversal_budget() {
         let mut config = GpuHashDagConfig::new(HashVariant::AccelHash32, 4096);
         config.traversal_budget = budget;
         random_edits_with(&ctx, config, 128, 6);
+    }
+    assert_clean(&ctx);
+}
+
+/// The route of real GPUs (subgroup teams: the dedup table and `mark`) and the single-lane
+/// route (the tables' claim passes) both on lavapipe, whose `Auto` picks single lanes.
+#[test]
+fn random_edits_match_brute_force_with_either_team_mode() {
+    let ctx = common::gpu();
+    for (variant, team) in [
+        (HashVariant::AccelHash32, TeamMode::Subgroup),
+        (HashVariant::Atomic64, TeamMode::Subgroup),
+        (HashVariant::TicketBoard, TeamMode::SingleLane),
+    ] {
+        let config = GpuHashDagConfig {
+            team,
+            ..GpuHashDagConfig::new(variant, 4096)
+        };
+        random_edits_with(&ctx, config, 128, 5);
     }
     assert_clean(&ctx);
 }

@@ -353,6 +353,112 @@ fn duplicates_in_one_batch_get_separate_slots() {
     assert_clean(&ctx);
 }
 
+/// The claim passes (single lanes): a find-or-insert whose batch repeats items stores each
+/// distinct item once, equal items get one handle, stored items keep theirs; every variant,
+/// small and large items, with and without pool exhaustion between the claim and the retry
+/// rounds (then the owners a full pool left out are inserted by plain rounds).
+#[test]
+fn distinct_find_or_insert_stores_each_item_once() {
+    let ctx = common::gpu();
+    let cases = [
+        (HashVariant::Atomic64, 1, true),
+        (HashVariant::Atomic64, 9, true),
+        (HashVariant::TicketBoard, 2, true),
+        (HashVariant::AccelHash32, 10, true),
+        (HashVariant::AccelHash8, 3, true),
+        (HashVariant::AccelHash32, 2, false),
+    ];
+    for (variant, w, grow) in cases {
+        let msg = format!("{variant:?} w={w} grow={grow}");
+        let buckets = if grow { 13 } else { 24_000 };
+        let config = HashTableConfig {
+            team: TeamMode::SingleLane,
+            grow_before_insert: grow,
+            ..HashTableConfig::new(variant, w, buckets)
+        };
+        let mut gpu = GpuHashTable::new(&ctx, &config).unwrap();
+        let mut cpu = ReferenceTable::new(variant, w, buckets).unwrap();
+        let mut taken = HashSet::new();
+        let stored = random_items(500, w, 31 + w as u64, &mut taken);
+        let (stored_handles, _) = gpu.insert(&flat(&stored), None).unwrap();
+        for item in &stored {
+            cpu.insert(item).unwrap();
+        }
+        // New items up to 4 times each, spread over the batch, mixed with stored ones.
+        let fresh = random_items(
+            if grow { 3000 } else { 30_000 },
+            w,
+            77 + w as u64,
+            &mut taken,
+        );
+        let mut batch = Vec::new();
+        let mut expected = Vec::new();
+        for (i, item) in fresh.iter().enumerate() {
+            for _ in 0..1 + i % 4 {
+                batch.push(item.clone());
+                expected.push(None);
+            }
+            if i % 3 == 0 {
+                batch.push(stored[i % stored.len()].clone());
+                expected.push(Some(stored_handles[i % stored.len()]));
+            }
+        }
+        // Scatter the copies (a fixed permutation) so equal items race in different lanes.
+        let n = batch.len();
+        let order: Vec<usize> = (0..n).map(|k| (k * 7919) % n).collect();
+        assert_eq!(
+            order.iter().collect::<HashSet<_>>().len(),
+            n,
+            "{msg}: permutation"
+        );
+        let batch: Vec<Vec<u32>> = order.iter().map(|&k| batch[k].clone()).collect();
+        let expected: Vec<Option<Handle>> = order.iter().map(|&k| expected[k]).collect();
+
+        let (handles, report) = gpu.find_or_insert_distinct(&flat(&batch), None).unwrap();
+        assert_eq!(report.rounds > 1, !grow, "{msg}: {report:?}");
+        cpu.find_or_insert(&flat(&fresh)).unwrap();
+        let mut handle_of: HashMap<&Vec<u32>, Handle> = HashMap::new();
+        for ((item, h), e) in batch.iter().zip(&handles).zip(&expected) {
+            if let Some(e) = e {
+                assert_eq!(h, e, "{msg}: a stored item's handle changed");
+            }
+            assert_eq!(
+                *handle_of.entry(item).or_insert(*h),
+                *h,
+                "{msg}: equal items, two handles"
+            );
+        }
+        assert_eq!(
+            gpu.read_items(&handles).unwrap(),
+            flat(&batch),
+            "{msg}: read_items"
+        );
+        // Each distinct item once, the reference's item set.
+        let gpu_map = walk_map(&gpu.download().unwrap());
+        let cpu_map = walk_map(cpu.image());
+        assert_eq!(gpu_map.len(), stored.len() + fresh.len(), "{msg}");
+        let gpu_items: HashSet<&Vec<u32>> = gpu_map.values().collect();
+        let cpu_items: HashSet<&Vec<u32>> = cpu_map.values().collect();
+        assert_eq!(gpu_items, cpu_items, "{msg}: item sets differ");
+    }
+    // The claim passes need single lanes.
+    let subgroup = GpuHashTable::new(
+        &ctx,
+        &HashTableConfig {
+            team: TeamMode::Subgroup,
+            ..HashTableConfig::new(HashVariant::AccelHash32, 2, 4)
+        },
+    );
+    match subgroup
+        .unwrap()
+        .find_or_insert_distinct(&[1, 2, 1, 2], None)
+    {
+        Err(HashError::InvalidArgument(m)) => assert!(m.contains("single-lane"), "{m}"),
+        other => panic!("expected an error, got {other:?}"),
+    }
+    assert_clean(&ctx);
+}
+
 /// A table whose only bucket chain is corrupted on purpose: the last slab's link points back
 /// to the first slab (`cycle`), or to a slab beyond the pool. Returns the items' handles too.
 fn corrupted_table(

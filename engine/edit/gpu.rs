@@ -7,7 +7,9 @@
 //! form (uniform ones become empty / full child values, the others append their item to the
 //! buffer of its size), then per size the batch's duplicates are found with the dedup table
 //! ([`GpuDedup`]), a search pass finds items already stored, `mark` keeps one copy of each new
-//! item, the insert round stores it, and `resolve` writes every node's pointer. The edit first
+//! item, the insert round stores it, and `resolve` writes every node's pointer. Single-lane
+//! tables (CPU devices) fold the duplicate detection into the search and insert passes instead
+//! ([`crate::hash::claim`]: two passes per size, no dedup table, no `mark`). The edit first
 //! walks the tool's region top-down (`traverse`, then `leaves` with one invocation per voxel),
 //! building the temporary SVO the merge consumes. See `docs/editing-gpu.md`.
 
@@ -29,11 +31,12 @@ use crate::gpu::{
     shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError,
     MemLocation, Profiler, Readback,
 };
+use crate::hash::claim::{ClaimTable, Claims};
 use crate::hash::dedup::{DedupError, DedupResult, GpuDedup};
 use crate::hash::layout::SLABS_PER_SUPER_BLOCK;
 use crate::hash::{
     GpuHashTable, Handle, HashError, HashStatus, HashTableConfig, HashVariant, PendingInsert,
-    TableImage,
+    TableImage, TeamMode,
 };
 use crate::scene::Voxels;
 
@@ -128,6 +131,10 @@ pub struct GpuHashDagConfig {
     /// (`GpuHashDag::traverse`); beyond, the count of the last level is read back first.
     /// 0: one level per submission with exact capacities (the path a wrong bound falls back to).
     pub traversal_budget: u64,
+    /// Lanes per item of the table passes: `Auto` picks single lanes on CPU devices (whose
+    /// merge uses the tables' claim passes) and subgroups elsewhere (the dedup table and
+    /// `mark`); tests force either.
+    pub team: TeamMode,
 }
 
 /// Super blocks that keep every handle below 2^28 ([`MAX_TABLE_SLABS`] slabs).
@@ -149,6 +156,7 @@ impl GpuHashDagConfig {
             undo_depth: gpu_gc::DEFAULT_UNDO_DEPTH,
             auto_gc_threshold: Some(gpu_gc::DEFAULT_AUTO_GC_THRESHOLD),
             traversal_budget: TRAVERSAL_BUDGET,
+            team: TeamMode::Auto,
         }
     }
 }
@@ -169,6 +177,8 @@ pub struct GpuHashDag {
     pub(super) ctx: Arc<GpuContext>,
     pub(super) config: GpuHashDagConfig,
     pub(super) tables: Vec<GpuHashTable>,
+    /// Per size the dedup table of the subgroup path; empty with single lanes (whose tables
+    /// fold the dedup into their passes: `merge_items_claimed`).
     dedups: Vec<GpuDedup>,
     /// The tables' super-block table addresses (`u64` each), read by the passes.
     pub(super) table_addresses: Buffer,
@@ -286,10 +296,14 @@ impl GpuHashDag {
                 grow_before_insert: config.grow_before_insert,
                 max_insert_rounds: config.max_insert_rounds,
                 max_super_blocks: config.max_super_blocks,
+                team: config.team,
                 ..HashTableConfig::new(config.variant, words, config.buckets)
             };
             tables.push(GpuHashTable::new(ctx, &table_config)?);
-            dedups.push(GpuDedup::new(ctx, words)?);
+            // Single lanes fold the dedup into the table passes (`hash::claim`).
+            if tables[0].team_size() > 1 {
+                dedups.push(GpuDedup::with_team(ctx, words, config.team)?);
+            }
         }
         // Specialization constants of every edit pass: the tool (read from the flags here) and
         // whether leaves carry materials (`EDIT_SPEC_*` in edit/common.glsl).
@@ -1264,9 +1278,11 @@ impl GpuHashDag {
         after: After<'_>,
         profiler: &mut Option<&mut Profiler>,
     ) -> Result<(u32, Back), GpuDagError> {
+        if self.dedups.is_empty() {
+            return self.merge_items_claimed(b, counts, after, profiler);
+        }
         let ctx = Arc::clone(&self.ctx);
         let (items, reps, handles) = (&b.items, &b.reps, &b.handles);
-        let mut retried = 0;
         let max = *counts.iter().max().unwrap_or(&0);
         self.ensure_iota(max)?;
         let values = self.iota.as_ref().expect("iota made above");
@@ -1360,7 +1376,104 @@ impl GpuHashDag {
             back = Some(self.record_resolve_after(&mut cmd, b, after, profiler)?);
             cmd.submit_async()?;
         }
-        for (pending, &s) in pending_insert.into_iter().zip(&sizes) {
+        let errors_before = errors_before.expect("recorded with the inserts");
+        let back = back.expect("recorded with the inserts");
+        self.finish_level(
+            b,
+            counts,
+            &sizes,
+            pending_insert,
+            errors_before,
+            back,
+            after,
+            profiler,
+        )
+    }
+
+    /// Single lanes (CPU devices): per size the table's search-and-claim pass and its claimed
+    /// insert round (`hash::claim`: the level's duplicate detection folded into them, no dedup
+    /// table, no mark pass), every size in one submission with the level's resolve and what
+    /// comes after it. The claim table never runs out, so this is always one submission.
+    fn merge_items_claimed(
+        &mut self,
+        b: &MergeBuffers,
+        counts: &[u32],
+        after: After<'_>,
+        profiler: &mut Option<&mut Profiler>,
+    ) -> Result<(u32, Back), GpuDagError> {
+        let ctx = Arc::clone(&self.ctx);
+        let sizes: Vec<usize> = (0..counts.len()).filter(|&s| counts[s] > 0).collect();
+        let claim_tables = sizes
+            .iter()
+            .map(|&s| ClaimTable::new(&ctx, s as u32 + MIN_ITEM_WORDS, counts[s]))
+            .collect::<Result<Vec<_>, _>>()?;
+        for &s in &sizes {
+            if self.tables[s].config().grow_before_insert {
+                self.tables[s].reserve(counts[s])?;
+            }
+        }
+        let mut cmd = ctx.begin_commands("edit merge")?;
+        let claims_of = |k: usize, s: usize| Claims {
+            table: &claim_tables[k],
+            reps: &b.reps[s],
+        };
+        for (k, &s) in sizes.iter().enumerate() {
+            self.tables[s].record_search_claim(
+                &mut cmd,
+                &b.items[s],
+                &b.handles[s],
+                counts[s],
+                claims_of(k, s),
+                profiler.as_deref_mut(),
+            )?;
+        }
+        let pending = sizes
+            .iter()
+            .enumerate()
+            .map(|(k, &s)| {
+                self.tables[s].record_claimed_insert_round(
+                    &mut cmd,
+                    &b.items[s],
+                    &b.handles[s],
+                    counts[s],
+                    claims_of(k, s),
+                    profiler.as_deref_mut(),
+                )
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let errors_before = cmd.readback::<u32>(&self.merge_errors, 0, 1)?;
+        let back = self.record_resolve_after(&mut cmd, b, after, profiler)?;
+        cmd.submit_async()?;
+        self.finish_level(
+            b,
+            counts,
+            &sizes,
+            pending,
+            errors_before,
+            back,
+            after,
+            profiler,
+        )
+    }
+
+    /// Completes a level's inserts once their submission was made (`finish_insert` per size:
+    /// pool growth and further rounds); returns the extra rounds and what the level's
+    /// submission read back after its resolve (`back`), recorded again when rounds were added.
+    #[allow(clippy::too_many_arguments)]
+    fn finish_level(
+        &mut self,
+        b: &MergeBuffers,
+        counts: &[u32],
+        sizes: &[usize],
+        pending_insert: Vec<PendingInsert>,
+        errors_before: Readback<u32>,
+        mut back: Back,
+        after: After<'_>,
+        profiler: &mut Option<&mut Profiler>,
+    ) -> Result<(u32, Back), GpuDagError> {
+        let (items, handles) = (&b.items, &b.handles);
+        let mut retried = 0;
+        for (pending, &s) in pending_insert.into_iter().zip(sizes) {
             let report = self.tables[s].finish_insert(
                 pending,
                 &items[s],
@@ -1381,10 +1494,9 @@ impl GpuHashDag {
         // When a pool ran out, the resolve recorded with the inserts saw the items of the
         // extra rounds missing (they stay pending): the count goes back to its value before,
         // and resolve and what comes after it (next build_items, root readback) run again.
-        let before = errors_before.expect("recorded with the inserts").read()?[0];
-        let mut back = back.expect("recorded with the inserts");
+        let before = errors_before.read()?[0];
         if retried > 0 {
-            let mut cmd = ctx.begin_commands("edit resolve")?;
+            let mut cmd = self.ctx.begin_commands("edit resolve")?;
             cmd.fill_buffer(&self.merge_errors, before);
             back = self.record_resolve_after(&mut cmd, b, after, profiler)?;
             cmd.submit_async()?;

@@ -33,6 +33,11 @@ gpu_shared! {
         pub items: uint64_t,
         /// Address of the handles (one `u32` per item).
         pub handles: uint64_t,
+        /// Address of a claim table (`engine/hash/claim.rs`; 0 = none): the search-and-claim
+        /// pass and an insert round with [`FLAG_CLAIMS`](super::layout::FLAG_CLAIMS) use it.
+        pub claims: uint64_t,
+        /// Address of the representatives (one `u32` per item) the claim passes write.
+        pub reps: uint64_t,
         /// Number of items (or handles).
         pub count: uint,
         /// Number of buckets.
@@ -43,8 +48,8 @@ gpu_shared! {
         pub seed: uint,
         /// `FLAG_*` bits of `engine/hash/layout.rs` (`HASH_FLAG_*` in `hash_layout.h`).
         pub flags: uint,
-        /// Padding to 8 bytes.
-        pub pad: uint,
+        /// Slots of the claim table (a power of two; 0 = none).
+        pub claim_slots: uint,
     }
 
     /// GC counters written by the mark and sweep passes (at `HashPush::items` during GC).

@@ -36,6 +36,10 @@ pub const SLAB_OCCUPANCY: u32 = 2;
 /// `HashPush::flags` bit: garbage collection may have cleared slots below occupied ones, so an
 /// Atomic64 insert scans every slot of a slab instead of trusting that its items form a prefix.
 pub const FLAG_HOLES: u32 = 1;
+/// `HashPush::flags` bit: an insert round that first settles each missing item's
+/// representative through the claim table (`engine/hash/claim.rs`); only the representatives
+/// are inserted, the other copies get [`HANDLE_INVALID`](super::HANDLE_INVALID).
+pub const FLAG_CLAIMS: u32 = 2;
 
 /// Words of the status block (see [`HashStatus`]).
 pub const STATUS_WORDS: u32 = 5;

@@ -6,12 +6,15 @@
 //!   handles, the hash functions.
 //! - [`alloc`]: the slab pool (super blocks, bitmasks, status block) seen from the host.
 //! - [`table`]: [`GpuHashTable`], the batch passes (search, insert, find-or-insert, read).
+//! - [`claim`]: the claim table that folds a batch's duplicate detection into the search and
+//!   insert passes on single lanes.
 //! - [`reference`]: the sequential CPU reference on the same memory image, and the structural
 //!   walk used by the tests on both.
 //!
 //! See `docs/hash.md`.
 
 pub mod alloc;
+pub mod claim;
 pub mod dedup;
 pub mod gc;
 mod gpu_shared;

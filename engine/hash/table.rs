@@ -15,9 +15,10 @@ use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::Arc;
 
 use super::alloc::SlabPool;
+use super::claim::{ClaimTable, Claims};
 use super::layout::{
-    Handle, HashPush, HashStatus, HashVariant, SlabLayout, FLAG_HOLES, HANDLE_INVALID, HANDLE_MISS,
-    MAX_SUPER_BLOCKS, SLABS_PER_SUPER_BLOCK, SLAB_SLOTS,
+    Handle, HashPush, HashStatus, HashVariant, SlabLayout, FLAG_CLAIMS, FLAG_HOLES, HANDLE_INVALID,
+    HANDLE_MISS, MAX_SUPER_BLOCKS, SLABS_PER_SUPER_BLOCK, SLAB_SLOTS,
 };
 use super::reference::TableImage;
 use super::HashError;
@@ -103,6 +104,8 @@ pub struct GpuHashTable {
     search: ComputePipeline,
     insert: ComputePipeline,
     read: ComputePipeline,
+    /// Search-and-claim pass (single lanes only: `claim.rs`).
+    claim: Option<ComputePipeline>,
     workgroup: u32,
     subgroup: u32,
     team: u32,
@@ -180,6 +183,9 @@ impl GpuHashTable {
         let search = pipeline("hash search", shaders::HASH_SEARCH)?;
         let insert = pipeline("hash insert", shaders::HASH_INSERT)?;
         let read = pipeline("hash read", shaders::HASH_READ)?;
+        let claim = single_lane
+            .then(|| pipeline("hash search and claim", shaders::HASH_CLAIM))
+            .transpose()?;
         let heads = ctx.create_buffer(
             "hash bucket heads",
             4 * config.buckets as u64,
@@ -206,6 +212,7 @@ impl GpuHashTable {
             search,
             insert,
             read,
+            claim,
             workgroup,
             subgroup,
             team,
@@ -283,7 +290,7 @@ impl GpuHashTable {
             } else {
                 0
             },
-            pad: 0,
+            ..HashPush::default()
         }
     }
 
@@ -387,10 +394,48 @@ impl GpuHashTable {
         items: &'a Buffer,
         handles: &'a Buffer,
         count: u32,
+        profiler: Option<&mut Profiler>,
+    ) -> Result<PendingInsert, HashError> {
+        self.record_round(cmd, items, handles, count, None, profiler)
+    }
+
+    /// Records the insert round that follows [`GpuHashTable::record_search_claim`] (single
+    /// lanes): of the items still [`HANDLE_MISS`], only the owner of each distinct item's
+    /// claim-table copy is inserted; the others get [`HANDLE_INVALID`] and `reps[i]` = the
+    /// owner's index (whose handle is theirs). Items found by the search keep `reps[i] = i`.
+    /// [`GpuHashTable::finish_insert`] completes it like any round (its further rounds, for
+    /// owners a full pool left out, need no claims).
+    pub fn record_claimed_insert_round<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        items: &'a Buffer,
+        handles: &'a Buffer,
+        count: u32,
+        claims: Claims<'a>,
+        profiler: Option<&mut Profiler>,
+    ) -> Result<PendingInsert, HashError> {
+        self.record_round(cmd, items, handles, count, Some(claims), profiler)
+    }
+
+    fn record_round<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        items: &'a Buffer,
+        handles: &'a Buffer,
+        count: u32,
+        claims: Option<Claims<'a>>,
         mut profiler: Option<&mut Profiler>,
     ) -> Result<PendingInsert, HashError> {
         Self::check_count(items, count, self.config.item_words, "items")?;
         Self::check_count(handles, count, 1, "handles")?;
+        let mut push = self.push_constants(items.address(), handles.address(), count);
+        if let Some(claims) = claims {
+            self.check_claims(claims, count)?;
+            push.claims = claims.table.address();
+            push.claim_slots = claims.table.slot_count();
+            push.reps = claims.reps.address();
+            push.flags |= FLAG_CLAIMS;
+        }
         let before = self.record_status(cmd)?;
         let seed = super::layout::fmix32(
             self.pass_seed
@@ -398,7 +443,7 @@ impl GpuHashTable {
                 .wrapping_add(0x9e37_79b9),
         );
         self.pass_seed.store(seed, Ordering::Relaxed);
-        let push = self.push_constants(items.address(), handles.address(), count);
+        push.seed = seed;
         let groups = self.cooperative_groups(count);
         self.record(
             cmd,
@@ -411,6 +456,57 @@ impl GpuHashTable {
         cmd.barrier();
         let after = self.record_status(cmd)?;
         Ok(PendingInsert { before, after })
+    }
+
+    /// Checks the claim passes' arguments: single lanes, a table sized for the batch, `reps`.
+    fn check_claims(&self, claims: Claims<'_>, count: u32) -> Result<(), HashError> {
+        if self.claim.is_none() {
+            return Err(HashError::InvalidArgument(
+                "claim passes need a single-lane table (TeamMode::SingleLane)".into(),
+            ));
+        }
+        claims.table.check_batch(count, self.config.item_words)?;
+        Self::check_count(claims.reps, count, 1, "reps")
+    }
+
+    /// Records the search-and-claim pass (single lanes; profiled as "hash search and claim"):
+    /// `handles[i]` = handle of `items[i]` or [`HANDLE_MISS`], `reps[i] = i`, and every
+    /// missing item gets a copy in `claims` (cleared first, here). Follow it with
+    /// [`GpuHashTable::record_claimed_insert_round`] on the same buffers.
+    pub fn record_search_claim<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        items: &'a Buffer,
+        handles: &'a Buffer,
+        count: u32,
+        claims: Claims<'a>,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<(), HashError> {
+        if count == 0 {
+            return Ok(());
+        }
+        Self::check_count(items, count, self.config.item_words, "items")?;
+        Self::check_count(handles, count, 1, "handles")?;
+        self.check_claims(claims, count)?;
+        let pipeline = self.claim.as_ref().expect("checked by check_claims");
+        claims.table.record_clear(cmd)?;
+        let push = HashPush {
+            claims: claims.table.address(),
+            claim_slots: claims.table.slot_count(),
+            reps: claims.reps.address(),
+            ..self.push_constants(items.address(), handles.address(), count)
+        };
+        let groups = self.cooperative_groups(count);
+        self.record(
+            cmd,
+            &mut profiler,
+            "hash search and claim",
+            pipeline,
+            groups,
+            &push,
+        )?;
+        cmd.barrier();
+        Ok(())
     }
 
     /// Records an insert (`search_first == false`: the items are known to be absent; the
@@ -790,6 +886,76 @@ impl GpuHashTable {
         profiler: Option<&mut Profiler>,
     ) -> Result<(Vec<Handle>, InsertReport), HashError> {
         self.insert_host(items, profiler, true)
+    }
+
+    /// Finds or inserts host items, each distinct item stored once however often the batch
+    /// holds it (single lanes: the claim passes of `claim.rs`); returns every item's handle.
+    /// Upload, search-and-claim, insert and the readbacks in one submission, one host wait
+    /// (unless the pool runs out).
+    pub fn find_or_insert_distinct(
+        &mut self,
+        items: &[u32],
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<(Vec<Handle>, InsertReport), HashError> {
+        if items.is_empty() {
+            return Ok((Vec::new(), self.empty_report()));
+        }
+        let count = self.validate_items(items)?;
+        let (item_buf, handles) = self.batch_buffers(count)?;
+        let reps = self
+            .ctx
+            .create_buffer("hash reps", 4 * count as u64, MemLocation::GpuOnly)?;
+        let table = ClaimTable::new(&self.ctx, self.config.item_words, count)?;
+        let claims = Claims {
+            table: &table,
+            reps: &reps,
+        };
+        if self.config.grow_before_insert {
+            self.reserve(count)?;
+        }
+        let mut cmd = self.ctx.begin_commands("hash find-or-insert distinct")?;
+        cmd.upload(&item_buf, 0, items)?;
+        self.record_search_claim(
+            &mut cmd,
+            &item_buf,
+            &handles,
+            count,
+            claims,
+            profiler.as_deref_mut(),
+        )?;
+        let pending = self.record_claimed_insert_round(
+            &mut cmd,
+            &item_buf,
+            &handles,
+            count,
+            claims,
+            profiler.as_deref_mut(),
+        )?;
+        let reps_back = cmd.readback::<u32>(&reps, 0, count as usize)?;
+        cmd.submit_async()?;
+        let report =
+            self.finish_insert(pending, &item_buf, &handles, count, profiler.as_deref_mut())?;
+        if let Some(p) = profiler {
+            p.resolve()?;
+        }
+        // Read after the last round (a full pool's further rounds change owners' handles).
+        let raw = self.ctx.read_buffer::<u32>(&handles, 0, count as usize)?;
+        let reps = reps_back.read()?;
+        let handle_of = |i: usize| {
+            let rep = reps[i] as usize;
+            let h = if raw[i] == HANDLE_INVALID && rep < raw.len() && rep != i {
+                raw[rep]
+            } else {
+                raw[i]
+            };
+            Handle::from_raw(h).ok_or_else(|| {
+                HashError::InvalidArgument(format!("item {i} has no handle after insert"))
+            })
+        };
+        let handles = (0..count as usize)
+            .map(handle_of)
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok((handles, report))
     }
 
     fn insert_host(

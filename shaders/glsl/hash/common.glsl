@@ -16,6 +16,9 @@ layout(constant_id = 4) const uint TEAM = 32;
 #include "shared/murmur.glsl"
 #include "shared/team.glsl"
 
+// Push constants of every hash pass (`HashPush` in engine/hash/gpu_shared.rs).
+layout(push_constant, std430) uniform Push { HASH_PUSH_MEMBERS } push;
+
 layout(buffer_reference, std430, buffer_reference_align = 4) coherent buffer HashWords {
     uint w[];
 };

@@ -15,8 +15,6 @@
 #include "hash/alloc.glsl"
 #include "hash/slab.glsl"
 
-layout(push_constant, std430) uniform Push { HASH_PUSH_MEMBERS } push;
-
 // GC counters at `push.items`; members: `GcCounters` in engine/hash/gpu_shared.rs.
 layout(buffer_reference, std430, buffer_reference_align = 4) coherent buffer GcCountersRef {
     GC_COUNTERS_MEMBERS

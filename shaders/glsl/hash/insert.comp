@@ -1,10 +1,13 @@
 #version 460
 // Slab hash insert pass: places every item whose handle is still HASH_MISS and writes its new
 // handle. Items are assumed absent (no search here; duplicates inside a batch get separate
-// slots). One item per team (a subgroup, or one lane) at a time: walk the bucket's chain from
-// its hint, claim a free slot in the first slab that has one, else allocate a slab and link it
-// at the end with a CAS. When no slab can be allocated the handle stays HASH_MISS and status.exhausted counts it: the host
-// grows the pool and runs the pass again (only HASH_MISS items are retried).
+// slots), except with HASH_FLAG_CLAIMS: then only the representatives the claim table names
+// are placed, the other copies get HASH_INVALID and their representative in reps (see
+// hash/claims.glsl). One item per team (a subgroup, or one lane) at a time: walk the bucket's
+// chain from its hint, claim a free slot in the first slab that has one, else allocate a slab
+// and link it at the end with a CAS. When no slab can be allocated the handle stays HASH_MISS
+// and status.exhausted counts it: the host grows the pool and runs the pass again (only
+// HASH_MISS items are retried).
 // Driven by engine/hash/table.rs.
 #extension GL_EXT_buffer_reference : require
 #extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
@@ -17,8 +20,7 @@
 #include "hash/common.glsl"
 #include "hash/alloc.glsl"
 #include "hash/slab.glsl"
-
-layout(push_constant, std430) uniform Push { HASH_PUSH_MEMBERS } push;
+#include "hash/claims.glsl"
 
 // Writes the item words the claim did not write, lanes in parallel.
 void write_item(HashWords slab, uint slot, uint item[HASH_MAX_ITEM_WORDS], uint first) {
@@ -240,7 +242,18 @@ void main() {
                 atomicAdd(HashStatus(push.status).invalid_items, 1u);
             }
         } else {
-            handle = insert_item(item, hash_item(item), murmur_fmix32(push.seed ^ (i * 0x9e3779b9u)));
+            uint h = hash_item(item);
+            if (TEAM == 1u && (push.flags & HASH_FLAG_CLAIMS) != 0u) {
+                // Only the owner of the item's first claim-table copy inserts it; the other
+                // copies name it as their representative.
+                uint owner = claim_owner(item, h);
+                HashWords(push.reps).w[i] = owner;
+                if (owner != i) {
+                    handles.w[i] = HASH_INVALID;
+                    continue;
+                }
+            }
+            handle = insert_item(item, h, murmur_fmix32(push.seed ^ (i * 0x9e3779b9u)));
         }
         if (team_leader()) {
             handles.w[i] = handle;

@@ -8,8 +8,6 @@
 #include "shared/hash_layout.h"
 #include "hash/common.glsl"
 
-layout(push_constant, std430) uniform Push { HASH_PUSH_MEMBERS } push;
-
 void main() {
     uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
     HashWords handles = HashWords(push.handles);

@@ -99,3 +99,23 @@ uint hash_find_in_slab(uint64_t slab_addr, uint slab, uint item[HASH_MAX_ITEM_WO
     }
     return HASH_MISS;
 }
+
+// Handle of `item` (hash `h`) in the table, or HASH_MISS: its bucket's chain walked slab by
+// slab. No insert may run meanwhile (the allocated-slab counter bounds the walk exactly).
+uint hash_search_chain(uint item[HASH_MAX_ITEM_WORDS], uint h) {
+    HashWords heads = HashWords(push.heads);
+    uint sec = hash_secondary_stored_form(h);
+    uint link = heads.w[h % push.buckets];
+    uint max_links = hash_allocated_slabs(push.status, false);
+    uint found = HASH_MISS;
+    for (uint links = 0u; link != 0u && found == HASH_MISS; ++links) {
+        if (links == max_links || hash_link_outside(link, push.blocks)) {
+            if (team_leader()) hash_report_broken_chain(push.status);
+            break;
+        }
+        uint64_t addr = hash_slab_address(push.super_blocks, link - 1u);
+        found = hash_find_in_slab(addr, link - 1u, item, sec);
+        link = HashWords(addr).w[HASH_SLAB_NEXT];
+    }
+    return found;
+}

@@ -29,6 +29,7 @@
 
 // HashPush::flags bits (FLAG_* in engine/hash/layout.rs).
 #define HASH_FLAG_HOLES 1u      // GC may have punched holes: Atomic64 inserts scan whole slabs
+#define HASH_FLAG_CLAIMS 2u     // insert only the representatives the claim table names
 
 #define HASH_SEED 0x9747b28cu
 #define HASH_SECONDARY_SALT 0x85ebca6bu
