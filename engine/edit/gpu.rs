@@ -1285,7 +1285,6 @@ impl GpuHashDag {
         let (items, reps, handles) = (&b.items, &b.reps, &b.handles);
         let max = *counts.iter().max().unwrap_or(&0);
         self.ensure_iota(max)?;
-        let values = self.iota.as_ref().expect("iota made above");
         let sizes: Vec<usize> = (0..counts.len()).filter(|&s| counts[s] > 0).collect();
         // A batch of one item is its own representative: no dedup, no mark.
         let deduped: Vec<usize> = sizes.iter().copied().filter(|&s| counts[s] > 1).collect();
@@ -1303,12 +1302,9 @@ impl GpuHashDag {
             })
             .collect::<Result<Vec<_>, _>>()?;
         if fused {
-            for &s in &sizes {
-                if self.tables[s].config().grow_before_insert {
-                    self.tables[s].reserve(counts[s])?;
-                }
-            }
+            self.reserve_sizes(&sizes, counts)?;
         }
+        let values = self.iota.as_ref().expect("iota made above");
         // Dedup and search of every size (the search does not read the representatives),
         // then in the same submission when fused the mark and insert round of every size.
         let mut cmd = ctx.begin_commands("edit dedup and search")?;
@@ -1362,11 +1358,7 @@ impl GpuHashDag {
             }
         }
         if !fused {
-            for &s in &sizes {
-                if self.tables[s].config().grow_before_insert {
-                    self.tables[s].reserve(counts[s])?;
-                }
-            }
+            self.reserve_sizes(&sizes, counts)?;
             // One submission for the mark and the insert round of every size, one host
             // wait (more only when a pool runs out: `finish_insert` grows it and runs more
             // rounds).
@@ -1407,11 +1399,7 @@ impl GpuHashDag {
             .iter()
             .map(|&s| ClaimTable::new(&ctx, s as u32 + MIN_ITEM_WORDS, counts[s]))
             .collect::<Result<Vec<_>, _>>()?;
-        for &s in &sizes {
-            if self.tables[s].config().grow_before_insert {
-                self.tables[s].reserve(counts[s])?;
-            }
-        }
+        self.reserve_sizes(&sizes, counts)?;
         let mut cmd = ctx.begin_commands("edit merge")?;
         let claims_of = |k: usize, s: usize| Claims {
             table: &claim_tables[k],
@@ -1454,6 +1442,16 @@ impl GpuHashDag {
             after,
             profiler,
         )
+    }
+
+    /// Grows the tables of `sizes` for `counts` new items each, where they grow before inserts.
+    fn reserve_sizes(&mut self, sizes: &[usize], counts: &[u32]) -> Result<(), GpuDagError> {
+        for &s in sizes {
+            if self.tables[s].config().grow_before_insert {
+                self.tables[s].reserve(counts[s])?;
+            }
+        }
+        Ok(())
     }
 
     /// Completes a level's inserts once their submission was made (`finish_insert` per size:

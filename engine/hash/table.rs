@@ -355,6 +355,20 @@ impl GpuHashTable {
         items: &'a Buffer,
         handles: &'a Buffer,
         count: u32,
+        profiler: Option<&mut Profiler>,
+    ) -> Result<(), HashError> {
+        self.record_search_pass(cmd, items, handles, count, None, profiler)
+    }
+
+    /// The search pass, or with `claims` the search-and-claim pass (which clears the claim
+    /// table first).
+    fn record_search_pass<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        items: &'a Buffer,
+        handles: &'a Buffer,
+        count: u32,
+        claims: Option<Claims<'a>>,
         mut profiler: Option<&mut Profiler>,
     ) -> Result<(), HashError> {
         if count == 0 {
@@ -362,16 +376,20 @@ impl GpuHashTable {
         }
         Self::check_count(items, count, self.config.item_words, "items")?;
         Self::check_count(handles, count, 1, "handles")?;
-        let push = self.push_constants(items.address(), handles.address(), count);
+        let mut push = self.push_constants(items.address(), handles.address(), count);
+        let (name, pipeline) = match claims {
+            None => ("hash search", &self.search),
+            Some(claims) => {
+                let claim = self.check_claims(claims, count)?;
+                claims.table.record_clear(cmd)?;
+                push.claims = claims.table.address();
+                push.claim_slots = claims.table.slot_count();
+                push.reps = claims.reps.address();
+                ("hash search and claim", claim)
+            }
+        };
         let groups = self.cooperative_groups(count);
-        self.record(
-            cmd,
-            &mut profiler,
-            "hash search",
-            &self.search,
-            groups,
-            &push,
-        )?;
+        self.record(cmd, &mut profiler, name, pipeline, groups, &push)?;
         cmd.barrier();
         Ok(())
     }
@@ -458,15 +476,17 @@ impl GpuHashTable {
         Ok(PendingInsert { before, after })
     }
 
-    /// Checks the claim passes' arguments: single lanes, a table sized for the batch, `reps`.
-    fn check_claims(&self, claims: Claims<'_>, count: u32) -> Result<(), HashError> {
-        if self.claim.is_none() {
+    /// Checks the claim passes' arguments (single lanes, a claim table sized for the batch,
+    /// `reps`); returns the search-and-claim pipeline.
+    fn check_claims(&self, claims: Claims<'_>, count: u32) -> Result<&ComputePipeline, HashError> {
+        let Some(claim) = &self.claim else {
             return Err(HashError::InvalidArgument(
                 "claim passes need a single-lane table (TeamMode::SingleLane)".into(),
             ));
-        }
+        };
         claims.table.check_batch(count, self.config.item_words)?;
-        Self::check_count(claims.reps, count, 1, "reps")
+        Self::check_count(claims.reps, count, 1, "reps")?;
+        Ok(claim)
     }
 
     /// Records the search-and-claim pass (single lanes; profiled as "hash search and claim"):
@@ -480,33 +500,9 @@ impl GpuHashTable {
         handles: &'a Buffer,
         count: u32,
         claims: Claims<'a>,
-        mut profiler: Option<&mut Profiler>,
+        profiler: Option<&mut Profiler>,
     ) -> Result<(), HashError> {
-        if count == 0 {
-            return Ok(());
-        }
-        Self::check_count(items, count, self.config.item_words, "items")?;
-        Self::check_count(handles, count, 1, "handles")?;
-        self.check_claims(claims, count)?;
-        let pipeline = self.claim.as_ref().expect("checked by check_claims");
-        claims.table.record_clear(cmd)?;
-        let push = HashPush {
-            claims: claims.table.address(),
-            claim_slots: claims.table.slot_count(),
-            reps: claims.reps.address(),
-            ..self.push_constants(items.address(), handles.address(), count)
-        };
-        let groups = self.cooperative_groups(count);
-        self.record(
-            cmd,
-            &mut profiler,
-            "hash search and claim",
-            pipeline,
-            groups,
-            &push,
-        )?;
-        cmd.barrier();
-        Ok(())
+        self.record_search_pass(cmd, items, handles, count, Some(claims), profiler)
     }
 
     /// Records an insert (`search_first == false`: the items are known to be absent; the

@@ -29,7 +29,7 @@ void main() {
             uint h = hash_item(item);
             found = hash_search_chain(item, h);
             if (found == HASH_MISS) {
-                claim_copy(item, h, i);
+                claim_first_copy(item, h, i, true);
             }
         }
         handles.w[i] = found;

@@ -23,6 +23,7 @@
 
 #include "gen/hash.glsl"
 #include "shared/murmur.glsl"
+#include "shared/probe.glsl"
 
 layout(local_size_x_id = 0) in;
 layout(constant_id = 1) const uint KEY_WORDS = 1;
@@ -142,11 +143,6 @@ uint find_key(Words slab, Words keys, uint i, bool racing) {
 // empty slot: pass 1 inserts there when no ready copy is seen (a copy being written is skipped,
 // making a second copy), pass 2 takes the first copy along the same probe sequence.
 
-// The ready tag of a key with hash `h` (never TAG_EMPTY or TAG_WRITING).
-uint probe_ready_tag(uint h) {
-    return h | 2u;
-}
-
 // Word of the probe table holding word `j` of the key in `slot`.
 uint probe_key_word(uint slot, uint j) {
     return 2u * push.buckets + slot * KEY_WORDS + j;
@@ -161,16 +157,3 @@ bool probe_key_equals(Words table, uint slot, Words keys, uint i) {
     return equal;
 }
 
-// From `slot` on, the first slot whose tag is empty or `ready` (the slots between hold other
-// keys or copies being written); `probes` counts the slots passed and stops the walk at the
-// table's size. A loop of one load per slot: the costly steps stay out of its body.
-uint probe_skip(Words table, uint slot, uint ready, inout uint probes, out uint tag) {
-    uint mask = push.buckets - 1u;
-    tag = table.w[slot];
-    while (tag != TAG_EMPTY && tag != ready && probes < push.buckets) {
-        slot = (slot + 1u) & mask;
-        probes += 1u;
-        tag = table.w[slot];
-    }
-    return slot;
-}

@@ -125,7 +125,7 @@ void probe_insert(uint i) {
     uint probes = 0u;
     while (probes < push.buckets) {
         uint tag;
-        slot = probe_skip(table, slot, ready, probes, tag);
+        slot = probe_skip(push.table, push.buckets, slot, ready, probes, tag);
         if (tag == TAG_EMPTY) {
             if (atomicCompSwap(table.w[slot], TAG_EMPTY, TAG_WRITING) == TAG_EMPTY) {
                 for (uint j = 0; j < KEY_WORDS; ++j) {

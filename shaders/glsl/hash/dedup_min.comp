@@ -41,7 +41,7 @@ void probe_representative(uint i) {
     uint probes = 0u;
     while (probes < push.buckets) {
         uint tag;
-        slot = probe_skip(table, slot, ready, probes, tag);
+        slot = probe_skip(push.table, push.buckets, slot, ready, probes, tag);
         if (tag == TAG_EMPTY) {
             break;
         }

@@ -246,7 +246,7 @@ void main() {
             if (TEAM == 1u && (push.flags & HASH_FLAG_CLAIMS) != 0u) {
                 // Only the owner of the item's first claim-table copy inserts it; the other
                 // copies name it as their representative.
-                uint owner = claim_owner(item, h);
+                uint owner = claim_first_copy(item, h, i, false);
                 HashWords(push.reps).w[i] = owner;
                 if (owner != i) {
                     handles.w[i] = HASH_INVALID;
