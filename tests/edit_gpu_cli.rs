@@ -171,6 +171,8 @@ fn bench_edit_times_unprofiled_and_profiles_a_second_run() {
         "accel32",
         "--random-edits",
         "0",
+        "--long-replay",
+        "20",
         "--json",
         path(&json),
         "--markdown",
@@ -192,6 +194,13 @@ fn bench_edit_times_unprofiled_and_profiles_a_second_run() {
         .filter(|r| r["engine"] != "cpu" && r["status"] == "ok" && r["replay"] != "paint")
         .collect();
     assert!(gpu.len() >= 2, "{report}");
+    // The long replay: its 20 edits on both engines.
+    let long: Vec<_> = rows
+        .iter()
+        .filter(|r| r["replay"] == "long spheres")
+        .collect();
+    assert_eq!(long.len(), 2, "{report}");
+    assert!(long.iter().all(|r| r["edits"] == 20), "{report}");
     for r in gpu {
         assert!(r["edits"].as_u64().unwrap() > 0, "{r}");
         let total = r["edit_ms_total"].as_f64().unwrap();

@@ -34,7 +34,7 @@ gpu_shared! {
         /// Address of the handles (one `u32` per item).
         pub handles: uint64_t,
         /// Address of a claim table (`engine/hash/claim.rs`; 0 = none): the search-and-claim
-        /// pass and an insert round with [`FLAG_CLAIMS`](super::layout::FLAG_CLAIMS) use it.
+        /// pass and an insert round with `FLAG_CLAIMS` (`engine/hash/layout.rs`) use it.
         pub claims: uint64_t,
         /// Address of the representatives (one `u32` per item) the claim passes write.
         pub reps: uint64_t,

@@ -39,6 +39,11 @@ pub struct BenchEditArgs {
         default_value = "atomic64,ticket_board,accel32,accel8"
     )]
     tables: Vec<TableArg>,
+    /// Edits of the long sphere replay (radius 128..512 at 8192, scaled with the resolution,
+    /// at spread surface points, added and removed in turn): the rate once every pipeline is
+    /// made, which the short replays' first edits hide; 0 skips it.
+    #[arg(long, default_value_t = 200)]
+    long_replay: usize,
     /// Random edits of the bytes target (first scene, first table layout); 0 skips it.
     #[arg(long, default_value_t = 1000)]
     random_edits: usize,
@@ -161,8 +166,8 @@ fn surface_points(codes: &[u64], count: usize) -> Vec<[f32; 3]> {
 }
 
 /// The replays: spheres (radius 64..1024 at 8192, scaled) added and removed, a copy stroke,
-/// paint strokes.
-fn replays(codes: &[u64], resolution: u32) -> Vec<Replay> {
+/// paint strokes, and `long` spheres (radius 128..512 at 8192) added and removed in turn.
+fn replays(codes: &[u64], resolution: u32, long: usize) -> Vec<Replay> {
     let scale = resolution as f32 / 8192.0;
     let p = surface_points(codes, 64);
     let mut spheres = Vec::new();
@@ -203,7 +208,28 @@ fn replays(codes: &[u64], resolution: u32) -> Vec<Replay> {
             }
         })
         .collect();
-    vec![
+    let long_spheres = surface_points(codes, long)
+        .into_iter()
+        .enumerate()
+        .map(|(i, center)| {
+            let radius = ((128 + (i * 37) % 385) as f32 * scale).max(2.0);
+            if i % 2 == 0 {
+                Tool::Add {
+                    shape: Shape::Sphere,
+                    center,
+                    radius,
+                    material: 0,
+                }
+            } else {
+                Tool::Remove {
+                    shape: Shape::Sphere,
+                    center,
+                    radius,
+                }
+            }
+        })
+        .collect::<Vec<_>>();
+    let mut out = vec![
         Replay {
             name: "spheres",
             tools: spheres,
@@ -216,7 +242,14 @@ fn replays(codes: &[u64], resolution: u32) -> Vec<Replay> {
             name: "paint",
             tools: paint,
         },
-    ]
+    ];
+    if !long_spheres.is_empty() {
+        out.push(Replay {
+            name: "long spheres",
+            tools: long_spheres,
+        });
+    }
+    out
 }
 
 /// Item bytes per table of GC statistics.
@@ -447,7 +480,7 @@ pub fn bench_edit(args: &BenchEditArgs) -> Result<()> {
         let mut svdag = Svdag::from_voxels(&voxels)?;
         drop(voxels);
         svdag.colors.clear();
-        for replay in replays(&codes, svdag.resolution) {
+        for replay in replays(&codes, svdag.resolution, args.long_replay) {
             let cpu = run_cpu(name, &svdag, &replay)?;
             let cpu_ms = cpu.edit_ms_total;
             report.replays.push(cpu);
