@@ -23,6 +23,8 @@
 
 use std::sync::Arc;
 
+use super::dedup::DedupLayout;
+use super::layout::HashPush;
 use super::HashError;
 use crate::gpu::{Buffer, Commands, GpuContext, MemLocation};
 
@@ -36,6 +38,15 @@ pub struct Claims<'a> {
     pub reps: &'a Buffer,
 }
 
+impl Claims<'_> {
+    /// Names the claim table and the representatives in a pass's push constants.
+    pub(super) fn fill_push(self, push: &mut HashPush) {
+        push.claims = self.table.address();
+        push.claim_slots = self.table.slot_count();
+        push.reps = self.reps.address();
+    }
+}
+
 /// The claim table of one batch (see the module docs).
 #[derive(Debug)]
 pub struct ClaimTable {
@@ -46,12 +57,18 @@ pub struct ClaimTable {
 }
 
 impl ClaimTable {
+    /// The layout it shares with the dedup table's probe form (tags, owners / values, keys).
+    fn layout(item_words: u32) -> DedupLayout {
+        DedupLayout {
+            key_words: item_words,
+            probe: true,
+        }
+    }
+
     /// Slots for `count` items: a power of two, at least twice the items; `None` when the
     /// table's words would not fit the shaders' 32-bit indices.
     pub fn slots(count: u32, item_words: u32) -> Option<u32> {
-        let slots = (2 * count.max(1) as u64).checked_next_power_of_two()?;
-        let words = slots * (2 + item_words as u64);
-        (words <= u32::MAX as u64).then_some(slots as u32)
+        Self::layout(item_words).fitting_probe_slots(count)
     }
 
     /// A table for batches of up to `count` items of `item_words` words.
@@ -65,7 +82,7 @@ impl ClaimTable {
                 "{count} items of {item_words} words are too many for one claim table"
             ))
         })?;
-        let bytes = 4 * slots as u64 * (2 + item_words as u64);
+        let bytes = 4 * Self::layout(item_words).probe_words(slots);
         Ok(ClaimTable {
             table: ctx.create_buffer("hash claim table", bytes, MemLocation::GpuOnly)?,
             slots,

@@ -137,6 +137,12 @@ impl DedupLayout {
             .and_then(|slots| u32::try_from(slots).ok())
     }
 
+    /// [`DedupLayout::probe_slots`] for this key size, `None` also when the table's words would
+    /// not fit the shaders' 32-bit indices.
+    pub fn fitting_probe_slots(self, count: u32) -> Option<u32> {
+        Self::probe_slots(count).filter(|&slots| self.probe_words(slots) <= u32::MAX as u64)
+    }
+
     /// Words of the probe table with `slots` slots: tags, values (the zeroed part), keys.
     pub fn probe_words(self, slots: u32) -> u64 {
         slots as u64 * (2 + self.key_words as u64)
@@ -370,15 +376,12 @@ impl GpuDedup {
     pub fn scratch(&self, count: u32, pool_slabs: Option<u32>) -> Result<DedupScratch, DedupError> {
         let n = count.max(1) as u64;
         let (buckets, pool_slabs, table_bytes) = if self.layout.probe {
-            // The shaders index the table's words with 32-bit integers.
-            let slots = DedupLayout::probe_slots(count)
-                .filter(|&slots| self.layout.probe_words(slots) <= u32::MAX as u64)
-                .ok_or_else(|| {
-                    DedupError::InvalidInput(format!(
-                        "{count} inputs of {} words are too many for one probe table",
-                        self.layout.key_words
-                    ))
-                })?;
+            let slots = self.layout.fitting_probe_slots(count).ok_or_else(|| {
+                DedupError::InvalidInput(format!(
+                    "{count} inputs of {} words are too many for one probe table",
+                    self.layout.key_words
+                ))
+            })?;
             (slots, 0, self.layout.probe_words(slots) * 4)
         } else {
             let buckets = self.buckets.unwrap_or_else(|| DedupLayout::buckets(count));

@@ -382,9 +382,7 @@ impl GpuHashTable {
             Some(claims) => {
                 let claim = self.check_claims(claims, count)?;
                 claims.table.record_clear(cmd)?;
-                push.claims = claims.table.address();
-                push.claim_slots = claims.table.slot_count();
-                push.reps = claims.reps.address();
+                claims.fill_push(&mut push);
                 ("hash search and claim", claim)
             }
         };
@@ -449,9 +447,7 @@ impl GpuHashTable {
         let mut push = self.push_constants(items.address(), handles.address(), count);
         if let Some(claims) = claims {
             self.check_claims(claims, count)?;
-            push.claims = claims.table.address();
-            push.claim_slots = claims.table.slot_count();
-            push.reps = claims.reps.address();
+            claims.fill_push(&mut push);
             push.flags |= FLAG_CLAIMS;
         }
         let before = self.record_status(cmd)?;
@@ -928,14 +924,19 @@ impl GpuHashTable {
             profiler.as_deref_mut(),
         )?;
         let reps_back = cmd.readback::<u32>(&reps, 0, count as usize)?;
+        let handles_back = cmd.readback::<u32>(&handles, 0, count as usize)?;
         cmd.submit_async()?;
         let report =
             self.finish_insert(pending, &item_buf, &handles, count, profiler.as_deref_mut())?;
         if let Some(p) = profiler {
             p.resolve()?;
         }
-        // Read after the last round (a full pool's further rounds change owners' handles).
-        let raw = self.ctx.read_buffer::<u32>(&handles, 0, count as usize)?;
+        // Further rounds (a full pool) changed owners' handles after the readback: read again.
+        let raw = if report.rounds > 1 {
+            self.ctx.read_buffer::<u32>(&handles, 0, count as usize)?
+        } else {
+            handles_back.read()?
+        };
         let reps = reps_back.read()?;
         let handle_of = |i: usize| {
             let rep = reps[i] as usize;

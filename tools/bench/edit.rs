@@ -165,6 +165,24 @@ fn surface_points(codes: &[u64], count: usize) -> Vec<[f32; 3]> {
         .collect()
 }
 
+/// A sphere of material 0 added (`add`) or removed.
+fn sphere(center: [f32; 3], radius: f32, add: bool) -> Tool {
+    if add {
+        Tool::Add {
+            shape: Shape::Sphere,
+            center,
+            radius,
+            material: 0,
+        }
+    } else {
+        Tool::Remove {
+            shape: Shape::Sphere,
+            center,
+            radius,
+        }
+    }
+}
+
 /// The replays: spheres (radius 64..1024 at 8192, scaled) added and removed, a copy stroke,
 /// paint strokes, and `long` spheres (radius 128..512 at 8192) added and removed in turn.
 fn replays(codes: &[u64], resolution: u32, long: usize) -> Vec<Replay> {
@@ -173,17 +191,8 @@ fn replays(codes: &[u64], resolution: u32, long: usize) -> Vec<Replay> {
     let mut spheres = Vec::new();
     for (i, r) in [64.0f32, 128.0, 256.0, 512.0, 1024.0].iter().enumerate() {
         let radius = (r * scale).max(2.0);
-        spheres.push(Tool::Add {
-            shape: Shape::Sphere,
-            center: p[2 * i],
-            radius,
-            material: 0,
-        });
-        spheres.push(Tool::Remove {
-            shape: Shape::Sphere,
-            center: p[2 * i + 1],
-            radius,
-        });
+        spheres.push(sphere(p[2 * i], radius, true));
+        spheres.push(sphere(p[2 * i + 1], radius, false));
     }
     let r = (64.0 * scale).max(4.0);
     let copy = (0..8)
@@ -213,20 +222,7 @@ fn replays(codes: &[u64], resolution: u32, long: usize) -> Vec<Replay> {
         .enumerate()
         .map(|(i, center)| {
             let radius = ((128 + (i * 37) % 385) as f32 * scale).max(2.0);
-            if i % 2 == 0 {
-                Tool::Add {
-                    shape: Shape::Sphere,
-                    center,
-                    radius,
-                    material: 0,
-                }
-            } else {
-                Tool::Remove {
-                    shape: Shape::Sphere,
-                    center,
-                    radius,
-                }
-            }
+            sphere(center, radius, i % 2 == 0)
         })
         .collect::<Vec<_>>();
     let mut out = vec![
