@@ -879,13 +879,14 @@ fn fixed_tool_cases_match_the_cpu_editor_and_brute_force() {
     assert_clean(&ctx);
 }
 
-/// The edit's traversal runs its levels in one submission and its merge waits once per level
-/// (the size counters of the next level are read with the table passes of this one), and the
-/// auto-GC check reads no status (the pool use read with the previous root): one wait per
-/// level with temporary nodes, plus the traversal's, the first level's counters and the
-/// root's. Printed for docs/editing-gpu.md.
+/// The edit's traversal runs its levels in one submission and the auto-GC check reads no
+/// status (the pool use read with the previous root). Single lanes (lavapipe) record the whole
+/// merge without waiting between levels: two waits in all. The subgroup route waits once per
+/// level (the size counters of the next level are read with the table passes of this one):
+/// one wait per level with temporary nodes, plus the traversal's, the first level's counters
+/// and the root's. Printed for docs/editing-gpu.md.
 #[test]
-fn an_edit_waits_once_per_level_plus_two() {
+fn an_edit_waits_twice_or_once_per_level_plus_two() {
     let ctx = common::gpu();
     let dag = Svdag::from_voxels(&synthetic(64, 9)).unwrap();
     let mut hd = GpuHashDag::load(
@@ -909,8 +910,10 @@ fn an_edit_waits_once_per_level_plus_two() {
             stats.host_waits, stats.submissions, report.items
         );
         assert_eq!(report.retried_rounds, 0);
+        let single_lanes = hd.table(2).unwrap().team_size() == 1;
+        let most = if single_lanes { 2 } else { levels + 2 };
         assert!(
-            stats.host_waits <= levels + 2,
+            stats.host_waits <= most,
             "{} host waits for {levels} levels",
             stats.host_waits
         );

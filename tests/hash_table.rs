@@ -9,11 +9,14 @@ use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 
 use voxdag::gpu::{GpuContext, MemLocation, Profiler};
+use voxdag::hash::claim::{ClaimTable, Claims};
 use voxdag::hash::gc::GpuGarbageCollector;
+use voxdag::hash::layout::HashPush;
 use voxdag::hash::layout::SUPER_BLOCK_BITMASK_WORDS;
+use voxdag::hash::mixed::{MixedPasses, MIXED_SIZES};
 use voxdag::hash::{
-    GpuHashTable, Handle, HashError, HashTableConfig, HashVariant, ReferenceTable, TableImage,
-    TeamMode, HANDLE_INVALID, HANDLE_MISS,
+    GpuHashTable, Handle, HashError, HashTableConfig, HashVariant, InsertCheck, ReferenceTable,
+    TableImage, TeamMode, HANDLE_INVALID, HANDLE_MISS,
 };
 
 fn assert_clean(ctx: &Arc<GpuContext>) {
@@ -351,6 +354,158 @@ fn duplicates_in_one_batch_get_separate_slots() {
         assert!(handles.contains(&found));
     }
     assert_clean(&ctx);
+}
+
+/// A mixed batch (single lanes, `hash::mixed`): one search-and-claim and one claimed insert
+/// dispatch over four tables of different item sizes, the sizes' counts read on the GPU, a
+/// bound above their sum: each distinct item is stored once in its table, equal items resolve
+/// to one handle, stored items keep theirs; every variant.
+#[test]
+fn mixed_batches_claim_and_insert_every_size_at_once() {
+    let ctx = common::gpu();
+    let sizes = [2u32, 3, 5, 9];
+    for variant in [
+        HashVariant::Atomic64,
+        HashVariant::TicketBoard,
+        HashVariant::AccelHash32,
+        HashVariant::AccelHash8,
+    ] {
+        let msg = format!("{variant:?}");
+        let mut tables: Vec<GpuHashTable> = sizes
+            .iter()
+            .map(|&w| {
+                let config = HashTableConfig {
+                    team: TeamMode::SingleLane,
+                    ..HashTableConfig::new(variant, w, 64)
+                };
+                GpuHashTable::new(&ctx, &config).unwrap()
+            })
+            .collect();
+        let mixed = MixedPasses::new(&ctx, &tables[0]).unwrap();
+        let mut taken = HashSet::new();
+        // Per size: its batch (new items up to three times, stored ones mixed in, scattered)
+        // and the handles its stored items had.
+        let mut batches = Vec::new();
+        let mut expected = Vec::new();
+        for (k, &w) in sizes.iter().enumerate() {
+            let stored = random_items(150, w, 500 + w as u64, &mut taken);
+            let (stored_handles, _) = tables[k].insert(&flat(&stored), None).unwrap();
+            tables[k].reserve(2000).unwrap();
+            let fresh = random_items(400 + 100 * k, w, 900 + w as u64, &mut taken);
+            let mut batch = Vec::new();
+            let mut known = Vec::new();
+            for (i, item) in fresh.iter().enumerate() {
+                for _ in 0..1 + i % 3 {
+                    batch.push(item.clone());
+                    known.push(None);
+                }
+                if i % 4 == 0 {
+                    batch.push(stored[i % stored.len()].clone());
+                    known.push(Some(stored_handles[i % stored.len()]));
+                }
+            }
+            let n = batch.len();
+            let order: Vec<usize> = (0..n).map(|j| (j * 7919) % n).collect();
+            batches.push(order.iter().map(|&j| batch[j].clone()).collect::<Vec<_>>());
+            expected.push((
+                order.iter().map(|&j| known[j]).collect::<Vec<_>>(),
+                stored.len() + fresh.len(),
+            ));
+        }
+        let counts: Vec<u32> = (0..MIXED_SIZES)
+            .map(|s| batches.get(s).map_or(0, |b| b.len() as u32))
+            .collect();
+        let bound = counts.iter().sum::<u32>() + 100;
+        let buffers: Vec<_> = batches
+            .iter()
+            .zip(sizes)
+            .map(|(batch, w)| {
+                let n = batch.len() as u64;
+                (
+                    ctx.upload("items", &flat(batch)).unwrap(),
+                    ctx.create_buffer("handles", 4 * n, MemLocation::GpuOnly)
+                        .unwrap(),
+                    ctx.create_buffer("reps", 4 * n, MemLocation::GpuOnly)
+                        .unwrap(),
+                    ClaimTable::new(&ctx, w, n as u32).unwrap(),
+                )
+            })
+            .collect();
+        let mut entries = [HashPush::default(); MIXED_SIZES];
+        for (k, (items, handles, reps, claims)) in buffers.iter().enumerate() {
+            let claims = Claims {
+                table: claims,
+                reps,
+            };
+            entries[k] = tables[k]
+                .claimed_entry(items, handles, counts[k], claims)
+                .unwrap();
+        }
+        let entry_buf = ctx.upload("entries", &entries).unwrap();
+        let count_buf = ctx.upload("counts", &counts).unwrap();
+        let mut cmd = ctx.begin_commands("mixed").unwrap();
+        let before: Vec<_> = tables
+            .iter()
+            .map(|t| t.record_status(&mut cmd).unwrap())
+            .collect();
+        for (_, _, _, claims) in &buffers {
+            claims.record_clear(&mut cmd).unwrap();
+        }
+        cmd.barrier();
+        mixed
+            .record(&mut cmd, &entry_buf, &count_buf, 0, bound, None)
+            .unwrap();
+        let after: Vec<_> = tables
+            .iter()
+            .map(|t| t.record_status(&mut cmd).unwrap())
+            .collect();
+        cmd.submit().unwrap();
+        for (k, (before, after)) in before.into_iter().zip(after).enumerate() {
+            let check = tables[k]
+                .check_inserts(&before.read().unwrap()[0], after.read().unwrap()[0])
+                .unwrap();
+            assert_eq!(check, InsertCheck::default(), "{msg}: size {k}");
+        }
+        for (k, (_, handles, reps, _)) in buffers.iter().enumerate() {
+            let handles: Vec<u32> = ctx.download(handles).unwrap();
+            let reps: Vec<u32> = ctx.download(reps).unwrap();
+            // A copy's handle is its representative's.
+            let resolved: Vec<Handle> = handles
+                .iter()
+                .zip(&reps)
+                .map(|(&h, &r)| {
+                    let h = if h == HANDLE_INVALID {
+                        handles[r as usize]
+                    } else {
+                        h
+                    };
+                    Handle::from_raw(h).expect("every item has a handle")
+                })
+                .collect();
+            let (known, distinct) = &expected[k];
+            let mut handle_of: HashMap<&Vec<u32>, Handle> = HashMap::new();
+            for ((item, h), e) in batches[k].iter().zip(&resolved).zip(known) {
+                if let Some(e) = e {
+                    assert_eq!(h, e, "{msg} size {k}: a stored item's handle changed");
+                }
+                assert_eq!(
+                    *handle_of.entry(item).or_insert(*h),
+                    *h,
+                    "{msg} size {k}: two handles"
+                );
+            }
+            assert_eq!(
+                tables[k].read_items(&resolved).unwrap(),
+                flat(&batches[k]),
+                "{msg} size {k}: read_items"
+            );
+            assert_eq!(
+                walk_map(&tables[k].download().unwrap()).len(),
+                *distinct,
+                "{msg} size {k}"
+            );
+        }
+    }
 }
 
 /// The claim passes (single lanes): a find-or-insert whose batch repeats items stores each

@@ -9,7 +9,9 @@
 //! ([`GpuDedup`]), a search pass finds items already stored, `mark` keeps one copy of each new
 //! item, the insert round stores it, and `resolve` writes every node's pointer. Single-lane
 //! tables (CPU devices) fold the duplicate detection into the search and insert passes instead
-//! ([`crate::hash::claim`]: two passes per size, no dedup table, no `mark`). The edit first
+//! ([`crate::hash::claim`]: two passes per size, no dedup table, no `mark`); their edits record
+//! every level's merge up front, the claim passes taking every size at once
+//! ([`crate::hash::mixed`], `merge_recorded`), and wait once for it. The edit first
 //! walks the tool's region top-down (`traverse`, then `leaves` with one invocation per voxel),
 //! building the temporary SVO the merge consumes. See `docs/editing-gpu.md`.
 
@@ -33,7 +35,8 @@ use crate::gpu::{
 };
 use crate::hash::claim::{ClaimTable, Claims};
 use crate::hash::dedup::{DedupError, DedupResult, GpuDedup};
-use crate::hash::layout::SLABS_PER_SUPER_BLOCK;
+use crate::hash::layout::{HashPush, SLABS_PER_SUPER_BLOCK};
+use crate::hash::mixed::{MixedPasses, MIXED_SIZES};
 use crate::hash::{
     GpuHashTable, Handle, HashError, HashStatus, HashTableConfig, HashVariant, PendingInsert,
     TableImage, TeamMode,
@@ -180,6 +183,8 @@ pub struct GpuHashDag {
     /// Per size the dedup table of the subgroup path; empty with single lanes (whose tables
     /// fold the dedup into their passes: `merge_items_claimed`).
     dedups: Vec<GpuDedup>,
+    /// The claim passes over items of every size (single lanes: `merge_recorded`).
+    mixed: Option<MixedPasses>,
     /// The tables' super-block table addresses (`u64` each), read by the passes.
     pub(super) table_addresses: Buffer,
     expand: ComputePipeline,
@@ -317,6 +322,9 @@ impl GpuHashDag {
                 bindings: &[],
             })
         };
+        let mixed = (tables[0].team_size() == 1)
+            .then(|| MixedPasses::new(ctx, &tables[0]))
+            .transpose()?;
         let table_addresses = ctx.create_buffer(
             "hash dag tables",
             8 * TABLE_COUNT as u64,
@@ -333,6 +341,7 @@ impl GpuHashDag {
             config: config.clone(),
             tables,
             dedups,
+            mixed,
             table_addresses,
             expand: pipeline("edit expand", shaders::EDIT_EXPAND)?,
             build_items: pipeline("edit build items", shaders::EDIT_BUILD_ITEMS)?,
@@ -691,7 +700,14 @@ impl GpuHashDag {
             });
         }
         let first = levels - merge_levels.len();
-        let merged = self.merge(&merge_levels, true, profiler.as_deref_mut())?;
+        let recorded = match self.merges_recorded() {
+            true => self.merge_recorded(&merge_levels, profiler.as_deref_mut())?,
+            false => None,
+        };
+        let merged = match recorded {
+            Some(merged) => merged,
+            None => self.merge(&merge_levels, true, profiler.as_deref_mut())?,
+        };
         for (k, &(items, retried)) in merged.levels.iter().enumerate() {
             report.items[first + k] = items;
             report.retried_rounds += retried;
@@ -1079,13 +1095,9 @@ impl GpuHashDag {
         let mut items = Vec::new();
         let mut reps = Vec::new();
         let mut handles = Vec::new();
+        let sizes = self.possible_sizes(level.leaves);
         for words in MIN_ITEM_WORDS..=MAX_ITEM_WORDS {
-            // Leaves without materials are 2 words; inner nodes at most 9.
-            let possible = match (level.leaves, self.with_materials) {
-                (true, false) => words == 2,
-                (true, true) => true,
-                (false, _) => words <= 9,
-            };
+            let possible = sizes.contains(&((words - MIN_ITEM_WORDS) as usize));
             let cap = if possible { n } else { 1 };
             items.push(ctx.create_buffer(
                 "edit level items",
@@ -1442,6 +1454,157 @@ impl GpuHashDag {
             after,
             profiler,
         )
+    }
+
+    /// The sizes (table indices) a level's items may have: leaves without materials are 2
+    /// words, with materials 2-10; inner nodes 2-9.
+    fn possible_sizes(&self, leaves: bool) -> Vec<usize> {
+        let largest = match (leaves, self.with_materials) {
+            (true, false) => 2,
+            (true, true) => MAX_ITEM_WORDS,
+            (false, _) => 9,
+        };
+        (0..=(largest - MIN_ITEM_WORDS) as usize).collect()
+    }
+
+    /// Whether edits merge with [`GpuHashDag::merge_recorded`]: single lanes (the mixed claim
+    /// passes) and tables that grow before inserts (the reservation it relies on).
+    fn merges_recorded(&self) -> bool {
+        self.mixed.is_some() && self.config.grow_before_insert
+    }
+
+    /// Single lanes: the merge of every level recorded without the host waiting between
+    /// levels (`merge` waits once per level for its size counters). Each level is one
+    /// submission: build_items counts its items per size on the GPU, one search-and-claim and
+    /// one claimed insert dispatch take the items of every size ([`crate::hash::mixed`]), on
+    /// claim tables sized for the level's node count (a bound of every size's items), then
+    /// resolve; the GPU runs a level while the host records the next. One wait in all, for the
+    /// tables' status and the root. The pools are grown for the expected case only
+    /// ([`GpuHashTable::reserve_expected`] of each size's share of the nodes): where one runs
+    /// out all the same, this returns None, having changed no root (the new items are
+    /// garbage), and the caller merges level by level, reserving for the worst case.
+    fn merge_recorded(
+        &mut self,
+        levels: &[MergeLevel<'_>],
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<Option<Merged>, GpuDagError> {
+        let ctx = Arc::clone(&self.ctx);
+        let Some(last) = levels.last() else {
+            return Ok(Some(Merged {
+                levels: Vec::new(),
+                root: None,
+            }));
+        };
+        let sizes: Vec<Vec<usize>> = levels
+            .iter()
+            .map(|level| self.possible_sizes(level.leaves))
+            .collect();
+        // Each table's expected new items: a level's nodes split over the sizes they may
+        // have as the tables' slabs are (a level of one size gives it every node).
+        let slabs: Vec<f64> = self
+            .tables
+            .iter()
+            .map(|t| t.allocated_slabs() as f64 + 1.0)
+            .collect();
+        let mut expected = [0f64; TABLE_COUNT as usize];
+        for (level, sizes) in levels.iter().zip(&sizes) {
+            let total: f64 = sizes.iter().map(|&s| slabs[s]).sum();
+            for &s in sizes {
+                expected[s] += level.count as f64 * slabs[s] / total;
+            }
+        }
+        let used: Vec<usize> = (0..expected.len()).filter(|&s| expected[s] > 0.0).collect();
+        for &s in &used {
+            self.tables[s].reserve_expected(expected[s].ceil() as u32)?;
+        }
+        let tables = &self.tables;
+        let mixed = self.mixed.as_ref().expect("merges_recorded checked it");
+        let entry_bytes = std::mem::size_of::<HashPush>() as u64;
+        let mut before = Vec::new();
+        let mut after = Vec::new();
+        let mut counts = Vec::new();
+        let mut root = None;
+        let mut kept = Vec::new();
+        for (k, level) in levels.iter().enumerate() {
+            let b = self.merge_buffers(level)?;
+            let claim_tables = sizes[k]
+                .iter()
+                .map(|&s| ClaimTable::new(&ctx, s as u32 + MIN_ITEM_WORDS, level.count))
+                .collect::<Result<Vec<_>, _>>()?;
+            let mut entries = [HashPush::default(); MIXED_SIZES];
+            for (&s, table) in sizes[k].iter().zip(&claim_tables) {
+                let claims = Claims {
+                    table,
+                    reps: &b.reps[s],
+                };
+                entries[s] =
+                    tables[s].claimed_entry(&b.items[s], &b.handles[s], level.count, claims)?;
+            }
+            let entry_buf = ctx.create_buffer(
+                "edit level entries",
+                MIXED_SIZES as u64 * entry_bytes,
+                MemLocation::GpuOnly,
+            )?;
+            let mut cmd = ctx.begin_commands("edit merge")?;
+            // The level below's submission wrote what this one reads.
+            cmd.barrier();
+            if k == 0 {
+                for &s in &used {
+                    before.push(tables[s].record_status(&mut cmd)?);
+                }
+            }
+            cmd.upload(&entry_buf, 0, &entries)?;
+            for table in &claim_tables {
+                table.record_clear(&mut cmd)?;
+            }
+            counts.push(self.record_build_items(&mut cmd, &b, &mut profiler)?);
+            let profiler_now = profiler.as_deref_mut();
+            mixed.record(
+                &mut cmd,
+                &entry_buf,
+                &b.counters,
+                0,
+                level.count,
+                profiler_now,
+            )?;
+            self.record_resolve_after(&mut cmd, &b, After::Nothing, &mut profiler)?;
+            if k + 1 == levels.len() {
+                for &s in &used {
+                    after.push(tables[s].record_status(&mut cmd)?);
+                }
+                root = Some(self.record_root_readback(&mut cmd, last.results)?);
+            }
+            cmd.submit_async()?;
+            // Released once the GPU is done with them.
+            kept.push((b, claim_tables, entry_buf));
+        }
+        drop(kept);
+        // The last submission's readbacks first: one wait covers all levels.
+        let after = after
+            .into_iter()
+            .map(|a| Ok(a.read()?[0]))
+            .collect::<Result<Vec<_>, GpuError>>()?;
+        let mut left_out = 0;
+        for ((&s, before), after) in used.iter().zip(before).zip(after) {
+            let check = self.tables[s].check_inserts(&before.read()?[0], after)?;
+            if check.invalid != 0 {
+                return Err(GpuDagError::Corrupt(format!(
+                    "{} items of {} words rejected by the table layout",
+                    check.invalid,
+                    s as u32 + MIN_ITEM_WORDS
+                )));
+            }
+            left_out += check.left_out;
+        }
+        if left_out > 0 {
+            log::debug!("recorded merge: {left_out} items found no slab; merging level by level");
+            return Ok(None);
+        }
+        let levels = counts
+            .into_iter()
+            .map(|c| Ok((c.read()?.iter().sum(), 0)))
+            .collect::<Result<Vec<_>, GpuError>>()?;
+        Ok(Some(Merged { levels, root }))
     }
 
     /// Grows the tables of `sizes` for `counts` new items each, where they grow before inserts.

@@ -38,6 +38,12 @@ gpu_shared! {
         pub claims: uint64_t,
         /// Address of the representatives (one `u32` per item) the claim passes write.
         pub reps: uint64_t,
+        /// A mixed batch: address of its sizes' item counts (one `u32` per entry of `mixed`),
+        /// written on the GPU by an earlier pass; `count` is then only their sum's bound.
+        pub count_at: uint64_t,
+        /// Address of a mixed batch's entries (`engine/hash/mixed.rs`): per item size the
+        /// `HashPush` of its table and buffers (0 = a batch of one size).
+        pub mixed: uint64_t,
         /// Number of items (or handles).
         pub count: uint,
         /// Number of buckets.
@@ -50,6 +56,11 @@ gpu_shared! {
         pub flags: uint,
         /// Slots of the claim table (a power of two; 0 = none).
         pub claim_slots: uint,
+        /// Words per item of a mixed batch's entry (the passes of one size ignore it: their
+        /// pipelines are specialised for it).
+        pub item_words: uint,
+        /// Padding to a multiple of 8 bytes.
+        pub pad: uint,
     }
 
     /// GC counters written by the mark and sweep passes (at `HashPush::items` during GC).

@@ -19,13 +19,16 @@ pub mod dedup;
 pub mod gc;
 mod gpu_shared;
 pub mod layout;
+pub mod mixed;
 pub mod reference;
 pub mod table;
 
 pub use alloc::{PoolOccupancy, SlabPool};
 pub use layout::{Handle, HashStatus, HashVariant, SlabLayout, HANDLE_INVALID, HANDLE_MISS};
 pub use reference::{ReferenceTable, TableImage, WalkReport};
-pub use table::{GpuHashTable, HashTableConfig, InsertReport, PendingInsert, TeamMode};
+pub use table::{
+    GpuHashTable, HashTableConfig, InsertCheck, InsertReport, PendingInsert, TeamMode,
+};
 
 use crate::gpu::GpuError;
 

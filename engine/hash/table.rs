@@ -119,6 +119,16 @@ pub struct GpuHashTable {
     holes: AtomicBool,
 }
 
+/// What the inserts of a submission did to a table, from its status block around them
+/// ([`GpuHashTable::check_inserts`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct InsertCheck {
+    /// Items left out for lack of a slab (their handles stayed [`HANDLE_MISS`]).
+    pub left_out: u32,
+    /// Items rejected by the layout.
+    pub invalid: u32,
+}
+
 /// An insert recorded by [`GpuHashTable::record_insert`]: the status block before and after its
 /// insert round, read by [`GpuHashTable::finish_insert`] once the submission has completed.
 #[derive(Debug)]
@@ -299,11 +309,20 @@ impl GpuHashTable {
         self.heads.size() + self.tails.size() + self.pool.gpu_bytes()
     }
 
+    /// Slabs allocated when the host last read the table's status (after inserts and GC).
+    pub fn allocated_slabs(&self) -> u32 {
+        self.status.allocated_slabs
+    }
+
+    /// Items the search, claim and insert passes take per workgroup (one per team).
+    pub fn items_per_group(&self) -> u32 {
+        self.workgroup / self.team
+    }
+
     /// Workgroups for `count` items at one item per team (grid-stride beyond the limit).
-    fn cooperative_groups(&self, count: u32) -> u32 {
-        let per_group = self.workgroup / self.team;
+    pub(super) fn cooperative_groups(&self, count: u32) -> u32 {
         count
-            .div_ceil(per_group)
+            .div_ceil(self.items_per_group())
             .clamp(1, self.ctx.info().max_compute_workgroup_count[0])
     }
 
@@ -451,13 +470,7 @@ impl GpuHashTable {
             push.flags |= FLAG_CLAIMS;
         }
         let before = self.record_status(cmd)?;
-        let seed = super::layout::fmix32(
-            self.pass_seed
-                .load(Ordering::Relaxed)
-                .wrapping_add(0x9e37_79b9),
-        );
-        self.pass_seed.store(seed, Ordering::Relaxed);
-        push.seed = seed;
+        push.seed = self.next_seed();
         let groups = self.cooperative_groups(count);
         self.record(
             cmd,
@@ -470,6 +483,54 @@ impl GpuHashTable {
         cmd.barrier();
         let after = self.record_status(cmd)?;
         Ok(PendingInsert { before, after })
+    }
+
+    /// A fresh seed for an insert pass's random block choice.
+    fn next_seed(&self) -> u32 {
+        let seed = super::layout::fmix32(
+            self.pass_seed
+                .load(Ordering::Relaxed)
+                .wrapping_add(0x9e37_79b9),
+        );
+        self.pass_seed.store(seed, Ordering::Relaxed);
+        seed
+    }
+
+    /// This table's entry in a mixed batch ([`super::mixed`]): the claim passes' parameters
+    /// for its items and handles (at most `bound`), its claims, and a fresh insert seed.
+    pub fn claimed_entry(
+        &self,
+        items: &Buffer,
+        handles: &Buffer,
+        bound: u32,
+        claims: Claims<'_>,
+    ) -> Result<HashPush, HashError> {
+        Self::check_count(items, bound, self.config.item_words, "items")?;
+        Self::check_count(handles, bound, 1, "handles")?;
+        self.check_claims(claims, bound)?;
+        let mut push = self.push_constants(items.address(), handles.address(), bound);
+        claims.fill_push(&mut push);
+        push.flags |= FLAG_CLAIMS;
+        push.seed = self.next_seed();
+        push.item_words = self.config.item_words;
+        Ok(push)
+    }
+
+    /// Checks the status block read before and after a submission's inserts (a mixed
+    /// batch's, [`super::mixed`]): pass errors, items left out for lack of a slab, items
+    /// rejected; keeps `after` as the table's status.
+    pub fn check_inserts(
+        &mut self,
+        before: &HashStatus,
+        after: HashStatus,
+    ) -> Result<InsertCheck, HashError> {
+        Self::status_ok(&after, self.subgroup)?;
+        let check = InsertCheck {
+            left_out: after.exhausted.wrapping_sub(before.exhausted),
+            invalid: after.invalid_items.wrapping_sub(before.invalid_items),
+        };
+        self.status = after;
+        Ok(check)
     }
 
     /// Checks the claim passes' arguments (single lanes, a claim table sized for the batch,
@@ -711,6 +772,19 @@ impl GpuHashTable {
     pub fn reserve(&mut self, new_items: u32) -> Result<(), HashError> {
         let new_slabs =
             new_items as u64 / SLAB_SLOTS as u64 + new_items.min(self.config.buckets) as u64 + 1;
+        self.grow_for(self.status.allocated_slabs as u64 + new_slabs, false)
+    }
+
+    /// Grows the pool for `new_items` more items in the expected case rather than the worst
+    /// ([`GpuHashTable::reserve`]): an item needs a slab of its own where its bucket is empty
+    /// (at least 1 - allocated slabs / buckets of them) and 1/32 of one elsewhere (chain ends
+    /// fill up); twice that, the pool kept at most 7/8 full. Inserts report what did not fit.
+    pub fn reserve_expected(&mut self, new_items: u32) -> Result<(), HashError> {
+        let allocated = self.status.allocated_slabs as f64;
+        let buckets = self.config.buckets as f64;
+        let empty = 1.0 - allocated.min(buckets) / buckets;
+        let per_item = empty + (1.0 - empty) / SLAB_SLOTS as f64;
+        let new_slabs = (2.0 * per_item * new_items as f64).ceil() as u64 + 1;
         self.grow_for(self.status.allocated_slabs as u64 + new_slabs, false)
     }
 

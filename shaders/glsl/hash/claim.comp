@@ -4,7 +4,8 @@
 // (hash/claims.glsl), so that the insert round that follows (HASH_FLAG_CLAIMS) inserts one
 // representative per distinct item. reps[i] = i (the insert round overwrites the missing
 // items' entries with their representative). The batch's duplicate detection thus costs no
-// pass of its own. Driven by engine/hash/table.rs.
+// pass of its own. A mixed batch (engine/hash/mixed.rs) runs this for items of every size.
+// Driven by engine/hash/table.rs and engine/hash/mixed.rs.
 #extension GL_EXT_buffer_reference : require
 #extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
 #extension GL_KHR_shader_subgroup_ballot : require
@@ -18,9 +19,11 @@
 
 void main() {
     // Single lanes only (TEAM == 1): the host makes this pipeline for no other team size.
-    HashWords handles = HashWords(push.handles);
-    HashWords reps = HashWords(push.reps);
-    for (uint i = team_index(); i < push.count; i += team_count()) {
+    uint batch_count = hash_count();
+    for (uint k = team_index(); k < batch_count; k += team_count()) {
+        uint i = hash_select(k);
+        HashWords handles = HashWords(push.handles);
+        HashWords reps = HashWords(push.reps);
         uint item[HASH_MAX_ITEM_WORDS];
         hash_load_item(push.items, i, item);
         uint found = HASH_MISS;

@@ -6,18 +6,32 @@
 layout(local_size_x_id = 0) in;                     // workgroup size (a multiple of SUBGROUP_SIZE)
 layout(constant_id = 1) const uint SUBGROUP_SIZE = 32;
 layout(constant_id = 2) const uint VARIANT = 0;     // HASH_ATOMIC64 ...
-layout(constant_id = 3) const uint ITEM_WORDS = 1;  // 1..10
+layout(constant_id = 3) const uint SPEC_ITEM_WORDS = 1;  // 1..10; 0: a mixed batch
 // Lanes that cooperate on one item: SUBGROUP_SIZE (the cooperative algorithm), or 1 (every
 // lane its own item, no subgroup operations: faster on CPU implementations such as lavapipe).
 layout(constant_id = 4) const uint TEAM = 32;
 
 #define HASH_MAX_ITEM_WORDS 10
+// Entries of a mixed batch (`MIXED_SIZES` in engine/hash/mixed.rs).
+#define HASH_MIXED_SIZES 9u
 
 #include "shared/murmur.glsl"
 #include "shared/team.glsl"
 
-// Push constants of every hash pass (`HashPush` in engine/hash/gpu_shared.rs).
-layout(push_constant, std430) uniform Push { HASH_PUSH_MEMBERS } push;
+// Parameters of every hash pass (`HashPush` in engine/hash/gpu_shared.rs).
+struct HashParams { HASH_PUSH_MEMBERS };
+layout(push_constant, std430) uniform Push { HashParams batch; } pc;
+
+// The table and buffers the pass works on: the push constants, or in a mixed batch (the
+// claim passes over items of every size, engine/hash/mixed.rs) the entry of the current
+// item's size, which hash_select sets together with ITEM_WORDS.
+HashParams push = pc.batch;
+uint ITEM_WORDS = SPEC_ITEM_WORDS;
+
+// Whether the pipeline runs mixed batches.
+bool hash_mixed() {
+    return SPEC_ITEM_WORDS == 0u;
+}
 
 layout(buffer_reference, std430, buffer_reference_align = 4) coherent buffer HashWords {
     uint w[];
@@ -25,6 +39,42 @@ layout(buffer_reference, std430, buffer_reference_align = 4) coherent buffer Has
 layout(buffer_reference, std430, buffer_reference_align = 8) coherent buffer HashWords64 {
     uint64_t w[];
 };
+
+// Items of the batch: push.count, or in a mixed batch the sum of its sizes' counts, which an
+// earlier pass wrote at count_at.
+uint hash_count() {
+    if (!hash_mixed()) {
+        return pc.batch.count;
+    }
+    HashWords counts = HashWords(pc.batch.count_at);
+    uint total = 0u;
+    for (uint s = 0u; s < HASH_MIXED_SIZES; ++s) {
+        total += counts.w[s];
+    }
+    return total;
+}
+
+layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer HashEntries {
+    HashParams entry[];
+};
+
+// Item `i` of the batch: in a mixed batch, selects its size's entry (push, ITEM_WORDS) and
+// returns its index among the items of that size; otherwise `i`.
+uint hash_select(uint i) {
+    if (!hash_mixed()) {
+        return i;
+    }
+    HashWords counts = HashWords(pc.batch.count_at);
+    uint s = 0u;
+    for (; s + 1u < HASH_MIXED_SIZES; ++s) {
+        uint n = counts.w[s];
+        if (i < n) break;
+        i -= n;
+    }
+    push = HashEntries(pc.batch.mixed).entry[s];
+    ITEM_WORDS = push.item_words;
+    return i;
+}
 
 // Atomic64 with 2+ words: a 64-bit prefix per slot; 1-word Atomic64 claims 32-bit words.
 bool hash_prefix64() {

@@ -7,8 +7,8 @@
 // chain from its hint, claim a free slot in the first slab that has one, else allocate a slab
 // and link it at the end with a CAS. When no slab can be allocated the handle stays HASH_MISS
 // and status.exhausted counts it: the host grows the pool and runs the pass again (only
-// HASH_MISS items are retried).
-// Driven by engine/hash/table.rs.
+// HASH_MISS items are retried). A mixed batch (engine/hash/mixed.rs, claim rounds only) runs
+// this for items of every size. Driven by engine/hash/table.rs and engine/hash/mixed.rs.
 #extension GL_EXT_buffer_reference : require
 #extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
 #extension GL_EXT_shader_atomic_int64 : require
@@ -228,8 +228,10 @@ void main() {
     }
     uint first = team_index();
     uint stride = team_count();
-    HashWords handles = HashWords(push.handles);
-    for (uint i = first; i < push.count; i += stride) {
+    uint batch_count = hash_count();
+    for (uint k = first; k < batch_count; k += stride) {
+        uint i = hash_select(k);
+        HashWords handles = HashWords(push.handles);
         if (handles.w[i] != HASH_MISS) {
             continue;
         }

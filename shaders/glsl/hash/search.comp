@@ -20,7 +20,8 @@ void main() {
     uint first = team_index();
     uint stride = team_count();
     HashWords handles = HashWords(push.handles);
-    for (uint i = first; i < push.count; i += stride) {
+    uint batch_count = hash_count();
+    for (uint i = first; i < batch_count; i += stride) {
         uint item[HASH_MAX_ITEM_WORDS];
         hash_load_item(push.items, i, item);
         uint found = hash_item_valid(item) ? hash_search_chain(item, hash_item(item)) : HASH_MISS;

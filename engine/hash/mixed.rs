@@ -1,0 +1,109 @@
+//! Mixed batches: the claim passes ([`super::claim`]) over the items of several tables of one
+//! variant at once (the hash DAG's nine tables, one per item size): one search-and-claim and
+//! one claimed insert dispatch for every size instead of two per size. On lavapipe each
+//! dispatch costs a hand-off to its worker threads (~15 us), more than most sizes' few items.
+//!
+//! Each size is an *entry*: the parameters of its table naming its items, handles, claim table
+//! and representatives ([`GpuHashTable::claimed_entry`]). The entries lie in a GPU buffer and
+//! the sizes' item counts at `counts`, written on the GPU by an earlier pass of the same
+//! submission, so that the host records a batch before knowing its sizes. Item `k` of the
+//! batch is item `k` minus the items of the sizes before of its size (`hash_select` in
+//! `shaders/glsl/hash/common.glsl`). Single lanes only, like the claim passes.
+
+use std::sync::Arc;
+
+use super::layout::HashPush;
+use super::{GpuHashTable, HashError};
+use crate::gpu::Profiler;
+use crate::gpu::{shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, GpuContext};
+
+/// Entries of a mixed batch (GLSL `HASH_MIXED_SIZES`).
+pub const MIXED_SIZES: usize = 9;
+
+/// The search-and-claim and claimed insert pipelines of mixed batches.
+pub struct MixedPasses {
+    claim: ComputePipeline,
+    insert: ComputePipeline,
+    items_per_group: u32,
+    max_groups: u32,
+}
+
+impl MixedPasses {
+    /// The passes for tables shaped like `table` (its variant and workgroup; single lanes).
+    pub fn new(ctx: &Arc<GpuContext>, table: &GpuHashTable) -> Result<MixedPasses, HashError> {
+        if table.team_size() != 1 {
+            return Err(HashError::InvalidArgument(
+                "mixed batches need single-lane tables (TeamMode::SingleLane)".into(),
+            ));
+        }
+        let mut spec = table.spec_constants();
+        // Item words 0: the size comes from each item's entry.
+        spec[3] = 0;
+        let pipeline = |name: &str, spirv: &[u32]| {
+            ctx.create_compute_pipeline(&ComputePipelineDesc {
+                name,
+                spirv,
+                spec_constants: &spec,
+                push_constant_size: std::mem::size_of::<HashPush>() as u32,
+                bindings: &[],
+            })
+        };
+        Ok(MixedPasses {
+            claim: pipeline("hash mixed search and claim", shaders::HASH_CLAIM)?,
+            insert: pipeline("hash mixed insert", shaders::HASH_INSERT)?,
+            items_per_group: table.items_per_group(),
+            max_groups: ctx.info().max_compute_workgroup_count[0],
+        })
+    }
+
+    /// Records the search-and-claim pass and the claimed insert round of a mixed batch of at
+    /// most `bound` items (profiled as "hash search and claim" and "hash insert"), each
+    /// followed by a barrier. `entries` holds [`MIXED_SIZES`] entries
+    /// ([`GpuHashTable::claimed_entry`]; a size without items may hold any entry), `counts` the
+    /// sizes' item counts ([`MIXED_SIZES`] `u32`s from byte `counts_offset`). Clear the claim
+    /// tables before; check each table's status around the submission after
+    /// ([`GpuHashTable::check_inserts`]): items a full pool left out keep `HANDLE_MISS`.
+    pub fn record<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        entries: &'a Buffer,
+        counts: &'a Buffer,
+        counts_offset: u64,
+        bound: u32,
+        mut profiler: Option<&mut Profiler>,
+    ) -> Result<(), HashError> {
+        let entry_bytes = std::mem::size_of::<HashPush>() as u64;
+        if entries.size() < MIXED_SIZES as u64 * entry_bytes
+            || counts_offset + 4 * MIXED_SIZES as u64 > counts.size()
+        {
+            return Err(HashError::InvalidArgument(format!(
+                "mixed batch: '{}' must hold {MIXED_SIZES} entries and '{}' {MIXED_SIZES} counts \
+                 from byte {counts_offset}",
+                entries.name(),
+                counts.name()
+            )));
+        }
+        if bound == 0 {
+            return Ok(());
+        }
+        let push = HashPush {
+            count: bound,
+            count_at: counts.address() + counts_offset,
+            mixed: entries.address(),
+            ..HashPush::default()
+        };
+        let groups = bound
+            .div_ceil(self.items_per_group)
+            .clamp(1, self.max_groups);
+        for (name, pipeline) in [
+            ("hash search and claim", &self.claim),
+            ("hash insert", &self.insert),
+        ] {
+            cmd.begin_pass(&mut profiler, name);
+            cmd.dispatch(pipeline, [groups, 1, 1], bytemuck::bytes_of(&push), &[])?;
+            cmd.end_pass(&mut profiler);
+            cmd.barrier();
+        }
+        Ok(())
+    }
+}
