@@ -356,6 +356,37 @@ fn duplicates_in_one_batch_get_separate_slots() {
     assert_clean(&ctx);
 }
 
+/// A find-or-insert batch: fresh item `i` `1 + i % copies` times, stored item `i % len` after
+/// every `stored_every`-th fresh one, scattered by a fixed permutation so that equal items race
+/// in different lanes; with the handle each stored item must keep (None for fresh ones).
+fn repeated_batch(
+    fresh: &[Vec<u32>],
+    stored: &[Vec<u32>],
+    stored_handles: &[Handle],
+    copies: usize,
+    stored_every: usize,
+) -> (Vec<Vec<u32>>, Vec<Option<Handle>>) {
+    let mut batch = Vec::new();
+    let mut expected = Vec::new();
+    for (i, item) in fresh.iter().enumerate() {
+        for _ in 0..1 + i % copies {
+            batch.push(item.clone());
+            expected.push(None);
+        }
+        if i % stored_every == 0 {
+            batch.push(stored[i % stored.len()].clone());
+            expected.push(Some(stored_handles[i % stored.len()]));
+        }
+    }
+    let n = batch.len();
+    let order: Vec<usize> = (0..n).map(|k| (k * 7919) % n).collect();
+    assert_eq!(order.iter().collect::<HashSet<_>>().len(), n, "permutation");
+    (
+        order.iter().map(|&k| batch[k].clone()).collect(),
+        order.iter().map(|&k| expected[k]).collect(),
+    )
+}
+
 /// A mixed batch (single lanes, `hash::mixed`): one search-and-claim and one claimed insert
 /// dispatch over four tables of different item sizes, the sizes' counts read on the GPU, a
 /// bound above their sum: each distinct item is stored once in its table, equal items resolve
@@ -392,25 +423,9 @@ fn mixed_batches_claim_and_insert_every_size_at_once() {
             let (stored_handles, _) = tables[k].insert(&flat(&stored), None).unwrap();
             tables[k].reserve(2000).unwrap();
             let fresh = random_items(400 + 100 * k, w, 900 + w as u64, &mut taken);
-            let mut batch = Vec::new();
-            let mut known = Vec::new();
-            for (i, item) in fresh.iter().enumerate() {
-                for _ in 0..1 + i % 3 {
-                    batch.push(item.clone());
-                    known.push(None);
-                }
-                if i % 4 == 0 {
-                    batch.push(stored[i % stored.len()].clone());
-                    known.push(Some(stored_handles[i % stored.len()]));
-                }
-            }
-            let n = batch.len();
-            let order: Vec<usize> = (0..n).map(|j| (j * 7919) % n).collect();
-            batches.push(order.iter().map(|&j| batch[j].clone()).collect::<Vec<_>>());
-            expected.push((
-                order.iter().map(|&j| known[j]).collect::<Vec<_>>(),
-                stored.len() + fresh.len(),
-            ));
+            let (batch, known) = repeated_batch(&fresh, &stored, &stored_handles, 3, 4);
+            batches.push(batch);
+            expected.push((known, stored.len() + fresh.len()));
         }
         let counts: Vec<u32> = (0..MIXED_SIZES)
             .map(|s| batches.get(s).map_or(0, |b| b.len() as u32))
@@ -546,28 +561,7 @@ fn distinct_find_or_insert_stores_each_item_once() {
             77 + w as u64,
             &mut taken,
         );
-        let mut batch = Vec::new();
-        let mut expected = Vec::new();
-        for (i, item) in fresh.iter().enumerate() {
-            for _ in 0..1 + i % 4 {
-                batch.push(item.clone());
-                expected.push(None);
-            }
-            if i % 3 == 0 {
-                batch.push(stored[i % stored.len()].clone());
-                expected.push(Some(stored_handles[i % stored.len()]));
-            }
-        }
-        // Scatter the copies (a fixed permutation) so equal items race in different lanes.
-        let n = batch.len();
-        let order: Vec<usize> = (0..n).map(|k| (k * 7919) % n).collect();
-        assert_eq!(
-            order.iter().collect::<HashSet<_>>().len(),
-            n,
-            "{msg}: permutation"
-        );
-        let batch: Vec<Vec<u32>> = order.iter().map(|&k| batch[k].clone()).collect();
-        let expected: Vec<Option<Handle>> = order.iter().map(|&k| expected[k]).collect();
+        let (batch, expected) = repeated_batch(&fresh, &stored, &stored_handles, 4, 3);
 
         let (handles, report) = gpu.find_or_insert_distinct(&flat(&batch), None).unwrap();
         assert_eq!(report.rounds > 1, !grow, "{msg}: {report:?}");

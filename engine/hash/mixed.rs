@@ -13,9 +13,9 @@
 use std::sync::Arc;
 
 use super::layout::HashPush;
+use super::table::hash_pipeline;
 use super::{GpuHashTable, HashError};
-use crate::gpu::Profiler;
-use crate::gpu::{shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, GpuContext};
+use crate::gpu::{shaders, Buffer, Commands, ComputePipeline, GpuContext, Profiler};
 
 /// Entries of a mixed batch (GLSL `HASH_MIXED_SIZES`).
 pub const MIXED_SIZES: usize = 9;
@@ -39,15 +39,7 @@ impl MixedPasses {
         let mut spec = table.spec_constants();
         // Item words 0: the size comes from each item's entry.
         spec[3] = 0;
-        let pipeline = |name: &str, spirv: &[u32]| {
-            ctx.create_compute_pipeline(&ComputePipelineDesc {
-                name,
-                spirv,
-                spec_constants: &spec,
-                push_constant_size: std::mem::size_of::<HashPush>() as u32,
-                bindings: &[],
-            })
-        };
+        let pipeline = |name: &str, spirv: &[u32]| hash_pipeline(ctx, name, spirv, &spec);
         Ok(MixedPasses {
             claim: pipeline("hash mixed search and claim", shaders::HASH_CLAIM)?,
             insert: pipeline("hash mixed insert", shaders::HASH_INSERT)?,

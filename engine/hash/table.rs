@@ -24,7 +24,7 @@ use super::reference::TableImage;
 use super::HashError;
 use crate::gpu::{
     shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, DeviceType, GpuContext,
-    MemLocation, Profiler, Readback,
+    GpuError, MemLocation, Profiler, Readback,
 };
 
 /// How a table is built.
@@ -119,6 +119,22 @@ pub struct GpuHashTable {
     holes: AtomicBool,
 }
 
+/// A hash pass's pipeline: `spec` as [`GpuHashTable::spec_constants`], push constants `HashPush`.
+pub(super) fn hash_pipeline(
+    ctx: &Arc<GpuContext>,
+    name: &str,
+    spirv: &[u32],
+    spec: &[u32],
+) -> Result<ComputePipeline, GpuError> {
+    ctx.create_compute_pipeline(&ComputePipelineDesc {
+        name,
+        spirv,
+        spec_constants: spec,
+        push_constant_size: std::mem::size_of::<HashPush>() as u32,
+        bindings: &[],
+    })
+}
+
 /// What the inserts of a submission did to a table, from its status block around them
 /// ([`GpuHashTable::check_inserts`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -181,15 +197,7 @@ impl GpuHashTable {
             config.item_words,
             team,
         ];
-        let pipeline = |name: &str, spirv: &[u32]| {
-            ctx.create_compute_pipeline(&ComputePipelineDesc {
-                name,
-                spirv,
-                spec_constants: &spec,
-                push_constant_size: std::mem::size_of::<HashPush>() as u32,
-                bindings: &[],
-            })
-        };
+        let pipeline = |name: &str, spirv: &[u32]| hash_pipeline(ctx, name, spirv, &spec);
         let search = pipeline("hash search", shaders::HASH_SEARCH)?;
         let insert = pipeline("hash insert", shaders::HASH_INSERT)?;
         let read = pipeline("hash read", shaders::HASH_READ)?;
