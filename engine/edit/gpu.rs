@@ -1524,7 +1524,6 @@ impl GpuHashDag {
         let mut after = Vec::new();
         let mut counts = Vec::new();
         let mut root = None;
-        let mut kept = Vec::new();
         for (k, level) in levels.iter().enumerate() {
             let b = self.merge_buffers(level)?;
             let claim_tables = sizes[k]
@@ -1574,11 +1573,9 @@ impl GpuHashDag {
                 }
                 root = Some(self.record_root_readback(&mut cmd, last.results)?);
             }
+            // The level's buffers go out of scope here: released once the GPU is done with them.
             cmd.submit_async()?;
-            // Released once the GPU is done with them.
-            kept.push((b, claim_tables, entry_buf));
         }
-        drop(kept);
         // The last submission's readbacks first: one wait covers all levels.
         let after = after
             .into_iter()

@@ -401,17 +401,13 @@ impl GpuHashTable {
         if count == 0 {
             return Ok(());
         }
-        Self::check_count(items, count, self.config.item_words, "items")?;
-        Self::check_count(handles, count, 1, "handles")?;
-        let mut push = self.push_constants(items.address(), handles.address(), count);
-        let (name, pipeline) = match claims {
-            None => ("hash search", &self.search),
-            Some(claims) => {
-                let claim = self.check_claims(claims, count)?;
+        let push = self.batch_push(items, handles, count, claims)?;
+        let (name, pipeline) = match (claims, &self.claim) {
+            (Some(claims), Some(claim)) => {
                 claims.table.record_clear(cmd)?;
-                claims.fill_push(&mut push);
                 ("hash search and claim", claim)
             }
+            _ => ("hash search", &self.search),
         };
         let groups = self.cooperative_groups(count);
         self.record(cmd, &mut profiler, name, pipeline, groups, &push)?;
@@ -469,16 +465,8 @@ impl GpuHashTable {
         claims: Option<Claims<'a>>,
         mut profiler: Option<&mut Profiler>,
     ) -> Result<PendingInsert, HashError> {
-        Self::check_count(items, count, self.config.item_words, "items")?;
-        Self::check_count(handles, count, 1, "handles")?;
-        let mut push = self.push_constants(items.address(), handles.address(), count);
-        if let Some(claims) = claims {
-            self.check_claims(claims, count)?;
-            claims.fill_push(&mut push);
-            push.flags |= FLAG_CLAIMS;
-        }
+        let push = self.insert_push(items, handles, count, claims)?;
         let before = self.record_status(cmd)?;
-        push.seed = self.next_seed();
         let groups = self.cooperative_groups(count);
         self.record(
             cmd,
@@ -491,6 +479,42 @@ impl GpuHashTable {
         cmd.barrier();
         let after = self.record_status(cmd)?;
         Ok(PendingInsert { before, after })
+    }
+
+    /// The push constants of a batch of `count` items and handles (both checked), naming
+    /// `claims` (checked: single lanes, sized for the batch) when given.
+    fn batch_push(
+        &self,
+        items: &Buffer,
+        handles: &Buffer,
+        count: u32,
+        claims: Option<Claims<'_>>,
+    ) -> Result<HashPush, HashError> {
+        Self::check_count(items, count, self.config.item_words, "items")?;
+        Self::check_count(handles, count, 1, "handles")?;
+        let mut push = self.push_constants(items.address(), handles.address(), count);
+        if let Some(claims) = claims {
+            self.check_claims(claims, count)?;
+            claims.fill_push(&mut push);
+        }
+        Ok(push)
+    }
+
+    /// The push constants of an insert round ([`GpuHashTable::batch_push`]; with `claims` a
+    /// claimed round) with a fresh seed for its random block choice.
+    fn insert_push(
+        &self,
+        items: &Buffer,
+        handles: &Buffer,
+        count: u32,
+        claims: Option<Claims<'_>>,
+    ) -> Result<HashPush, HashError> {
+        let mut push = self.batch_push(items, handles, count, claims)?;
+        if claims.is_some() {
+            push.flags |= FLAG_CLAIMS;
+        }
+        push.seed = self.next_seed();
+        Ok(push)
     }
 
     /// A fresh seed for an insert pass's random block choice.
@@ -513,13 +537,7 @@ impl GpuHashTable {
         bound: u32,
         claims: Claims<'_>,
     ) -> Result<HashPush, HashError> {
-        Self::check_count(items, bound, self.config.item_words, "items")?;
-        Self::check_count(handles, bound, 1, "handles")?;
-        self.check_claims(claims, bound)?;
-        let mut push = self.push_constants(items.address(), handles.address(), bound);
-        claims.fill_push(&mut push);
-        push.flags |= FLAG_CLAIMS;
-        push.seed = self.next_seed();
+        let mut push = self.insert_push(items, handles, bound, Some(claims))?;
         push.item_words = self.config.item_words;
         Ok(push)
     }
@@ -541,17 +559,16 @@ impl GpuHashTable {
         Ok(check)
     }
 
-    /// Checks the claim passes' arguments (single lanes, a claim table sized for the batch,
-    /// `reps`); returns the search-and-claim pipeline.
-    fn check_claims(&self, claims: Claims<'_>, count: u32) -> Result<&ComputePipeline, HashError> {
-        let Some(claim) = &self.claim else {
+    /// Checks the claim passes' arguments: single lanes, a claim table sized for the batch,
+    /// `reps`.
+    fn check_claims(&self, claims: Claims<'_>, count: u32) -> Result<(), HashError> {
+        if self.claim.is_none() {
             return Err(HashError::InvalidArgument(
                 "claim passes need a single-lane table (TeamMode::SingleLane)".into(),
             ));
-        };
+        }
         claims.table.check_batch(count, self.config.item_words)?;
-        Self::check_count(claims.reps, count, 1, "reps")?;
-        Ok(claim)
+        Self::check_count(claims.reps, count, 1, "reps")
     }
 
     /// Records the search-and-claim pass (single lanes; profiled as "hash search and claim"):

@@ -20,8 +20,7 @@ void main() {
     uint first = team_index();
     uint stride = team_count();
     HashWords handles = HashWords(push.handles);
-    uint batch_count = hash_count();
-    for (uint i = first; i < batch_count; i += stride) {
+    for (uint i = first; i < push.count; i += stride) {
         uint item[HASH_MAX_ITEM_WORDS];
         hash_load_item(push.items, i, item);
         uint found = hash_item_valid(item) ? hash_search_chain(item, hash_item(item)) : HASH_MISS;
