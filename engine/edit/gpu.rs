@@ -63,8 +63,13 @@ const TOOL_PARAMS: usize = 28;
 /// Flood passes (one per axis) recorded per host wait of the fill.
 const FLOOD_ROUNDS_PER_WAIT: u32 = 2;
 /// Words of the per-level address buffer (GLSL `EDIT_LEVEL_*`): 9 items, 1 slots, 9 reps,
-/// 9 handles.
-const LEVEL_ADDRESSES: usize = 28;
+/// 9 handles, the level below's address buffer (0: resolved by its own pass), the missing
+/// handle counter.
+const LEVEL_ADDRESSES: usize = 30;
+/// `EDIT_LEVEL_BELOW`: where build_items finds the level below's pending results.
+const LEVEL_BELOW: usize = 28;
+/// `EDIT_LEVEL_MISSING`: the counter of nodes left without a handle (`merge_errors`).
+const LEVEL_MISSING: usize = 29;
 /// Counters of a merge: one item count per size.
 const COUNTERS: usize = TABLE_COUNT as usize;
 /// Invocations per workgroup of every edit pass.
@@ -1120,6 +1125,7 @@ impl GpuHashDag {
             addresses[19 + s] = handles[s].address();
         }
         addresses[9] = slots.address();
+        addresses[LEVEL_MISSING] = self.merge_errors.address();
         let address_buf = ctx.create_buffer(
             "edit level addresses",
             8 * LEVEL_ADDRESSES as u64,
@@ -1185,15 +1191,11 @@ impl GpuHashDag {
         after: After<'a>,
         profiler: &mut Option<&mut Profiler>,
     ) -> Result<Back, GpuDagError> {
-        let resolve = EditPush {
-            counters: self.merge_errors.address(),
-            ..b.push
-        };
         cmd.begin_pass(profiler, "edit resolve");
         cmd.dispatch(
             &self.resolve,
             groups(b.push.count),
-            bytemuck::bytes_of(&resolve),
+            bytemuck::bytes_of(&b.push),
             &[],
         )?;
         cmd.end_pass(profiler);
@@ -1475,11 +1477,12 @@ impl GpuHashDag {
 
     /// Single lanes: the merge of every level recorded without the host waiting between
     /// levels (`merge` waits once per level for its size counters). Each level is one
-    /// submission: build_items counts its items per size on the GPU, one search-and-claim and
-    /// one claimed insert dispatch take the items of every size ([`crate::hash::mixed`]), on
-    /// claim tables sized for the level's node count (a bound of every size's items), then
-    /// resolve; the GPU runs a level while the host records the next. One wait in all, for the
-    /// tables' status and the root. The pools are grown for the expected case only
+    /// submission: build_items counts its items per size on the GPU and resolves the pending
+    /// children of the level below (its resolve pass left out), one search-and-claim and one
+    /// claimed insert dispatch take the items of every size ([`crate::hash::mixed`]), on claim
+    /// tables sized for the level's node count (a bound of every size's items); only the last
+    /// level runs resolve, for the root. The GPU runs a level while the host records the next.
+    /// One wait in all, for the tables' status and the root. The pools are grown for the expected case only
     /// ([`GpuHashTable::reserve_expected`] of each size's share of the nodes): where one runs
     /// out all the same, this returns None, having changed no root (the new items are
     /// garbage), and the caller merges level by level, reserving for the worst case.
@@ -1495,6 +1498,12 @@ impl GpuHashDag {
                 root: None,
             }));
         };
+        if levels.iter().any(|level| level.result_index.is_some()) {
+            // build_items reads a pending child's slot at its result's index.
+            return Err(GpuDagError::Invalid(
+                "the recorded merge takes levels without a result index".into(),
+            ));
+        }
         let sizes: Vec<Vec<usize>> = levels
             .iter()
             .map(|level| self.possible_sizes(level.leaves))
@@ -1524,8 +1533,14 @@ impl GpuHashDag {
         let mut after = Vec::new();
         let mut counts = Vec::new();
         let mut root = None;
+        // The level below's buffers: its pending results are resolved by this level's
+        // build_items, so they live until this level's submission.
+        let mut below: Option<MergeBuffers> = None;
         for (k, level) in levels.iter().enumerate() {
-            let b = self.merge_buffers(level)?;
+            let mut b = self.merge_buffers(level)?;
+            if let Some(below) = &below {
+                b.addresses[LEVEL_BELOW] = below.address_buf.address();
+            }
             let claim_tables = sizes[k]
                 .iter()
                 .map(|&s| ClaimTable::new(&ctx, s as u32 + MIN_ITEM_WORDS, level.count))
@@ -1566,15 +1581,17 @@ impl GpuHashDag {
                 level.count,
                 profiler_now,
             )?;
-            self.record_resolve_after(&mut cmd, &b, After::Nothing, &mut profiler)?;
             if k + 1 == levels.len() {
+                self.record_resolve_after(&mut cmd, &b, After::Nothing, &mut profiler)?;
                 for &s in &used {
                     after.push(tables[s].record_status(&mut cmd)?);
                 }
                 root = Some(self.record_root_readback(&mut cmd, last.results)?);
             }
-            // The level's buffers go out of scope here: released once the GPU is done with them.
             cmd.submit_async()?;
+            // The buffers of the level below go out of scope here: released once the GPU is
+            // done with this submission.
+            below = Some(b);
         }
         // The last submission's readbacks first: one wait covers all levels.
         let after = after

@@ -4,7 +4,9 @@
 // others append their item to the buffer of its size and leave EDIT_PENDING | size index.
 //   src      temporary nodes (8 child values) or leaves (2 mask words, + 8 material words
 //            with materials (edit_materials()): nibble v = material of voxel v)
-//   src2     the level below's results (EDIT_TEMP | i children read entry i)
+//   src2     the level below's results (EDIT_TEMP | i children read entry i; pending ones
+//            are resolved here when the address buffer names the level below's, as in
+//            resolve.comp, whose pass the recorded merge leaves out)
 //   dst      results (one per node; at result_index[i] with EDIT_FLAG_RESULT_INDEX)
 //   dst2     result_index (u32 per node)
 //   tables   the level's buffer addresses (EDIT_LEVEL_* in edit/common.glsl)
@@ -58,7 +60,14 @@ void main() {
             uint c[8];
             for (uint o = 0u; o < 8u; ++o) {
                 uint v = input_words.w[i * 8u + o];
-                c[o] = (v & EDIT_TAG_MASK) == EDIT_TEMP ? below.w[v & EDIT_INDEX_MASK] : v;
+                if ((v & EDIT_TAG_MASK) == EDIT_TEMP) {
+                    uint j = v & EDIT_INDEX_MASK;
+                    v = below.w[j];
+                    if ((v & EDIT_TAG_MASK) == EDIT_PENDING && tables.a[EDIT_LEVEL_BELOW] != 0ul) {
+                        v = edit_resolve(Addresses(tables.a[EDIT_LEVEL_BELOW]), j, v);
+                    }
+                }
+                c[o] = v;
             }
             bool same = !edit_is_ptr(c[0]);
             for (uint o = 1u; o < 8u; ++o) same = same && c[o] == c[0];

@@ -55,11 +55,15 @@ layout(buffer_reference, std430, buffer_reference_align = 16) buffer Entries {
 
 // The per-level address buffer (push.tables of build_items / resolve): per size table s
 // (0..9) its items, its dedup representatives and its handles, and one slot per node (the
-// index of its item in its size's buffer).
+// index of its item in its size's buffer); the level below's address buffer when its results
+// are left pending for build_items to resolve (0: resolved by its own pass), and the counter
+// of nodes left without a handle.
 #define EDIT_LEVEL_ITEMS 0u
 #define EDIT_LEVEL_SLOTS 9u
 #define EDIT_LEVEL_REPS 10u
 #define EDIT_LEVEL_HANDLES 19u
+#define EDIT_LEVEL_BELOW 28u
+#define EDIT_LEVEL_MISSING 29u
 
 #define EDIT_SHAPE_SPHERE 0u
 #define EDIT_SHAPE_CUBE 1u
@@ -70,6 +74,21 @@ bool edit_is_ptr(uint v) {
 
 bool edit_is_full(uint v) {
     return (v & 0xFFFFFFF0u) == EDIT_FULL;
+}
+
+// The NodePtr of node i's pending result r (EDIT_PENDING | size) in the level whose address
+// buffer is `level`: the handle of its item's representative, once the level's inserts ran.
+// An item left without a handle (a pool ran out) keeps r and is counted as missing.
+uint edit_resolve(Addresses level, uint i, uint r) {
+    uint s = r & 15u;
+    uint index = Words(level.a[EDIT_LEVEL_SLOTS]).w[i];
+    uint rep = Words(level.a[EDIT_LEVEL_REPS + s]).w[index];
+    uint handle = Words(level.a[EDIT_LEVEL_HANDLES + s]).w[rep];
+    if (handle >= (1u << 28u)) {
+        atomicAdd(Words(level.a[EDIT_LEVEL_MISSING]).w[0], 1u);
+        return r;
+    }
+    return s << 28u | handle;
 }
 
 // ---- reading items (twin of hash/common.glsl with the item size a run-time value) ----
