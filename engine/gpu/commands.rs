@@ -138,6 +138,9 @@ pub struct Commands<'a> {
     /// Shared with the profiler's passes and the readbacks recorded here.
     pub(crate) lifecycle: Arc<Lifecycle>,
     pub(crate) ctx: Arc<GpuContext>,
+    /// Whether the last command recorded is a full [`Commands::barrier`]: a second one right
+    /// after it orders nothing more and is left out (lavapipe flushes and waits at each).
+    after_barrier: bool,
     _resources: PhantomData<&'a ()>,
 }
 
@@ -267,6 +270,7 @@ impl GpuContext {
             staging: Vec::new(),
             lifecycle: Arc::new(Lifecycle::default()),
             ctx: Arc::clone(self),
+            after_barrier: false,
             _resources: PhantomData,
         };
         // SAFETY: the recorder is reset and owned by `cmd` alone (see the type's docs).
@@ -364,6 +368,7 @@ impl<'a> Commands<'a> {
                 device.cmd_dispatch(self.raw, groups[0], groups[1], groups[2]);
             }
         }
+        self.recorded();
         Ok(())
     }
 
@@ -412,6 +417,7 @@ impl<'a> Commands<'a> {
                 .device
                 .cmd_dispatch_indirect(self.raw, args.raw, offset);
         }
+        self.recorded();
         Ok(())
     }
 
@@ -515,8 +521,13 @@ impl<'a> Commands<'a> {
     }
 
     /// Full memory barrier: compute and transfer writes become visible to later compute,
-    /// transfer and host accesses.
+    /// transfer and host accesses. Recorded once where several follow each other with no
+    /// command between them.
     pub fn barrier(&mut self) {
+        if self.after_barrier {
+            return;
+        }
+        self.after_barrier = true;
         let stages = vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER;
         let barrier = vk::MemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
@@ -538,6 +549,12 @@ impl<'a> Commands<'a> {
                 &[],
             );
         }
+    }
+
+    /// Notes that a command other than a full barrier was recorded (also by code that records
+    /// on [`Commands::raw`] directly: the profiler, the swapchain).
+    pub(crate) fn recorded(&mut self) {
+        self.after_barrier = false;
     }
 
     /// Copies `size` bytes between buffers (barriers before and after included).
@@ -585,6 +602,7 @@ impl<'a> Commands<'a> {
                 .device
                 .cmd_copy_buffer(self.raw, src, dst, &[region]);
         }
+        self.recorded();
         self.barrier();
     }
 
@@ -714,6 +732,7 @@ impl<'a> Commands<'a> {
                     .device
                     .cmd_fill_buffer(self.raw, dst.raw, offset, len, value);
             }
+            self.recorded();
         }
         self.barrier();
     }
@@ -765,6 +784,7 @@ impl<'a> Commands<'a> {
                 &[region],
             );
         }
+        self.recorded();
         self.image_layout(
             image,
             (
@@ -806,6 +826,7 @@ impl<'a> Commands<'a> {
                 &[barrier],
             );
         }
+        self.recorded();
     }
 
     /// Transitions a new image from `UNDEFINED` to `GENERAL` and clears it to zero.
@@ -835,6 +856,7 @@ impl<'a> Commands<'a> {
                 &[color_range()],
             );
         }
+        self.recorded();
         self.barrier();
     }
 
