@@ -138,10 +138,32 @@ pub struct Commands<'a> {
     /// Shared with the profiler's passes and the readbacks recorded here.
     pub(crate) lifecycle: Arc<Lifecycle>,
     pub(crate) ctx: Arc<GpuContext>,
-    /// Whether the last command recorded is a full [`Commands::barrier`]: a second one right
-    /// after it orders nothing more and is left out (lavapipe flushes and waits at each).
-    after_barrier: bool,
+    /// The buffer ranges the transfers since the last full barrier read and write, when
+    /// nothing else was recorded since it: a transfer that conflicts with none of them joins
+    /// them without a barrier between (docs/gpu.md, "Barriers").
+    transfers: Vec<TransferAccess>,
+    /// Whether a command other than a transfer was recorded since the last full barrier.
+    commands_since_barrier: bool,
     _resources: PhantomData<&'a ()>,
+}
+
+/// A byte range of a buffer that a recorded transfer reads or writes.
+#[derive(Clone, Copy, Debug)]
+struct TransferAccess {
+    buffer: vk::Buffer,
+    start: u64,
+    end: u64,
+    write: bool,
+}
+
+impl TransferAccess {
+    /// Whether the two accesses must be ordered: the same bytes, at least one written.
+    fn conflicts(&self, other: &TransferAccess) -> bool {
+        self.buffer == other.buffer
+            && self.start < other.end
+            && other.start < self.end
+            && (self.write || other.write)
+    }
 }
 
 impl std::fmt::Debug for Commands<'_> {
@@ -270,7 +292,8 @@ impl GpuContext {
             staging: Vec::new(),
             lifecycle: Arc::new(Lifecycle::default()),
             ctx: Arc::clone(self),
-            after_barrier: false,
+            transfers: Vec::new(),
+            commands_since_barrier: true,
             _resources: PhantomData,
         };
         // SAFETY: the recorder is reset and owned by `cmd` alone (see the type's docs).
@@ -341,6 +364,7 @@ impl<'a> Commands<'a> {
             Some(layout) => Some(self.descriptor_set(layout, bound)?),
             None => None,
         };
+        self.before_command();
         let device = &self.ctx.device;
         // SAFETY: recording into our command buffer with objects of this device.
         unsafe {
@@ -368,7 +392,6 @@ impl<'a> Commands<'a> {
                 device.cmd_dispatch(self.raw, groups[0], groups[1], groups[2]);
             }
         }
-        self.recorded();
         Ok(())
     }
 
@@ -417,7 +440,6 @@ impl<'a> Commands<'a> {
                 .device
                 .cmd_dispatch_indirect(self.raw, args.raw, offset);
         }
-        self.recorded();
         Ok(())
     }
 
@@ -521,13 +543,13 @@ impl<'a> Commands<'a> {
     }
 
     /// Full memory barrier: compute and transfer writes become visible to later compute,
-    /// transfer and host accesses. Recorded once where several follow each other with no
-    /// command between them.
+    /// transfer and host accesses. Left out where nothing was recorded since the last one.
     pub fn barrier(&mut self) {
-        if self.after_barrier {
+        if self.transfers.is_empty() && !self.commands_since_barrier {
             return;
         }
-        self.after_barrier = true;
+        self.transfers.clear();
+        self.commands_since_barrier = false;
         let stages = vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER;
         let barrier = vk::MemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
@@ -551,10 +573,28 @@ impl<'a> Commands<'a> {
         }
     }
 
-    /// Notes that a command other than a full barrier was recorded (also by code that records
-    /// on [`Commands::raw`] directly: the profiler, the swapchain).
-    pub(crate) fn recorded(&mut self) {
-        self.after_barrier = false;
+    /// Called before recording a command other than a transfer (also by code that records on
+    /// [`Commands::raw`] directly: the profiler, the swapchain): the transfers recorded since
+    /// the last barrier complete before it.
+    pub(crate) fn before_command(&mut self) {
+        if !self.transfers.is_empty() {
+            self.barrier();
+        }
+        self.commands_since_barrier = true;
+    }
+
+    /// Called before recording a transfer with these accesses: a barrier first when a command
+    /// other than a transfer, or a transfer touching the same bytes (one of them writing), was
+    /// recorded since the last one. Transfers are thus ordered exactly as with a barrier before
+    /// and after each, while independent ones (uploads and fills of distinct buffers) share one.
+    fn before_transfer(&mut self, accesses: &[TransferAccess]) {
+        let conflict = accesses
+            .iter()
+            .any(|a| self.transfers.iter().any(|t| t.conflicts(a)));
+        if self.commands_since_barrier || conflict {
+            self.barrier();
+        }
+        self.transfers.extend_from_slice(accesses);
     }
 
     /// Copies `size` bytes between buffers (barriers before and after included).
@@ -580,8 +620,8 @@ impl<'a> Commands<'a> {
         Ok(())
     }
 
-    /// Records a copy between raw buffers with barriers before and after (ranges checked by
-    /// the caller).
+    /// Records a copy between raw buffers, ordered against every other command like one between
+    /// barriers ([`Commands::before_transfer`]; ranges checked by the caller).
     fn copy_raw(
         &mut self,
         src: vk::Buffer,
@@ -590,7 +630,20 @@ impl<'a> Commands<'a> {
         dst_offset: u64,
         size: u64,
     ) {
-        self.barrier();
+        self.before_transfer(&[
+            TransferAccess {
+                buffer: src,
+                start: src_offset,
+                end: src_offset + size,
+                write: false,
+            },
+            TransferAccess {
+                buffer: dst,
+                start: dst_offset,
+                end: dst_offset + size,
+                write: true,
+            },
+        ]);
         let region = vk::BufferCopy {
             src_offset,
             dst_offset,
@@ -602,8 +655,6 @@ impl<'a> Commands<'a> {
                 .device
                 .cmd_copy_buffer(self.raw, src, dst, &[region]);
         }
-        self.recorded();
-        self.barrier();
     }
 
     /// Records an upload of `data` to byte `offset` of `dst`: the bytes are staged now (in the
@@ -722,19 +773,22 @@ impl<'a> Commands<'a> {
         Ok(())
     }
 
-    /// `vkCmdFillBuffer` of a checked range, between barriers.
+    /// `vkCmdFillBuffer` of a checked range, ordered like one between barriers.
     fn fill_raw(&mut self, dst: &'a Buffer, offset: u64, len: u64, value: u32) {
-        self.barrier();
         if len > 0 {
+            self.before_transfer(&[TransferAccess {
+                buffer: dst.raw,
+                start: offset,
+                end: offset + len,
+                write: true,
+            }]);
             // SAFETY: an in-range fill (a multiple of 4 bytes) of a TRANSFER_DST buffer.
             unsafe {
                 self.ctx
                     .device
                     .cmd_fill_buffer(self.raw, dst.raw, offset, len, value);
             }
-            self.recorded();
         }
-        self.barrier();
     }
 
     /// Copies an RGBA8 image into a buffer (tightly packed rows, top row first).
@@ -774,6 +828,7 @@ impl<'a> Commands<'a> {
                 depth: 1,
             },
         };
+        self.before_command();
         // SAFETY: the image was just moved to TRANSFER_SRC_OPTIMAL; dst size is checked by callers.
         unsafe {
             self.ctx.device.cmd_copy_image_to_buffer(
@@ -784,7 +839,6 @@ impl<'a> Commands<'a> {
                 &[region],
             );
         }
-        self.recorded();
         self.image_layout(
             image,
             (
@@ -805,6 +859,7 @@ impl<'a> Commands<'a> {
         access: (vk::AccessFlags, vk::AccessFlags),
         stages: (vk::PipelineStageFlags, vk::PipelineStageFlags),
     ) {
+        self.before_command();
         let barrier = vk::ImageMemoryBarrier::default()
             .src_access_mask(access.0)
             .dst_access_mask(access.1)
@@ -826,7 +881,6 @@ impl<'a> Commands<'a> {
                 &[barrier],
             );
         }
-        self.recorded();
     }
 
     /// Transitions a new image from `UNDEFINED` to `GENERAL` and clears it to zero.
@@ -856,7 +910,6 @@ impl<'a> Commands<'a> {
                 &[color_range()],
             );
         }
-        self.recorded();
         self.barrier();
     }
 

@@ -118,7 +118,7 @@ impl Profiler {
         }
         let q = self.next_query;
         self.next_query += 1;
-        cmd.recorded();
+        cmd.before_command();
         // SAFETY: resetting then writing query `q` of our pool in the same command buffer.
         unsafe {
             self.ctx

@@ -602,7 +602,7 @@ impl Presenter {
         }
         let device = &self.ctx.device;
         let raw = cmd.raw;
-        cmd.recorded();
+        cmd.before_command();
         // SAFETY: recording into the frame's command buffer; the swapchain image was acquired
         // for it, and its layout is set explicitly (UNDEFINED: its old contents are discarded).
         unsafe {
