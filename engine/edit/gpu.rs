@@ -10,8 +10,9 @@
 //! item, the insert round stores it, and `resolve` writes every node's pointer. Single-lane
 //! tables (CPU devices) fold the duplicate detection into the search and insert passes instead
 //! ([`crate::hash::claim`]: two passes per size, no dedup table, no `mark`); their edits record
-//! every level's merge up front, the claim passes taking every size at once
-//! ([`crate::hash::mixed`], `merge_recorded`), and wait once for it. The edit first
+//! every level's merge up front in one submission, the claim passes taking every size at once
+//! ([`crate::hash::mixed`], `merge_recorded`) and each level's `build_items` resolving the
+//! pending nodes of the level below, and wait once for it. The edit first
 //! walks the tool's region top-down (`traverse`, then `leaves` with one invocation per voxel),
 //! building the temporary SVO the merge consumes. See `docs/editing-gpu.md`.
 
@@ -245,6 +246,15 @@ struct MergeBuffers {
     addresses: [u64; LEVEL_ADDRESSES],
     /// Push constants of build_items and resolve.
     push: EditPush,
+}
+
+/// One level of the recorded merge, made before the recording: its buffers, its claim tables
+/// (one per possible item size) and its mixed-batch entries.
+struct PreparedLevel {
+    buffers: MergeBuffers,
+    claim_tables: Vec<ClaimTable>,
+    entry_buf: Buffer,
+    entries: [HashPush; MIXED_SIZES],
 }
 
 /// What a merged level's submission records after its resolve.
@@ -1476,13 +1486,13 @@ impl GpuHashDag {
     }
 
     /// Single lanes: the merge of every level recorded without the host waiting between
-    /// levels (`merge` waits once per level for its size counters). Each level is one
-    /// submission: build_items counts its items per size on the GPU and resolves the pending
-    /// children of the level below (its resolve pass left out), one search-and-claim and one
-    /// claimed insert dispatch take the items of every size ([`crate::hash::mixed`]), on claim
-    /// tables sized for the level's node count (a bound of every size's items); only the last
-    /// level runs resolve, for the root. The GPU runs a level while the host records the next.
-    /// One wait in all, for the tables' status and the root. The pools are grown for the expected case only
+    /// levels (`merge` waits once per level for its size counters), all levels in one
+    /// submission. Per level build_items counts its items per size on the GPU and resolves the
+    /// pending children of the level below (its resolve pass left out), one search-and-claim
+    /// and one claimed insert dispatch take the items of every size ([`crate::hash::mixed`]),
+    /// on claim tables sized for the level's node count (a bound of every size's items); only
+    /// the last level runs resolve, for the root. One wait in all, for the tables' status and
+    /// the root. The pools are grown for the expected case only
     /// ([`GpuHashTable::reserve_expected`] of each size's share of the nodes): where one runs
     /// out all the same, this returns None, having changed no root (the new items are
     /// garbage), and the caller merges level by level, reserving for the worst case.
@@ -1533,13 +1543,13 @@ impl GpuHashDag {
         let mut after = Vec::new();
         let mut counts = Vec::new();
         let mut root = None;
-        // The level below's buffers: its pending results are resolved by this level's
-        // build_items, so they live until this level's submission.
-        let mut below: Option<MergeBuffers> = None;
+        // Every level's buffers first (the level above resolves the pending results of the one
+        // below through its address buffer), then one recording of all levels.
+        let mut prepared: Vec<PreparedLevel> = Vec::with_capacity(levels.len());
         for (k, level) in levels.iter().enumerate() {
             let mut b = self.merge_buffers(level)?;
-            if let Some(below) = &below {
-                b.addresses[LEVEL_BELOW] = below.address_buf.address();
+            if let Some(below) = prepared.last() {
+                b.addresses[LEVEL_BELOW] = below.buffers.address_buf.address();
             }
             let claim_tables = sizes[k]
                 .iter()
@@ -1559,40 +1569,41 @@ impl GpuHashDag {
                 MIXED_SIZES as u64 * entry_bytes,
                 MemLocation::GpuOnly,
             )?;
-            let mut cmd = ctx.begin_commands("edit merge")?;
-            // The level below's submission wrote what this one reads.
-            cmd.barrier();
-            if k == 0 {
-                for &s in &used {
-                    before.push(tables[s].record_status(&mut cmd)?);
-                }
-            }
-            cmd.upload(&entry_buf, 0, &entries)?;
-            for table in &claim_tables {
+            prepared.push(PreparedLevel {
+                buffers: b,
+                claim_tables,
+                entry_buf,
+                entries,
+            });
+        }
+        let mut cmd = ctx.begin_commands("edit merge")?;
+        for &s in &used {
+            before.push(tables[s].record_status(&mut cmd)?);
+        }
+        for (k, (level, p)) in levels.iter().zip(&prepared).enumerate() {
+            cmd.upload(&p.entry_buf, 0, &p.entries)?;
+            for table in &p.claim_tables {
                 table.record_clear(&mut cmd)?;
             }
-            counts.push(self.record_build_items(&mut cmd, &b, &mut profiler)?);
+            counts.push(self.record_build_items(&mut cmd, &p.buffers, &mut profiler)?);
             let profiler_now = profiler.as_deref_mut();
             mixed.record(
                 &mut cmd,
-                &entry_buf,
-                &b.counters,
+                &p.entry_buf,
+                &p.buffers.counters,
                 0,
                 level.count,
                 profiler_now,
             )?;
             if k + 1 == levels.len() {
-                self.record_resolve_after(&mut cmd, &b, After::Nothing, &mut profiler)?;
+                self.record_resolve_after(&mut cmd, &p.buffers, After::Nothing, &mut profiler)?;
                 for &s in &used {
                     after.push(tables[s].record_status(&mut cmd)?);
                 }
                 root = Some(self.record_root_readback(&mut cmd, last.results)?);
             }
-            cmd.submit_async()?;
-            // The buffers of the level below go out of scope here: released once the GPU is
-            // done with this submission.
-            below = Some(b);
         }
+        cmd.submit_async()?;
         // The last submission's readbacks first: one wait covers all levels.
         let after = after
             .into_iter()
