@@ -237,6 +237,61 @@ fn fill_shader_spec_and_push_constants_and_subgroup_size() {
     assert_clean(&ctx);
 }
 
+/// Transfers in a row that touch different bytes share one barrier; one that reads or writes
+/// bytes another wrote since the last barrier, and any dispatch after transfers, gets a barrier
+/// first (`Commands::before_transfer`). Synchronization validation (on in these tests) reports
+/// a hazard wherever a needed barrier is missing, and the values read back show the order.
+#[test]
+fn transfers_share_barriers_unless_they_touch_the_same_bytes() {
+    let ctx = context();
+    {
+        let pipeline = fill_pipeline(&ctx, "test fill", [64, 3]);
+        let make = |name| ctx.create_buffer(name, 64, MemLocation::GpuOnly).unwrap();
+        let (a, b, c) = (make("a"), make("b"), make("c"));
+        let mut cmd = ctx.begin_commands("transfers").unwrap();
+        let start = cmd.barriers_recorded();
+        assert_eq!(start, 1, "a recording starts with one barrier");
+        // Distinct buffers, or distinct bytes of one: no barrier between.
+        cmd.fill_buffer(&a, 7);
+        cmd.upload(&b, 0, &[1u32; 16]).unwrap();
+        cmd.fill_range(&c, 0, 32, 9).unwrap();
+        cmd.fill_range(&c, 32, 32, 10).unwrap();
+        assert_eq!(cmd.barriers_recorded(), start);
+        // A write over bytes written since the barrier.
+        cmd.upload(&a, 8, &[5u32, 6]).unwrap();
+        assert_eq!(cmd.barriers_recorded(), start + 1);
+        // A read of bytes written (a), a write over bytes written (c[4..8]).
+        cmd.copy_buffer(&a, 0, &c, 16, 16).unwrap();
+        assert_eq!(cmd.barriers_recorded(), start + 2);
+        let read_c = cmd.readback::<u32>(&c, 0, 16).unwrap();
+        assert_eq!(cmd.barriers_recorded(), start + 3);
+        // A dispatch after transfers, a transfer after a dispatch.
+        let push = fill_push(b.address(), 0, 16, 100);
+        cmd.dispatch(&pipeline, [1, 1, 1], &push, &[]).unwrap();
+        assert_eq!(cmd.barriers_recorded(), start + 4);
+        let read_b = cmd.readback::<u32>(&b, 0, 16).unwrap();
+        assert_eq!(cmd.barriers_recorded(), start + 5);
+        // Reads of bytes only read since the barrier: none.
+        let read_a = cmd.readback::<u32>(&a, 0, 16).unwrap();
+        assert_eq!(cmd.barriers_recorded(), start + 5);
+        // Two barriers in a row record one.
+        cmd.barrier();
+        cmd.barrier();
+        assert_eq!(cmd.barriers_recorded(), start + 6);
+        cmd.submit().unwrap();
+        let mut want_a = vec![7u32; 16];
+        want_a[2..4].copy_from_slice(&[5, 6]);
+        assert_eq!(read_a.read().unwrap(), want_a);
+        let mut want_c = vec![9u32; 8];
+        want_c.extend([10u32; 8]);
+        want_c[4..8].copy_from_slice(&want_a[..4]);
+        assert_eq!(read_c.read().unwrap(), want_c);
+        let want_b: Vec<u32> = (0..16).map(|i| i * 3 + 100).collect();
+        assert_eq!(read_b.read().unwrap(), want_b);
+    }
+    assert_clean(&ctx);
+}
+
 /// Several threads record and submit at once on one shared context (each `Commands` must own
 /// what Vulkan requires to be externally synchronised); every result is checked exactly.
 #[test]

@@ -144,6 +144,8 @@ pub struct Commands<'a> {
     transfers: Vec<TransferAccess>,
     /// Whether a command other than a transfer was recorded since the last full barrier.
     commands_since_barrier: bool,
+    /// Full barriers recorded so far.
+    barriers: u32,
     _resources: PhantomData<&'a ()>,
 }
 
@@ -294,6 +296,7 @@ impl GpuContext {
             ctx: Arc::clone(self),
             transfers: Vec::new(),
             commands_since_barrier: true,
+            barriers: 0,
             _resources: PhantomData,
         };
         // SAFETY: the recorder is reset and owned by `cmd` alone (see the type's docs).
@@ -550,6 +553,7 @@ impl<'a> Commands<'a> {
         }
         self.transfers.clear();
         self.commands_since_barrier = false;
+        self.barriers += 1;
         let stages = vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER;
         let barrier = vk::MemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
@@ -571,6 +575,12 @@ impl<'a> Commands<'a> {
                 &[],
             );
         }
+    }
+
+    /// Full barriers recorded so far, the one every recording starts with included (what
+    /// [`Commands::barrier`] left out is not counted).
+    pub fn barriers_recorded(&self) -> u32 {
+        self.barriers
     }
 
     /// Called before recording a command other than a transfer (also by code that records on
