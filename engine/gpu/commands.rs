@@ -607,7 +607,8 @@ impl<'a> Commands<'a> {
         self.transfers.extend_from_slice(accesses);
     }
 
-    /// Copies `size` bytes between buffers (barriers before and after included).
+    /// Copies `size` bytes between buffers, ordered against every other command like a copy
+    /// between barriers (docs/gpu.md, "Barriers").
     pub fn copy_buffer(
         &mut self,
         src: &'a Buffer,

@@ -58,13 +58,14 @@ void main() {
             }
         } else {
             uint c[8];
+            uint64_t below_level = tables.a[EDIT_LEVEL_BELOW];
             for (uint o = 0u; o < 8u; ++o) {
                 uint v = input_words.w[i * 8u + o];
                 if ((v & EDIT_TAG_MASK) == EDIT_TEMP) {
                     uint j = v & EDIT_INDEX_MASK;
                     v = below.w[j];
-                    if ((v & EDIT_TAG_MASK) == EDIT_PENDING && tables.a[EDIT_LEVEL_BELOW] != 0ul) {
-                        v = edit_resolve(Addresses(tables.a[EDIT_LEVEL_BELOW]), j, v);
+                    if ((v & EDIT_TAG_MASK) == EDIT_PENDING && below_level != 0ul) {
+                        v = edit_resolve(Addresses(below_level), j, v);
                     }
                 }
                 c[o] = v;
