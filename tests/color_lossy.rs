@@ -210,6 +210,30 @@ fn lossy_error(input: &[u32], decoded: &[u32]) -> (u8, f64) {
     (worst, (sum / (3 * input.len().max(1)) as f64).sqrt())
 }
 
+/// `max_delta` maps k / 255 to k and never allows more than its threshold, also just below
+/// k / 255 (0.16862524 is the case a random run found: 43 / 255 is 2e-6 above it).
+#[test]
+fn max_delta_is_exact_at_steps_and_never_above_the_threshold() {
+    for k in 0..=255u8 {
+        let step = f32::from(k) / 255.0;
+        assert_eq!(varbit::max_delta(step), k, "threshold {k}/255");
+        for below in [
+            f32::from_bits(step.to_bits().saturating_sub(1)),
+            step - 2e-6,
+        ] {
+            let allowed = varbit::max_delta(below);
+            assert!(
+                f32::from(allowed) / 255.0 <= below.max(0.0),
+                "threshold {below}: {allowed}"
+            );
+        }
+    }
+    assert_eq!(varbit::max_delta(0.16862524), 42);
+    assert_eq!(varbit::max_delta(f32::NAN), 0);
+    assert_eq!(varbit::max_delta(-1.0), 0);
+    assert_eq!(varbit::max_delta(2.0), 255);
+}
+
 type Encoder = fn(&[u32], f32) -> Vec<u32>;
 
 /// The two lossy encoders, each with the most colours a test gives it (the offline encoder is

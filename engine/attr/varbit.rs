@@ -257,8 +257,15 @@ pub fn expand101210(c: u32) -> [u8; 3] {
 /// The largest per-channel difference, in 8-bit steps, that a threshold in [0, 1] allows:
 /// `floor(threshold * 255)` (NaN and negative thresholds allow none).
 pub fn max_delta(threshold: f32) -> u8 {
-    // The epsilon keeps thresholds given as k / 255 at k despite float rounding.
-    (threshold.clamp(0.0, 1.0) * 255.0 + 1e-3).floor() as u8
+    let threshold = threshold.clamp(0.0, 1.0);
+    // The epsilon keeps thresholds given as k / 255 at k despite float rounding; the check
+    // after it keeps the promise `max_delta(t) / 255 <= t` for thresholds just below k / 255.
+    let steps = (threshold * 255.0 + 1e-3).floor() as u8;
+    if f32::from(steps) / 255.0 > threshold {
+        steps - 1
+    } else {
+        steps
+    }
 }
 
 /// Largest channel difference between two colours.
