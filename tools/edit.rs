@@ -12,7 +12,7 @@ use voxdag::attr::Materials;
 use voxdag::dag::encode::EncodedDag;
 use voxdag::dag::{Svdag, VdagFile};
 use voxdag::edit::cpu::{CpuEditor, HashDag};
-use voxdag::edit::gpu::{GpuHashDag, GpuHashDagConfig};
+use voxdag::edit::gpu::{buckets_for, GpuHashDag, GpuHashDagConfig};
 use voxdag::edit::gpu_gc::GcStats;
 use voxdag::edit::replay::{Replay, Step};
 use voxdag::edit::tool::Tool;
@@ -169,14 +169,6 @@ pub fn tool_name(tool: &Tool) -> &'static str {
         Tool::Fill { .. } => "fill",
         Tool::Copy(_) => "copy",
     }
-}
-
-/// Buckets per table for a scene: about one per 16 stored words (the largest table holds at
-/// most every node), a power of two in 1024..=2^22.
-pub fn buckets_for(svdag: &Svdag) -> u32 {
-    ((svdag.words.len() / 16) as u32)
-        .next_power_of_two()
-        .clamp(1024, 1 << 22)
 }
 
 /// `voxdag edit`.
@@ -383,7 +375,7 @@ fn edit_gpu(
     } else {
         None
     };
-    let config = GpuHashDagConfig::new(args.table.variant(), buckets_for(&svdag))
+    let config = GpuHashDagConfig::new(args.table.variant(), buckets_for(svdag.words.len()))
         .with_undo_depth(args.undo_depth);
     let start = Instant::now();
     let mut hd = match &materials {

@@ -14,7 +14,7 @@ use rustc_hash::FxHashMap;
 use serde::Serialize;
 use voxdag::attr::Materials;
 use voxdag::dag::{Svdag, VdagFile};
-use voxdag::edit::gpu::{GpuHashDag, GpuHashDagConfig, HashDagImage};
+use voxdag::edit::gpu::{buckets_for, GpuHashDag, GpuHashDagConfig, HashDagImage};
 use voxdag::edit::item::{Child, InnerNode, Leaf, NodePtr, Root, MATERIAL_COUNT};
 use voxdag::edit::replay::{Action, Replay};
 use voxdag::edit::tool::Tool;
@@ -23,7 +23,6 @@ use voxdag::gpu::{
 };
 use voxdag::hash::HashVariant;
 use voxdag::render::gpu::{GpuRenderer, GpuScene, Palette, RenderFrame};
-use voxdag::render::hash_scene::buckets_for;
 use voxdag::render::pathtrace::DEFAULT_BOUNCES;
 use voxdag::render::{Camera, FirstHit, RenderOutput, RenderSettings};
 use voxdag::scene::{self, ImportOptions};

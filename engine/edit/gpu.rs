@@ -146,6 +146,16 @@ pub struct GpuHashDagConfig {
     pub team: TeamMode,
 }
 
+/// Buckets per table for a scene of `svdag_words` svdag32 words: one per 64 words, a power of
+/// two in 1024..=2^22. Slabs are allocated per non-empty bucket, so more buckets mean sparser
+/// slabs: one per 16 words held twice the slab memory for the same edit time, one per 256 made
+/// large edits 5-15 % slower (docs/editing-gpu.md, "Buckets per table").
+pub fn buckets_for(svdag_words: usize) -> u32 {
+    ((svdag_words / 64) as u32)
+        .next_power_of_two()
+        .clamp(1024, 1 << 22)
+}
+
 /// Super blocks that keep every handle below 2^28 ([`MAX_TABLE_SLABS`] slabs).
 pub fn max_super_blocks() -> u32 {
     MAX_TABLE_SLABS / SLABS_PER_SUPER_BLOCK

@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use super::gpu::{GpuRenderer, GpuScene};
 use crate::dag::Svdag;
-use crate::edit::gpu::{GpuDagError, GpuHashDag, GpuHashDagConfig};
+use crate::edit::gpu::{buckets_for, GpuDagError, GpuHashDag, GpuHashDagConfig};
 use crate::gpu::{GpuContext, Profiler};
 use crate::hash::HashVariant;
 
@@ -18,14 +18,6 @@ pub struct HashDagScene {
     pub scene: GpuScene,
     /// The tables (edit it, then `scene.set_hash_root(&dag, dag.root())`).
     pub dag: GpuHashDag,
-}
-
-/// Buckets per table for a DAG of `words` svdag32 words: about 64 items per bucket over all
-/// nine tables (chains of one or two slabs for the largest table), at least 64.
-pub fn buckets_for(words: usize) -> u32 {
-    ((words / 256).max(64) as u32)
-        .next_power_of_two()
-        .min(1 << 22)
 }
 
 impl HashDagScene {

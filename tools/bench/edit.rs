@@ -14,13 +14,13 @@ use clap::Args;
 use serde::Serialize;
 use voxdag::dag::Svdag;
 use voxdag::edit::cpu::{CpuEditor, HashDag};
-use voxdag::edit::gpu::{GpuDagError, GpuHashDag, GpuHashDagConfig};
+use voxdag::edit::gpu::{buckets_for, GpuDagError, GpuHashDag, GpuHashDagConfig};
 use voxdag::edit::tool::{CopyParams, Shape, Tool};
 use voxdag::gpu::{GpuContext, GpuOptions, Profiler};
 use voxdag::scene::{self, morton, ImportOptions};
 
 use super::{scene_path, write_outputs};
-use crate::edit::{buckets_for, tool_name, TableArg};
+use crate::edit::{tool_name, TableArg};
 
 /// Arguments of `voxdag bench edit`.
 #[derive(Args)]
@@ -321,7 +321,7 @@ fn replay_gpu(
     replay: &Replay,
     mut profiler: Option<&mut Profiler>,
 ) -> Result<ReplayRow> {
-    let config = GpuHashDagConfig::new(table.variant(), buckets_for(svdag));
+    let config = GpuHashDagConfig::new(table.variant(), buckets_for(svdag.words.len()));
     let mut hd = GpuHashDag::load(ctx, &config, svdag, None)?;
     let before = live_bytes(&hd.gc(None)?.live_per_table);
     let mut row = ReplayRow {
@@ -393,7 +393,7 @@ fn bytes_target(
     table: TableArg,
     args: &BenchEditArgs,
 ) -> Result<BytesRow> {
-    let config = GpuHashDagConfig::new(table.variant(), buckets_for(svdag))
+    let config = GpuHashDagConfig::new(table.variant(), buckets_for(svdag.words.len()))
         .with_undo_depth(args.random_undo_depth);
     let mut hd = GpuHashDag::load(ctx, &config, svdag, None)?;
     let points = surface_points(codes, args.random_edits.max(1));

@@ -10,11 +10,10 @@ use std::sync::Arc;
 
 use anyhow::{anyhow, Result};
 use clap::ValueEnum;
-use voxdag::edit::gpu::{GpuHashDag, GpuHashDagConfig};
+use voxdag::edit::gpu::{buckets_for, GpuHashDag, GpuHashDagConfig};
 use voxdag::gpu::{GpuContext, Profiler};
 use voxdag::hash::HashVariant;
 use voxdag::render::gpu::GpuRenderer;
-use voxdag::render::hash_scene::buckets_for;
 
 use super::{pack_colour, Document, RenderMode, Running};
 use crate::edit::TableArg;
