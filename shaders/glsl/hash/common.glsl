@@ -40,8 +40,12 @@ layout(buffer_reference, std430, buffer_reference_align = 8) coherent buffer Has
     uint64_t w[];
 };
 
+// A mixed batch's per-size counts, read once by hash_count: every read through a buffer
+// address is a loop over the SIMD lanes on lavapipe, and hash_select needs them per item.
+uint g_mixed_counts[HASH_MIXED_SIZES];
+
 // Items of the batch: push.count, or in a mixed batch the sum of its sizes' counts, which an
-// earlier pass wrote at count_at.
+// earlier pass wrote at count_at. Call before hash_select.
 uint hash_count() {
     if (!hash_mixed()) {
         return pc.batch.count;
@@ -49,7 +53,8 @@ uint hash_count() {
     HashWords counts = HashWords(pc.batch.count_at);
     uint total = 0u;
     for (uint s = 0u; s < HASH_MIXED_SIZES; ++s) {
-        total += counts.w[s];
+        g_mixed_counts[s] = counts.w[s];
+        total += g_mixed_counts[s];
     }
     return total;
 }
@@ -64,12 +69,13 @@ uint hash_select(uint i) {
     if (!hash_mixed()) {
         return i;
     }
-    HashWords counts = HashWords(pc.batch.count_at);
+    // Unrolled, with constant indices: no loads, no dynamic register indexing.
     uint s = 0u;
-    for (; s + 1u < HASH_MIXED_SIZES; ++s) {
-        uint n = counts.w[s];
-        if (i < n) break;
-        i -= n;
+    for (uint k = 0u; k + 1u < HASH_MIXED_SIZES; ++k) {
+        if (s == k && i >= g_mixed_counts[k]) {
+            i -= g_mixed_counts[k];
+            s = k + 1u;
+        }
     }
     push = HashEntries(pc.batch.mixed).entry[s];
     ITEM_WORDS = push.item_words;

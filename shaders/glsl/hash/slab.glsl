@@ -70,11 +70,44 @@ uint hash_find_in_slab_single(HashWords words, uint slab, uint item[HASH_MAX_ITE
     return HASH_MISS;
 }
 
+// Four 64-bit prefixes of an Atomic64 slab per load (from the slab's second 64-bit word).
+layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer HashPrefixes4 {
+    u64vec4 v[];
+};
+
+// One lane alone, Atomic64 with 64-bit prefixes: the prefixes read four at a time (a load
+// through a buffer address is a loop over the SIMD lanes on lavapipe: 8 per slab instead of
+// 32). Inserts claim the lowest empty slot and only GC empties one (HASH_FLAG_HOLES), so
+// without holes the items are a prefix of the slab and an empty prefix ends the scan (and the
+// chain: a slab gets a successor only once full).
+uint hash_find_in_slab_atomic64_single(uint64_t slab_addr, uint slab,
+                                       uint item[HASH_MAX_ITEM_WORDS]) {
+    HashWords words = HashWords(slab_addr);
+    HashPrefixes4 prefixes = HashPrefixes4(slab_addr + 8ul);
+    uint64_t prefix = packUint2x32(uvec2(item[0], item[1]));
+    bool holes = (push.flags & HASH_FLAG_HOLES) != 0u;
+    for (uint g = 0u; g < HASH_SLAB_SLOTS / 4u; ++g) {
+        u64vec4 p = prefixes.v[g];
+        for (uint k = 0u; k < 4u; ++k) {
+            if (p[k] == prefix && hash_slot_equals(words, 4u * g + k, item, 2u)) {
+                return (slab << 5u) | (4u * g + k);
+            }
+        }
+        if (!holes && any(equal(p, u64vec4(0ul)))) {
+            break;
+        }
+    }
+    return HASH_MISS;
+}
+
 // Handle of `item` in the slab at `slab_addr` (index `slab`), or HASH_MISS. Team-uniform.
 uint hash_find_in_slab(uint64_t slab_addr, uint slab, uint item[HASH_MAX_ITEM_WORDS], uint sec) {
     HashWords words = HashWords(slab_addr);
     if (TEAM == 1u && VARIANT != HASH_ATOMIC64) {
         return hash_find_in_slab_single(words, slab, item, sec);
+    }
+    if (TEAM == 1u && hash_prefix64()) {
+        return hash_find_in_slab_atomic64_single(slab_addr, slab, item);
     }
     uint occupancy = VARIANT == HASH_ATOMIC64 ? 0u : words.w[HASH_SLAB_OCCUPANCY];
     uint64_t prefix = hash_prefix64() ? packUint2x32(uvec2(item[0], item[1])) : 0ul;
