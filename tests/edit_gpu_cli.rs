@@ -222,3 +222,59 @@ fn bench_edit_times_unprofiled_and_profiles_a_second_run() {
         .unwrap()
         .contains("profiled ms total"));
 }
+
+/// `voxdag bench edit --materials 4` on the bundled Avocado (colours quantized into 4
+/// materials): the paint replay changes the scene, and every GPU replay leaves the same item
+/// bytes as the CPU reference editor (the two editors build the same DAG).
+#[test]
+fn bench_edit_with_materials_paints_and_matches_the_cpu_editor() {
+    let dir = tempfile::tempdir().unwrap();
+    let avocado = common::repo().join("assets/avocado/Avocado.gltf");
+    let (json, md) = (dir.path().join("e.json"), dir.path().join("e.md"));
+    run(&[
+        "--quiet",
+        "bench",
+        "edit",
+        "--scenes",
+        path(&avocado),
+        "--resolution",
+        "64",
+        "--tables",
+        "atomic64,accel8",
+        "--random-edits",
+        "0",
+        "--long-replay",
+        "10",
+        "--materials",
+        "4",
+        "--json",
+        path(&json),
+        "--markdown",
+        path(&md),
+    ]);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(report["materials"], 4, "{report}");
+    let rows = report["replays"].as_array().unwrap();
+    for replay in ["spheres", "copy", "paint", "long spheres"] {
+        let of = |engine: &str| {
+            rows.iter()
+                .find(|r| r["engine"] == engine && r["replay"] == replay)
+                .unwrap_or_else(|| panic!("{replay} on {engine}: {report}"))
+        };
+        let cpu = of("cpu");
+        assert_ne!(
+            cpu["dag_bytes_after"], cpu["dag_bytes_before"],
+            "{replay} changes the scene"
+        );
+        for table in ["atomic64", "accel8"] {
+            let gpu = of(table);
+            assert_eq!(gpu["status"], "ok", "{gpu}");
+            assert_eq!(gpu["dag_bytes_before"], cpu["dag_bytes_before"], "{gpu}");
+            assert_eq!(gpu["dag_bytes_after"], cpu["dag_bytes_after"], "{gpu}");
+        }
+    }
+    assert!(std::fs::read_to_string(&md)
+        .unwrap()
+        .contains("materials: colours quantized to at most 4"));
+}

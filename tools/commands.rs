@@ -455,7 +455,7 @@ impl EncodedSummary {
 
 /// `--materials K`: the DAG's colours quantized into a palette of at most `k` entries
 /// (`docs/materials.md`); a scene without colours gets one white material.
-fn quantize_materials(dag: &Svdag, k: u32) -> Result<Materials> {
+pub(crate) fn quantize_materials(dag: &Svdag, k: u32) -> Result<Materials> {
     let start = Instant::now();
     let materials = if dag.colors.is_empty() {
         Materials::new(vec![0xffff_ffff], vec![0; dag.voxel_count() as usize])?

@@ -12,6 +12,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::Args;
 use serde::Serialize;
+use voxdag::attr::materials::Materials;
 use voxdag::dag::Svdag;
 use voxdag::edit::cpu::{CpuEditor, HashDag};
 use voxdag::edit::gpu::{buckets_for, GpuDagError, GpuHashDag, GpuHashDagConfig};
@@ -20,6 +21,7 @@ use voxdag::gpu::{GpuContext, GpuOptions, Profiler};
 use voxdag::scene::{self, morton, ImportOptions};
 
 use super::{scene_path, write_outputs};
+use crate::commands::quantize_materials;
 use crate::edit::{tool_name, TableArg};
 
 /// Arguments of `voxdag bench edit`.
@@ -44,6 +46,11 @@ pub struct BenchEditArgs {
     /// made, which the short replays' first edits hide; 0 skips it.
     #[arg(long, default_value_t = 200)]
     long_replay: usize,
+    /// Materials: the scenes' colours quantized into a palette of at most this many (1..=16,
+    /// as `build --materials`), so leaves carry 4-bit ids and the paint replay changes them;
+    /// 0: geometry only. The bytes target stays geometry only.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=16))]
+    materials: u32,
     /// Random edits of the bytes target (first scene, first table layout); 0 skips it.
     #[arg(long, default_value_t = 1000)]
     random_edits: usize,
@@ -143,6 +150,8 @@ struct BytesRow {
 #[derive(Serialize)]
 struct Report {
     resolution: u32,
+    /// Palette size of the edited scenes (0: geometry only).
+    materials: u32,
     cpu_threads: usize,
     device: String,
     replays: Vec<ReplayRow>,
@@ -184,8 +193,9 @@ fn sphere(center: [f32; 3], radius: f32, add: bool) -> Tool {
 }
 
 /// The replays: spheres (radius 64..1024 at 8192, scaled) added and removed, a copy stroke,
-/// paint strokes, and `long` spheres (radius 128..512 at 8192) added and removed in turn.
-fn replays(codes: &[u64], resolution: u32, long: usize) -> Vec<Replay> {
+/// paint strokes (materials 1.. of a `palette`-entry palette in turn), and `long` spheres
+/// (radius 128..512 at 8192) added and removed in turn.
+fn replays(codes: &[u64], resolution: u32, long: usize, palette: u32) -> Vec<Replay> {
     let scale = resolution as f32 / 8192.0;
     let p = surface_points(codes, 64);
     let mut spheres = Vec::new();
@@ -213,7 +223,11 @@ fn replays(codes: &[u64], resolution: u32, long: usize) -> Vec<Replay> {
             Tool::Paint {
                 center: [0, 1, 2].map(|a| p[30][a] + t * (p[31][a] - p[30][a])),
                 radius: (32.0 * scale).max(2.0),
-                material: 1 + (k % 15) as u8,
+                material: if palette > 1 {
+                    1 + (k as u32 % (palette - 1)) as u8
+                } else {
+                    0
+                },
             }
         })
         .collect();
@@ -257,9 +271,14 @@ fn live_bytes(per_table: &[u64]) -> u64 {
         .sum()
 }
 
-fn run_cpu(scene: &str, svdag: &Svdag, replay: &Replay) -> Result<ReplayRow> {
-    let mut dag = HashDag::new(svdag.resolution, false)?;
-    let root = dag.insert_svdag(svdag, None)?;
+fn run_cpu(
+    scene: &str,
+    svdag: &Svdag,
+    materials: Option<&Materials>,
+    replay: &Replay,
+) -> Result<ReplayRow> {
+    let mut dag = HashDag::new(svdag.resolution, materials.is_some())?;
+    let root = dag.insert_svdag(svdag, materials.map(|m| m.ids.as_slice()))?;
     let before = dag.item_bytes();
     let mut editor = CpuEditor::new(dag, root, 64);
     let mut times = Vec::new();
@@ -294,15 +313,24 @@ fn run_gpu(
     ctx: &Arc<GpuContext>,
     scene: &str,
     svdag: &Svdag,
+    materials: Option<&Materials>,
     table: TableArg,
     replay: &Replay,
 ) -> Result<ReplayRow> {
-    let mut row = replay_gpu(ctx, scene, svdag, table, replay, None)?;
+    let mut row = replay_gpu(ctx, scene, svdag, materials, table, replay, None)?;
     if row.status != "ok" {
         return Ok(row);
     }
     let mut profiler = Profiler::new(ctx)?;
-    let profiled = replay_gpu(ctx, scene, svdag, table, replay, Some(&mut profiler))?;
+    let profiled = replay_gpu(
+        ctx,
+        scene,
+        svdag,
+        materials,
+        table,
+        replay,
+        Some(&mut profiler),
+    )?;
     row.profiled_ms_total = Some(profiled.edit_ms_total);
     row.kernels_ms = profiled.kernels_ms;
     if let (Some(per_edit), Some(p)) = (&mut row.per_edit, profiled.per_edit) {
@@ -317,12 +345,16 @@ fn replay_gpu(
     ctx: &Arc<GpuContext>,
     scene: &str,
     svdag: &Svdag,
+    materials: Option<&Materials>,
     table: TableArg,
     replay: &Replay,
     mut profiler: Option<&mut Profiler>,
 ) -> Result<ReplayRow> {
     let config = GpuHashDagConfig::new(table.variant(), buckets_for(svdag.words.len()));
-    let mut hd = GpuHashDag::load(ctx, &config, svdag, None)?;
+    let mut hd = match materials {
+        Some(m) => GpuHashDag::load_materials(ctx, &config, svdag, m, None)?,
+        None => GpuHashDag::load(ctx, &config, svdag, None)?,
+    };
     let before = live_bytes(&hd.gc(None)?.live_per_table);
     let mut row = ReplayRow {
         scene: scene.into(),
@@ -458,6 +490,7 @@ pub fn bench_edit(args: &BenchEditArgs) -> Result<()> {
     let ctx = GpuContext::new(&GpuOptions::default())?;
     let mut report = Report {
         resolution: args.resolution,
+        materials: args.materials,
         cpu_threads: rayon::current_num_threads(),
         device: ctx.info().name.clone(),
         replays: Vec::new(),
@@ -475,14 +508,19 @@ pub fn bench_edit(args: &BenchEditArgs) -> Result<()> {
         let codes = voxels.codes.clone();
         let mut svdag = Svdag::from_voxels(&voxels)?;
         drop(voxels);
+        let materials = match args.materials {
+            0 => None,
+            k => Some(quantize_materials(&svdag, k)?),
+        };
         svdag.colors.clear();
-        for replay in replays(&codes, svdag.resolution, args.long_replay) {
-            let cpu = run_cpu(name, &svdag, &replay)?;
+        let palette = materials.as_ref().map_or(16, |m| m.palette.len() as u32);
+        for replay in replays(&codes, svdag.resolution, args.long_replay, palette) {
+            let cpu = run_cpu(name, &svdag, materials.as_ref(), &replay)?;
             let cpu_ms = cpu.edit_ms_total;
             report.replays.push(cpu);
             for &table in &args.tables {
                 eprintln!("  {} on {}", replay.name, table.variant().name());
-                let mut row = run_gpu(&ctx, name, &svdag, table, &replay)?;
+                let mut row = run_gpu(&ctx, name, &svdag, materials.as_ref(), table, &replay)?;
                 if row.status == "ok" {
                     row.vs_cpu = Some(row.edit_ms_total / cpu_ms.max(1e-9));
                 }
@@ -503,10 +541,14 @@ pub fn bench_edit(args: &BenchEditArgs) -> Result<()> {
 
 fn markdown(report: &Report) -> String {
     let mut md = format!(
-        "GPU: {}; CPU reference editor on {} threads; resolution {}^3.\n\n| scene | replay | engine | edits | edit ms total | max | profiled ms total | {} | temp SVO max KiB | DAG KiB before | after | / CPU | per edit: submits / waits / passes |\n|---|---|---|---|---|---|---|{}---|---|---|---|---|\n",
+        "GPU: {}; CPU reference editor on {} threads; resolution {}^3; {}.\n\n| scene | replay | engine | edits | edit ms total | max | profiled ms total | {} | temp SVO max KiB | DAG KiB before | after | / CPU | per edit: submits / waits / passes |\n|---|---|---|---|---|---|---|{}---|---|---|---|---|\n",
         report.device,
         report.cpu_threads,
         report.resolution,
+        match report.materials {
+            0 => "geometry only".to_string(),
+            k => format!("materials: colours quantized to at most {k}"),
+        },
         GROUPS.join(" ms | ") + " ms",
         "---|".repeat(GROUPS.len()),
     );
