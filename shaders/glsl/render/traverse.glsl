@@ -348,9 +348,9 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     ivec3 clip_lo = ivec3(0);
     ivec3 clip_hi = ivec3(n);
     uint shifts = 0u;
-    // The root depth of the innermost translated subtree (none: never reached).
-    uint shift_depth = TRAVERSE_MAX_FRAMES;
-    bool leave_shift = false;
+    // The root frame depth of the innermost translated subtree, 0 outside them: the advance
+    // loop stops when it would pop this frame, like the root frame's.
+    uint shift_depth = 0u;
     ivec3 sh_cell0 = ivec3(0);
     uint sh_entry0 = 0u;
     uint sh_entry1 = 0u;
@@ -371,13 +371,14 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     for (;;) {
         for (;;) {
             if (todo == 0u) {
-                if (depth == 0u) {
+#if defined(TSVDAG_TRANSLATIONS)
+                // Done with the root frame, or leaving a translated subtree (the outer loop
+                // restores the outer frame): one test in the loop, told apart outside it.
+                if (depth == shift_depth) {
                     break;
                 }
-#if defined(TSVDAG_TRANSLATIONS)
-                if (depth == shift_depth) {
-                    // Leaving a translated subtree: the outer loop restores the outer frame.
-                    leave_shift = true;
+#else
+                if (depth == 0u) {
                     break;
                 }
 #endif
@@ -449,11 +450,10 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
         }
         if (!fetch) {
 #if defined(TSVDAG_TRANSLATIONS)
-            if (leave_shift) {
-                // Back to the frame that holds the translated subtree's root: the outer
-                // cursor is its cell less the outer base, the clip box the intersection of
-                // the outer cells; the inner loop then pops that frame as usual.
-                leave_shift = false;
+            if (!found && depth != 0u) {
+                // Leaving a translated subtree, back to the frame that holds its root: the
+                // outer cursor is its cell less the outer base, the clip box the intersection
+                // of the outer cells; the inner loop then pops that frame as usual.
                 ivec3 base1 = sh_cell0 + traverse_entry_shift(sh_entry0);
                 ivec3 cell1 = base1 + traverse_entry_offset(sh_entry1);
                 ivec3 base2 = cell1 + traverse_entry_shift(sh_entry1);
@@ -464,7 +464,7 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
                 shifts -= 1u;
                 clip_lo = ivec3(0);
                 clip_hi = ivec3(n);
-                shift_depth = TRAVERSE_MAX_FRAMES;
+                shift_depth = 0u;
                 if (shifts >= 1u) {
                     shift_depth = traverse_entry_depth(sh_entry0);
                     clip_lo = max(clip_lo, sh_cell0);
