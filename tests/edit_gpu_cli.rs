@@ -150,36 +150,43 @@ fn gpu_edit_report_profile_trace_and_render() {
     assert!(std::fs::read(&cpu).unwrap() == std::fs::read(&out).unwrap());
 }
 
+/// `voxdag bench edit` of the repository's `scene` at 64^3 without the bytes target, plus
+/// `extra` arguments: its JSON report and Markdown table.
+fn bench_edit(scene: &str, extra: &[&str]) -> (serde_json::Value, String) {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = common::repo().join(scene);
+    let (json, md) = (dir.path().join("e.json"), dir.path().join("e.md"));
+    let mut args = vec![
+        "--quiet",
+        "bench",
+        "edit",
+        "--scenes",
+        path(&scene),
+        "--resolution",
+        "64",
+        "--random-edits",
+        "0",
+        "--json",
+        path(&json),
+        "--markdown",
+        path(&md),
+    ];
+    args.extend_from_slice(extra);
+    run(&args);
+    let report = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    (report, std::fs::read_to_string(&md).unwrap())
+}
+
 /// `voxdag bench edit` times every GPU replay without the profiler (whose timestamps cost
 /// lavapipe about an edit) and profiles a second run for the kernel groups: each GPU row has
 /// both totals, kernel times and a pass count, and its ratio to the CPU editor comes from the
 /// unprofiled total.
 #[test]
 fn bench_edit_times_unprofiled_and_profiles_a_second_run() {
-    let dir = tempfile::tempdir().unwrap();
-    let teapot = common::repo().join("tests/data/teapot.obj");
-    let (json, md) = (dir.path().join("e.json"), dir.path().join("e.md"));
-    run(&[
-        "--quiet",
-        "bench",
-        "edit",
-        "--scenes",
-        path(&teapot),
-        "--resolution",
-        "64",
-        "--tables",
-        "accel32",
-        "--random-edits",
-        "0",
-        "--long-replay",
-        "20",
-        "--json",
-        path(&json),
-        "--markdown",
-        path(&md),
-    ]);
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let (report, md) = bench_edit(
+        "tests/data/teapot.obj",
+        &["--tables", "accel32", "--long-replay", "20"],
+    );
     let rows = report["replays"].as_array().unwrap();
     let cpu_total = |replay: &serde_json::Value| {
         rows.iter()
@@ -218,9 +225,7 @@ fn bench_edit_times_unprofiled_and_profiles_a_second_run() {
         let expected = total / cpu_total(&r["replay"]).max(1e-9);
         assert!((ratio - expected).abs() <= 1e-9 * expected.max(1.0), "{r}");
     }
-    assert!(std::fs::read_to_string(&md)
-        .unwrap()
-        .contains("profiled ms total"));
+    assert!(md.contains("profiled ms total"));
 }
 
 /// `voxdag bench edit --materials 4` on the bundled Avocado (colours quantized into 4
@@ -228,32 +233,17 @@ fn bench_edit_times_unprofiled_and_profiles_a_second_run() {
 /// bytes as the CPU reference editor (the two editors build the same DAG).
 #[test]
 fn bench_edit_with_materials_paints_and_matches_the_cpu_editor() {
-    let dir = tempfile::tempdir().unwrap();
-    let avocado = common::repo().join("assets/avocado/Avocado.gltf");
-    let (json, md) = (dir.path().join("e.json"), dir.path().join("e.md"));
-    run(&[
-        "--quiet",
-        "bench",
-        "edit",
-        "--scenes",
-        path(&avocado),
-        "--resolution",
-        "64",
-        "--tables",
-        "atomic64,accel8",
-        "--random-edits",
-        "0",
-        "--long-replay",
-        "10",
-        "--materials",
-        "4",
-        "--json",
-        path(&json),
-        "--markdown",
-        path(&md),
-    ]);
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let (report, md) = bench_edit(
+        "assets/avocado/Avocado.gltf",
+        &[
+            "--tables",
+            "atomic64,accel8",
+            "--long-replay",
+            "10",
+            "--materials",
+            "4",
+        ],
+    );
     assert_eq!(report["materials"], 4, "{report}");
     let rows = report["replays"].as_array().unwrap();
     for replay in ["spheres", "copy", "paint", "long spheres"] {
@@ -274,7 +264,5 @@ fn bench_edit_with_materials_paints_and_matches_the_cpu_editor() {
             assert_eq!(gpu["dag_bytes_after"], cpu["dag_bytes_after"], "{gpu}");
         }
     }
-    assert!(std::fs::read_to_string(&md)
-        .unwrap()
-        .contains("materials: colours quantized to at most 4"));
+    assert!(md.contains("materials: colours quantized to at most 4"));
 }
