@@ -48,7 +48,7 @@ pub struct BenchEditArgs {
     long_replay: usize,
     /// Materials: the scenes' colours quantized into a palette of at most this many (1..=16,
     /// as `build --materials`), so leaves carry 4-bit ids and the paint replay changes them;
-    /// 0: geometry only. The bytes target stays geometry only.
+    /// 0: geometry only (no paint replay). The bytes target stays geometry only.
     #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=16))]
     materials: u32,
     /// Random edits of the bytes target (first scene, first table layout); 0 skips it.
@@ -193,9 +193,10 @@ fn sphere(center: [f32; 3], radius: f32, add: bool) -> Tool {
 }
 
 /// The replays: spheres (radius 64..1024 at 8192, scaled) added and removed, a copy stroke,
-/// paint strokes (materials 1.. of a `palette`-entry palette in turn), and `long` spheres
-/// (radius 128..512 at 8192) added and removed in turn.
-fn replays(codes: &[u64], resolution: u32, long: usize, palette: u32) -> Vec<Replay> {
+/// paint strokes in a material scene (materials 1.. of its `palette`-entry palette in turn;
+/// `None`: geometry only, where paint changes nothing), and `long` spheres (radius 128..512 at
+/// 8192) added and removed in turn.
+fn replays(codes: &[u64], resolution: u32, long: usize, palette: Option<u32>) -> Vec<Replay> {
     let scale = resolution as f32 / 8192.0;
     let p = surface_points(codes, 64);
     let mut spheres = Vec::new();
@@ -217,20 +218,6 @@ fn replays(codes: &[u64], resolution: u32, long: usize, palette: u32) -> Vec<Rep
             })
         })
         .collect();
-    let paint = (0..16)
-        .map(|k| {
-            let t = k as f32 / 15.0;
-            Tool::Paint {
-                center: [0, 1, 2].map(|a| p[30][a] + t * (p[31][a] - p[30][a])),
-                radius: (32.0 * scale).max(2.0),
-                material: if palette > 1 {
-                    1 + (k as u32 % (palette - 1)) as u8
-                } else {
-                    0
-                },
-            }
-        })
-        .collect();
     let long_spheres = surface_points(codes, long)
         .into_iter()
         .enumerate()
@@ -248,11 +235,27 @@ fn replays(codes: &[u64], resolution: u32, long: usize, palette: u32) -> Vec<Rep
             name: "copy",
             tools: copy,
         },
-        Replay {
+    ];
+    if let Some(palette) = palette {
+        let paint = (0..16)
+            .map(|k| {
+                let t = k as f32 / 15.0;
+                Tool::Paint {
+                    center: [0, 1, 2].map(|a| p[30][a] + t * (p[31][a] - p[30][a])),
+                    radius: (32.0 * scale).max(2.0),
+                    material: if palette > 1 {
+                        1 + (k as u32 % (palette - 1)) as u8
+                    } else {
+                        0
+                    },
+                }
+            })
+            .collect();
+        out.push(Replay {
             name: "paint",
             tools: paint,
-        },
-    ];
+        });
+    }
     if !long_spheres.is_empty() {
         out.push(Replay {
             name: "long spheres",
@@ -513,7 +516,7 @@ pub fn bench_edit(args: &BenchEditArgs) -> Result<()> {
             k => Some(quantize_materials(&svdag, k)?),
         };
         svdag.colors.clear();
-        let palette = materials.as_ref().map_or(16, |m| m.palette.len() as u32);
+        let palette = materials.as_ref().map(|m| m.palette.len() as u32);
         for replay in replays(&codes, svdag.resolution, args.long_replay, palette) {
             let cpu = run_cpu(name, &svdag, materials.as_ref(), &replay)?;
             let cpu_ms = cpu.edit_ms_total;
