@@ -357,6 +357,7 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     uint sh_entry2 = 0u;
 #else
     const ivec3 base = ivec3(0);
+    const uint shift_depth = 0u;
 #endif
     // Two nested loops: the inner one advances (pops, slab tests, descents into the cheap
     // sub-block levels) until a lane needs a child fetch, has found its voxel or is done (or,
@@ -371,17 +372,11 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     for (;;) {
         for (;;) {
             if (todo == 0u) {
-#if defined(TSVDAG_TRANSLATIONS)
-                // Done with the root frame, or leaving a translated subtree (the outer loop
-                // restores the outer frame): one test in the loop, told apart outside it.
+                // Done with the root frame, or (S+A+T) leaving a translated subtree (the outer
+                // loop restores the outer frame): one test in the loop, told apart outside it.
                 if (depth == shift_depth) {
                     break;
                 }
-#else
-                if (depth == 0u) {
-                    break;
-                }
-#endif
                 depth -= 1u;
                 node = stack_node[depth];
                 uint st = stack_state[depth];
