@@ -329,12 +329,10 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     uvec2 leaf_bits = uvec2(0u);
     // Cube of frame d: base + (cursor & ~(size_d - 1)). `base` is 0 except inside a translated
     // subtree, whose frames are laid out from its translated origin (cursor local to it).
+    // The cube of the last child tested, the hit voxel when `found`: what the outer loop
+    // and the hit read back from it (octant, origin) is derived, not carried through the loops.
     uvec3 cursor = uvec3(0u);
     bool found = false;
-    float hit_t_near = 0.0;
-    uint hit_axis = 0u;
-    uint hit_c = 0u;
-    ivec3 hit_voxel = ivec3(0);
 #if defined(TSVDAG_TRANSLATIONS)
     // The second stack: one entry per translated subtree on the path, packed (see
     // `traverse_entry`): the depth of its root frame, its translation and where its cell lies
@@ -366,9 +364,11 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     // every iteration (masked), so the fetch, the format's costly part, runs once per descent
     // instead of once per iteration of the advance, and the advance carries only the clip box
     // and base of the translated-subtree state.
+    // Values a lane sets under its own mask inside a loop are carried from iteration to
+    // iteration (one masked select each, and a register or a spill), so what the outer loop
+    // and the hit need is derived from `cursor` after the advance loop (docs/pathtracing.md,
+    // "Fewer values carried through the loops").
     bool fetch = false;
-    uint fetch_c = 0u;
-    ivec3 fetch_child = ivec3(0);
     for (;;) {
         for (;;) {
             if (todo == 0u) {
@@ -422,10 +422,6 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
             cursor = child_local;
             if (depth + 1u == voxel_depth) {
                 found = true;
-                hit_t_near = t_near;
-                hit_axis = axis;
-                hit_c = c;
-                hit_voxel = child;
                 break;
             }
             stack_node[depth] = node;
@@ -433,8 +429,6 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
             if (depth + 1u <= leaf_depth) {
                 // Inner or leaf child: its pointer is followed by the outer loop.
                 fetch = true;
-                fetch_c = c;
-                fetch_child = child;
                 break;
             }
             // Sub-block c of the leaf in leaf_bits.
@@ -476,7 +470,12 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
             break;
         }
         fetch = false;
-        // Follow the pointer of world octant fetch_c of the frame at `depth`.
+        // Follow the pointer of world octant fetch_c of the frame at `depth`: the child's cube
+        // is the cursor's, its octant the cursor's bits at the child's size.
+        uint fetch_half = n >> (depth + 1u);
+        uvec3 fetch_bits = min(cursor & fetch_half, 1u);
+        uint fetch_c = fetch_bits.x | (fetch_bits.y << 1u) | (fetch_bits.z << 2u);
+        ivec3 fetch_child = base + ivec3(cursor);
         uint child_node = node;
         uint child_xform = xform;
         uint child_mask;
@@ -502,7 +501,7 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
             // Enter a translated subtree: its frames start at its translated origin; only
             // the voxels inside the cell (and any outer translated cell) count.
             uint half_size = n >> depth;
-            uint entry = traverse_entry(depth, shift, fetch_child - base);
+            uint entry = traverse_entry(depth, shift, ivec3(cursor));
             sh_cell0 = shifts == 0u ? fetch_child : sh_cell0;
             sh_entry0 = shifts == 0u ? entry : sh_entry0;
             sh_entry1 = shifts == 1u ? entry : sh_entry1;
@@ -519,6 +518,14 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     if (!found) {
         return false;
     }
+    // The hit voxel is the cursor's cube; its slab test again, on the same values, gives the
+    // same entry (inside a translated subtree the clipped box of a hit voxel is the voxel).
+    ivec3 hit_voxel = base + ivec3(cursor);
+    uvec3 hit_bits = cursor & 1u;
+    uint hit_c = hit_bits.x | (hit_bits.y << 1u) | (hit_bits.z << 2u);
+    float hit_t_near;
+    uint hit_axis;
+    traverse_slab_box(r, hit_voxel, hit_voxel + ivec3(1), hit_t_near, t_far, hit_axis);
     hit.t = max(hit_t_near, 0.0);
     hit.voxel = uvec3(hit_voxel);
     hit.normal = traverse_normal(dir, hit_t_near, hit_axis);
