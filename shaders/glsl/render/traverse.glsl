@@ -111,14 +111,10 @@ ivec3 traverse_normal(vec3 dir, float t_near, uint entry_axis) {
 
 #if defined(TSVDAG_TRANSLATIONS)
 // A translated-subtree entry packed into one word: the translation (|t| < 16 per axis, 5 bits
-// each, biased by 16), the depth of the subtree's root frame (5 bits) and the cell's offset
-// from the enclosing subtree's base (< 16 per axis: translated subtrees are at most 16^3; 4
-// bits each, unused for the outermost entry, whose cell is kept whole).
-uint traverse_entry(uint depth, ivec3 shift, ivec3 offset) {
+// each, biased by 16) and the depth of the subtree's root frame (5 bits).
+uint traverse_entry(uint depth, ivec3 shift) {
     uvec3 t = uvec3(shift + 16) & 31u;
-    uvec3 o = uvec3(offset) & 15u;
-    return t.x | (t.y << 5u) | (t.z << 10u) | (depth << 15u) | (o.x << 20u) | (o.y << 24u) |
-           (o.z << 28u);
+    return t.x | (t.y << 5u) | (t.z << 10u) | (depth << 15u);
 }
 
 // The translation of a packed entry.
@@ -131,9 +127,11 @@ uint traverse_entry_depth(uint e) {
     return (e >> 15u) & 31u;
 }
 
-// The cell offset of a packed entry from the enclosing subtree's base.
-ivec3 traverse_entry_offset(uint e) {
-    return ivec3(uvec3(e >> 20u, e >> 24u, e >> 28u) & 15u);
+// The cell of a translated subtree whose root frame has side `side`, seen from `outer_base`
+// (the base outside it): the cursor's cube at that size, since a subtree only changes the
+// cursor's bits below its side.
+ivec3 traverse_entry_cell(uvec3 cursor, uint side, ivec3 outer_base) {
+    return outer_base + ivec3(cursor & ~uvec3(side - 1u));
 }
 
 // Morton code of a point inside a 16^3 cell (4 bits per axis).
@@ -327,21 +325,22 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     uint todo = traverse_order(mask, r.mirror);
     uint depth = 0u;
     uvec2 leaf_bits = uvec2(0u);
-    // Cube of frame d: base + (cursor & ~(size_d - 1)). `base` is 0 except inside a translated
-    // subtree, whose frames are laid out from its translated origin (cursor local to it).
-    // The cube of the last child tested, the hit voxel when `found`: what the outer loop
-    // and the hit read back from it (octant, origin) is derived, not carried through the loops.
+    // Cube of frame d: base + (cursor & ~(size_d - 1)). `base` is 0 except inside translated
+    // subtrees, where it is the sum of their translations: entering one moves the base and
+    // keeps the cursor, whose bits below the subtree's side then walk it from its translated
+    // origin. The cursor is the cube of the last child tested, the hit voxel when `found`: what
+    // the outer loop and the hit read back from it (octant, origin) is derived, not carried
+    // through the loops.
     uvec3 cursor = uvec3(0u);
     bool found = false;
 #if defined(TSVDAG_TRANSLATIONS)
     // The second stack: one entry per translated subtree on the path, packed (see
-    // `traverse_entry`): the depth of its root frame, its translation and where its cell lies
-    // in the enclosing subtree; the outermost cell is kept whole (`sh_cell0`). Voxels outside
-    // the clip box (the intersection of the cells) are dropped, as the destructive translation
-    // says. A pop derives the rest: the cells and the outer bases follow from the outermost
-    // cell, the offsets and the translations. Every value live across the loops costs on
-    // every iteration (spills), and an entry written by selects costs one select per value, so
-    // the 21 values of three unpacked entries are 6 here.
+    // `traverse_entry`): the depth of its root frame and its translation. Voxels outside the
+    // clip box (the intersection of the subtrees' cells) are dropped, as the destructive
+    // translation says. Leaving a subtree derives the rest: the base less its translation, and
+    // each enclosing cell from the cursor (`traverse_entry_cell`). Every value live across the
+    // loops costs on every iteration (spills), and an entry written by selects costs one select
+    // per value, so the 12 values of three unpacked entries are 3 here.
     ivec3 base = ivec3(0);
     ivec3 clip_lo = ivec3(0);
     ivec3 clip_hi = ivec3(n);
@@ -349,7 +348,6 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     // The root frame depth of the innermost translated subtree, 0 outside them: the advance
     // loop stops when it would pop this frame, like the root frame's.
     uint shift_depth = 0u;
-    ivec3 sh_cell0 = ivec3(0);
     uint sh_entry0 = 0u;
     uint sh_entry1 = 0u;
     uint sh_entry2 = 0u;
@@ -440,29 +438,28 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
         if (!fetch) {
 #if defined(TSVDAG_TRANSLATIONS)
             if (!found && depth != 0u) {
-                // Leaving a translated subtree, back to the frame that holds its root: the
-                // outer cursor is its cell less the outer base, the clip box the intersection
-                // of the outer cells; the inner loop then pops that frame as usual.
-                ivec3 base1 = sh_cell0 + traverse_entry_shift(sh_entry0);
-                ivec3 cell1 = base1 + traverse_entry_offset(sh_entry1);
-                ivec3 base2 = cell1 + traverse_entry_shift(sh_entry1);
-                ivec3 cell = shifts == 1u ? sh_cell0
-                                          : (shifts == 2u ? cell1 : base2 + traverse_entry_offset(sh_entry2));
-                base = shifts == 1u ? ivec3(0) : (shifts == 2u ? base1 : base2);
-                cursor = uvec3(cell - base);
+                // Leaving a translated subtree, back to the frame that holds its root: the base
+                // less its translation, the clip box the intersection of the enclosing cells;
+                // the inner loop then pops that frame as usual.
+                uint inner = shifts == 1u ? sh_entry0 : (shifts == 2u ? sh_entry1 : sh_entry2);
+                base -= traverse_entry_shift(inner);
                 shifts -= 1u;
                 clip_lo = ivec3(0);
                 clip_hi = ivec3(n);
                 shift_depth = 0u;
                 if (shifts >= 1u) {
                     shift_depth = traverse_entry_depth(sh_entry0);
-                    clip_lo = max(clip_lo, sh_cell0);
-                    clip_hi = min(clip_hi, sh_cell0 + ivec3(n >> shift_depth));
+                    uint side = n >> shift_depth;
+                    ivec3 cell = traverse_entry_cell(cursor, side, ivec3(0));
+                    clip_lo = max(clip_lo, cell);
+                    clip_hi = min(clip_hi, cell + ivec3(side));
                 }
                 if (shifts >= 2u) {
                     shift_depth = traverse_entry_depth(sh_entry1);
-                    clip_lo = max(clip_lo, cell1);
-                    clip_hi = min(clip_hi, cell1 + ivec3(n >> shift_depth));
+                    uint side = n >> shift_depth;
+                    ivec3 cell = traverse_entry_cell(cursor, side, traverse_entry_shift(sh_entry0));
+                    clip_lo = max(clip_lo, cell);
+                    clip_hi = min(clip_hi, cell + ivec3(side));
                 }
                 continue;
             }
@@ -498,18 +495,17 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
         todo = traverse_order(child_mask, r.mirror);
 #if defined(TSVDAG_TRANSLATIONS)
         if (any(notEqual(shift, ivec3(0)))) {
-            // Enter a translated subtree: its frames start at its translated origin; only
-            // the voxels inside the cell (and any outer translated cell) count.
+            // Enter a translated subtree: its frames start at its translated origin (the base
+            // moves, the cursor stays); only the voxels inside the cell (and any outer
+            // translated cell) count.
             uint half_size = n >> depth;
-            uint entry = traverse_entry(depth, shift, ivec3(cursor));
-            sh_cell0 = shifts == 0u ? fetch_child : sh_cell0;
+            uint entry = traverse_entry(depth, shift);
             sh_entry0 = shifts == 0u ? entry : sh_entry0;
             sh_entry1 = shifts == 1u ? entry : sh_entry1;
             sh_entry2 = shifts == 2u ? entry : sh_entry2;
             clip_lo = max(clip_lo, fetch_child);
             clip_hi = min(clip_hi, fetch_child + ivec3(half_size));
-            base = fetch_child + shift;
-            cursor = uvec3(0u);
+            base += shift;
             shifts += 1u;
             shift_depth = depth;
         }
@@ -553,10 +549,11 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
         // voxels the translated subtree leaves in its cell.
         uint d0 = traverse_entry_depth(sh_entry0);
         uint side = n >> d0;
-        ivec3 origin0 = sh_cell0 + traverse_entry_shift(sh_entry0);
+        ivec3 cell0 = traverse_entry_cell(cursor, side, ivec3(0));
+        ivec3 origin0 = cell0 + traverse_entry_shift(sh_entry0);
         color += uint64_t(traverse_shifted_rank(
             stack_node[d0], (stack_state[d0] >> 24u) & 63u, root_level - d0,
-            origin0, sh_cell0, side, hit_voxel));
+            origin0, cell0, side, hit_voxel));
         hit.color_index = color;
         return true;
     }
