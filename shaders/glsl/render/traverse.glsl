@@ -314,9 +314,14 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     // descended, the visited one included as the lowest bit, << 16 | transform id << 24).
     // The aux word is what the format's child fetch takes (svdag32: the
     // child mask; SSVDAG/TSVDAG: the node header, so a descent does not load it again); leaf
-    // and sub-block frames keep their world child mask there.
+    // and sub-block frames keep their world child mask there. The frames above the leaf are
+    // written by the outer loop when it follows a pointer; the leaf frame's state stays in a
+    // register (`leaf_state`, its node is `node` while in its sub-blocks), so the advance loop
+    // writes no stack (an array written at a per-lane index costs a loop over the lanes on
+    // lavapipe, on every iteration).
     uint stack_node[TRAVERSE_MAX_FRAMES];
     uint stack_state[TRAVERSE_MAX_FRAMES];
+    uint leaf_state = 0u;
     uint node;
     uint xform;
     dag_root(root_level, node, xform);
@@ -376,8 +381,9 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
                     break;
                 }
                 depth -= 1u;
-                node = stack_node[depth];
-                uint st = stack_state[depth];
+                bool to_leaf = depth == leaf_depth;
+                node = to_leaf ? node : stack_node[depth];
+                uint st = to_leaf ? leaf_state : stack_state[depth];
                 aux = st & 0xffffu;
                 xform = (st >> 24u) & 63u;
                 // The frame keeps the ordinals it had left when it descended, the one it
@@ -422,14 +428,13 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
                 found = true;
                 break;
             }
-            stack_node[depth] = node;
-            stack_state[depth] = aux | (ordinals << 16u) | (xform << 24u);
             if (depth + 1u <= leaf_depth) {
                 // Inner or leaf child: its pointer is followed by the outer loop.
                 fetch = true;
                 break;
             }
             // Sub-block c of the leaf in leaf_bits.
+            leaf_state = aux | (ordinals << 16u) | (xform << 24u);
             uint block = (((c & 4u) != 0u ? leaf_bits.y : leaf_bits.x) >> (8u * (c & 3u))) & 0xffu;
             depth += 1u;
             aux = block;
@@ -473,6 +478,10 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
         uvec3 fetch_bits = min(cursor & fetch_half, 1u);
         uint fetch_c = fetch_bits.x | (fetch_bits.y << 1u) | (fetch_bits.z << 2u);
         ivec3 fetch_child = base + ivec3(cursor);
+        // The frame's ordinals left when it descended: the ones still to visit and the
+        // visited one, below them.
+        stack_node[depth] = node;
+        stack_state[depth] = aux | ((todo | (1u << (fetch_c ^ r.mirror))) << 16u) | (xform << 24u);
         uint child_node = node;
         uint child_xform = xform;
         uint child_mask;
@@ -551,18 +560,22 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
         uint side = n >> d0;
         ivec3 cell0 = traverse_entry_cell(cursor, side, ivec3(0));
         ivec3 origin0 = cell0 + traverse_entry_shift(sh_entry0);
-        color += uint64_t(traverse_shifted_rank(
-            stack_node[d0], (stack_state[d0] >> 24u) & 63u, root_level - d0,
-            origin0, cell0, side, hit_voxel));
+        // (A translated leaf's frame is the leaf frame, kept in registers.)
+        bool leaf0 = d0 == leaf_depth;
+        uint node0 = leaf0 ? node : stack_node[d0];
+        uint state0 = leaf0 ? leaf_state : stack_state[d0];
+        color += uint64_t(traverse_shifted_rank(node0, (state0 >> 24u) & 63u, root_level - d0,
+                                                origin0, cell0, side, hit_voxel));
         hit.color_index = color;
         return true;
     }
 #endif
-    // Rank inside the leaf: its voxels before Morton code (sub-block << 3 | voxel).
-    uint code = ((uint(findLSB((stack_state[leaf_depth] >> 16u) & 0xffu)) ^ r.mirror) << 3u) | hit_c;
+    // Rank inside the leaf (the hit's frame is one of its sub-blocks, so `node` is the leaf):
+    // its voxels before Morton code (sub-block << 3 | voxel).
+    uint code = ((uint(findLSB((leaf_state >> 16u) & 0xffu)) ^ r.mirror) << 3u) | hit_c;
 #if defined(DAG_HAS_LEAF_RANK)
     // The format's own index inside the leaf (hash DAG: the voxel's material).
-    uint rank = dag_leaf_rank(stack_node[leaf_depth], (stack_state[leaf_depth] >> 24u) & 63u, code);
+    uint rank = dag_leaf_rank(node, (leaf_state >> 24u) & 63u, code);
 #else
     uint rank = code < 32u ? uint(bitCount(leaf_bits.x & ((1u << code) - 1u)))
                            : uint(bitCount(leaf_bits.x)) +
