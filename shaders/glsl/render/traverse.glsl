@@ -84,6 +84,13 @@ void traverse_slab_box(TraverseRay r, ivec3 box_lo, ivec3 box_hi, out float t_ne
     t_far = min(min(far_t.x, far_t.y), far_t.z);
 }
 
+// The octant of the cube of side `half_size` whose corner is `cursor` inside its parent: the
+// cursor's bits at that size (the cursor is aligned to it).
+uint traverse_octant(uvec3 cursor, uint half_size) {
+    uvec3 b = min(cursor & half_size, 1u);
+    return b.x | (b.y << 1u) | (b.z << 2u);
+}
+
 // Slab test of the cube [pos, pos + size]^3.
 void traverse_slab(TraverseRay r, ivec3 pos, uint size, out float t_near, out float t_far,
                    out uint axis) {
@@ -474,9 +481,7 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
         fetch = false;
         // Follow the pointer of world octant fetch_c of the frame at `depth`: the child's cube
         // is the cursor's, its octant the cursor's bits at the child's size.
-        uint fetch_half = n >> (depth + 1u);
-        uvec3 fetch_bits = min(cursor & fetch_half, 1u);
-        uint fetch_c = fetch_bits.x | (fetch_bits.y << 1u) | (fetch_bits.z << 2u);
+        uint fetch_c = traverse_octant(cursor, n >> (depth + 1u));
         ivec3 fetch_child = base + ivec3(cursor);
         // The frame's ordinals left when it descended: the ones still to visit and the
         // visited one, below them.
@@ -526,11 +531,10 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     // The hit voxel is the cursor's cube; its slab test again, on the same values, gives the
     // same entry (inside a translated subtree the clipped box of a hit voxel is the voxel).
     ivec3 hit_voxel = base + ivec3(cursor);
-    uvec3 hit_bits = cursor & 1u;
-    uint hit_c = hit_bits.x | (hit_bits.y << 1u) | (hit_bits.z << 2u);
+    uint hit_c = traverse_octant(cursor, 1u);
     float hit_t_near;
     uint hit_axis;
-    traverse_slab_box(r, hit_voxel, hit_voxel + ivec3(1), hit_t_near, t_far, hit_axis);
+    traverse_slab(r, hit_voxel, 1u, hit_t_near, t_far, hit_axis);
     hit.t = max(hit_t_near, 0.0);
     hit.voxel = uvec3(hit_voxel);
     hit.normal = traverse_normal(dir, hit_t_near, hit_axis);
