@@ -11,8 +11,20 @@
 //   dst2     result_index (u32 per node)
 //   tables   the level's buffer addresses (EDIT_LEVEL_* in edit/common.glsl)
 //   counters 9 per-size item counts
+//
+// Shaped by lavapipe (docs/editing-gpu.md, "Speed, round 8"): every load or store through a
+// buffer address is a loop over the SIMD lanes, run for every child slot whether or not a
+// lane needs it, and an array indexed by a per-lane value is another such loop. So the child
+// loops are unrolled (constant indices), the addresses every node shares are read once per
+// invocation, a node's 8 child values come in 4 64-bit loads, and an item's words go straight
+// from registers to its size's buffer (no array of them).
 #include "edit/common.glsl"
 layout(local_size_x = 64) in;
+
+// A node's child values two at a time (one 64-bit load is one loop over the lanes, a uvec2 two).
+layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer WordPairs {
+    uint64_t p[];
+};
 
 void main() {
     Words input_words = Words(push.src);
@@ -22,33 +34,51 @@ void main() {
     Words counters = Words(push.counters);
     bool leaves = (push.flags & EDIT_FLAG_LEAVES) != 0u;
     bool materials = edit_materials();
+    // Read once: where the level below's pending results resolve (0: already resolved) and
+    // this level's slot per node.
+    uint64_t below_level = leaves ? 0ul : tables.a[EDIT_LEVEL_BELOW];
+    Addresses below_tables = Addresses(below_level);
+    Words below_slots = Words(0ul);
+    if (below_level != 0ul) {
+        below_slots = Words(below_tables.a[EDIT_LEVEL_SLOTS]);
+    }
+    Words slots = Words(tables.a[EDIT_LEVEL_SLOTS]);
+    uint missing = 0u;
     uint stride = gl_NumWorkGroups.x * 64u;
     for (uint i = gl_GlobalInvocationID.x; i < push.count; i += stride) {
-        uint item[10];
+        uint c[8];
+        uint lo = 0u;
+        uint hi = 0u;
         uint words = 0u;
         uint result = EDIT_EMPTY;
         bool decided = false;
+        // With materials: the leaf's 8 material words (nibble v = voxel v's material).
+        uint mats[8];
         if (leaves) {
             uint rec = materials ? 10u : 2u;
-            uint lo = input_words.w[i * rec];
-            uint hi = input_words.w[i * rec + 1u];
-            uint first = materials ? input_words.w[i * rec + 2u] & 15u : 0u;
-            bool one_material = true;
-            item[0] = lo;
-            item[1] = hi;
+            lo = input_words.w[i * rec];
+            hi = input_words.w[i * rec + 1u];
             words = 2u;
+            bool one_material = true;
+            uint first = 0u;
             if (materials) {
-                for (uint k = 2u; k < 10u; ++k) item[k] = 0u;
-                uint rank = 0u;
-                for (uint v = 0u; v < 64u; ++v) {
-                    bool set = ((v < 32u ? lo >> v : hi >> (v - 32u)) & 1u) != 0u;
-                    if (!set) continue;
-                    uint m = input_words.w[i * rec + 2u + v / 8u] >> (4u * (v % 8u)) & 15u;
-                    one_material = one_material && m == first;
-                    item[2u + rank / 8u] |= m << (4u * (rank % 8u));
-                    rank++;
+                [[unroll]] for (uint g = 0u; g < 8u; ++g) {
+                    mats[g] = input_words.w[i * rec + 2u + g];
                 }
-                words = 2u + (rank + 7u) / 8u;
+                first = mats[0] & 15u;
+                // The set voxels whose material differs from voxel 0's: a nibble-wise compare.
+                uint differ = 0u;
+                [[unroll]] for (uint g = 0u; g < 8u; ++g) {
+                    uint x = mats[g] ^ (first * 0x11111111u);
+                    x = (x | (x >> 1u)) & 0x55555555u;
+                    x = (x | (x >> 2u)) & 0x11111111u;
+                    uint set = ((g < 4u ? lo : hi) >> (8u * (g & 3u))) & 0xffu;
+                    [[unroll]] for (uint b = 0u; b < 8u; ++b) {
+                        differ |= (x >> (4u * b)) & (set >> b) & 1u;
+                    }
+                }
+                one_material = differ == 0u;
+                words = 2u + (uint(bitCount(lo)) + uint(bitCount(hi)) + 7u) / 8u;
             }
             if ((lo | hi) == 0u) {
                 decided = true;
@@ -57,49 +87,91 @@ void main() {
                 decided = true;
             }
         } else {
-            uint c[8];
-            uint64_t below_level = tables.a[EDIT_LEVEL_BELOW];
-            for (uint o = 0u; o < 8u; ++o) {
-                uint v = input_words.w[i * 8u + o];
+            [[unroll]] for (uint k = 0u; k < 4u; ++k) {
+                uvec2 pair = unpackUint2x32(WordPairs(push.src).p[i * 4u + k]);
+                c[2u * k] = pair.x;
+                c[2u * k + 1u] = pair.y;
+            }
+            [[unroll]] for (uint o = 0u; o < 8u; ++o) {
+                uint v = c[o];
                 if ((v & EDIT_TAG_MASK) == EDIT_TEMP) {
                     uint j = v & EDIT_INDEX_MASK;
                     v = below.w[j];
                     if ((v & EDIT_TAG_MASK) == EDIT_PENDING && below_level != 0ul) {
-                        v = edit_resolve(Addresses(below_level), j, v);
+                        uint r = v;
+                        v = edit_resolve_slot(below_tables, below_slots.w[j], r);
+                        missing += v == r ? 1u : 0u;
                     }
                 }
                 c[o] = v;
             }
             bool same = !edit_is_ptr(c[0]);
-            for (uint o = 1u; o < 8u; ++o) same = same && c[o] == c[0];
+            [[unroll]] for (uint o = 1u; o < 8u; ++o) same = same && c[o] == c[0];
             if (same) {
                 result = c[0];
                 decided = true;
             } else {
-                uint header = 0u;
-                words = 1u;
-                for (uint o = 0u; o < 8u; ++o) {
-                    if (c[o] == EDIT_EMPTY) continue;
-                    header |= 1u << o;
-                    if (edit_is_full(c[o])) {
-                        header |= 1u << (8u + o);
-                        item[words++] = c[o] & 15u;
-                    } else {
-                        item[words++] = c[o];
-                    }
+                // Header: child mask, and the full children's bits (their word is the material).
+                [[unroll]] for (uint o = 0u; o < 8u; ++o) {
+                    lo |= c[o] != EDIT_EMPTY ? 1u << o : 0u;
+                    lo |= edit_is_full(c[o]) ? 1u << (8u + o) : 0u;
                 }
-                item[0] = header;
+                words = 1u + uint(bitCount(lo & 0xFFu));
             }
         }
         if (!decided) {
             uint s = words - 2u;
             uint index = atomicAdd(counters.w[s], 1u);
             Words items = Words(tables.a[EDIT_LEVEL_ITEMS + s]);
-            for (uint k = 0u; k < words; ++k) items.w[index * words + k] = item[k];
-            Words(tables.a[EDIT_LEVEL_SLOTS]).w[i] = index;
+            uint at = index * words;
+            items.w[at] = lo;
+            if (leaves) {
+                items.w[at + 1u] = hi;
+                if (materials) {
+                    // The set voxels' materials in rank order, 8 nibbles a word: each group of 8
+                    // voxels adds its nibbles to a 64-bit queue, which gives out a word when full.
+                    uint64_t queue = 0ul;
+                    uint queued = 0u;
+                    uint next = at + 2u;
+                    [[unroll]] for (uint g = 0u; g < 8u; ++g) {
+                        uint set = ((g < 4u ? lo : hi) >> (8u * (g & 3u))) & 0xffu;
+                        uint packed = 0u;
+                        uint n = 0u;
+                        [[unroll]] for (uint b = 0u; b < 8u; ++b) {
+                            bool on = ((set >> b) & 1u) != 0u;
+                            packed |= on ? ((mats[g] >> (4u * b)) & 15u) << (4u * n) : 0u;
+                            n += on ? 1u : 0u;
+                        }
+                        queue |= uint64_t(packed) << (4u * queued);
+                        queued += n;
+                        if (queued >= 8u) {
+                            items.w[next] = uint(queue);
+                            next += 1u;
+                            queue >>= 32u;
+                            queued -= 8u;
+                        }
+                    }
+                    if (queued != 0u) {
+                        items.w[next] = uint(queue);
+                    }
+                }
+            } else {
+                uint next = at + 1u;
+                [[unroll]] for (uint o = 0u; o < 8u; ++o) {
+                    if (c[o] != EDIT_EMPTY) {
+                        items.w[next] = edit_is_full(c[o]) ? c[o] & 15u : c[o];
+                        next += 1u;
+                    }
+                }
+            }
+            slots.w[i] = index;
             result = EDIT_PENDING | s;
         }
         uint at = (push.flags & EDIT_FLAG_RESULT_INDEX) != 0u ? Words(push.dst2).w[i] : i;
         results.w[at] = result;
+    }
+    if (missing != 0u) {
+        // Children left pending (a pool ran out): counted once per invocation.
+        atomicAdd(Words(below_tables.a[EDIT_LEVEL_MISSING]).w[0], missing);
     }
 }

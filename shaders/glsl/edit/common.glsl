@@ -2,6 +2,7 @@
 // Twin of engine/edit/gpu.rs (value encoding) and engine/edit/item.rs (item format).
 #extension GL_EXT_buffer_reference : require
 #extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
+#extension GL_EXT_control_flow_attributes : require
 
 #include "shared/hash_layout.h"
 #include "gen/edit.glsl"
@@ -76,19 +77,15 @@ bool edit_is_full(uint v) {
     return (v & 0xFFFFFFF0u) == EDIT_FULL;
 }
 
-// The NodePtr of node i's pending result r (EDIT_PENDING | size) in the level whose address
-// buffer is `level`: the handle of its item's representative, once the level's inserts ran.
-// An item left without a handle (a pool ran out) keeps r and is counted as missing.
-uint edit_resolve(Addresses level, uint i, uint r) {
+// The NodePtr of a pending result r (EDIT_PENDING | size) whose item is entry `index` of its
+// size's buffer in the level whose address buffer is `level`: the handle of the item's
+// representative, once the level's inserts ran. An item left without a handle (a pool ran
+// out) gives r back: the caller counts it as missing and keeps r.
+uint edit_resolve_slot(Addresses level, uint index, uint r) {
     uint s = r & 15u;
-    uint index = Words(level.a[EDIT_LEVEL_SLOTS]).w[i];
     uint rep = Words(level.a[EDIT_LEVEL_REPS + s]).w[index];
     uint handle = Words(level.a[EDIT_LEVEL_HANDLES + s]).w[rep];
-    if (handle >= (1u << 28u)) {
-        atomicAdd(Words(level.a[EDIT_LEVEL_MISSING]).w[0], 1u);
-        return r;
-    }
-    return s << 28u | handle;
+    return handle >= (1u << 28u) ? r : s << 28u | handle;
 }
 
 // ---- reading items (twin of hash/common.glsl with the item size a run-time value) ----
@@ -143,16 +140,20 @@ uint edit_item_read(EditItem item, uint w) {
     return Words(item.slab).w[edit_item_word(item.words, item.slot, w)];
 }
 
-// The eight children of a stored node value (pointer, full or empty) at an inner level.
+// The eight children of a stored node value (pointer, full or empty) at an inner level. The
+// loops over the children are unrolled wherever an array holds them (here and in the passes
+// that call this): an array indexed by a loop counter is a loop over the SIMD lanes on
+// lavapipe at every access (docs/editing-gpu.md, "Speed, round 8"). Includers enable
+// GL_EXT_control_flow_attributes.
 void edit_children(uint v, out uint children[8]) {
     if (!edit_is_ptr(v)) {
-        for (uint o = 0u; o < 8u; ++o) children[o] = v;
+        [[unroll]] for (uint o = 0u; o < 8u; ++o) children[o] = v;
         return;
     }
     EditItem node = edit_item(v);
     uint header = edit_item_read(node, 0u);
     uint next = 1u;
-    for (uint o = 0u; o < 8u; ++o) {
+    [[unroll]] for (uint o = 0u; o < 8u; ++o) {
         if ((header >> o & 1u) == 0u) {
             children[o] = EDIT_EMPTY;
         } else {
@@ -225,7 +226,7 @@ bool edit_cube_all_inside(uvec3 p, uint side) {
     precise vec3 dlo = (vec3(p) + 0.5) - push.tool.xyz;
     precise vec3 dhi = (vec3(last) + 0.5) - push.tool.xyz;
     uvec3 far = p;
-    for (int a = 0; a < 3; ++a) {
+    [[unroll]] for (int a = 0; a < 3; ++a) {
         if (abs(dhi[a]) > abs(dlo[a])) far[a] = last[a];
     }
     return edit_voxel_inside(far);
@@ -315,7 +316,7 @@ uint edit_copy_source(uvec3 p) {
     precise vec3 rel = (vec3(p) + 0.5) - edit_param_vec3(EDIT_P_DEST);
     if (edit_param(EDIT_P_HAS_INVERSE) != 0u) {
         precise vec3 t;
-        for (uint r = 0u; r < 3u; ++r) {
+        [[unroll]] for (uint r = 0u; r < 3u; ++r) {
             uint at = EDIT_P_INVERSE + 3u * r;
             t[r] = edit_param_f(at) * rel.x + edit_param_f(at + 1u) * rel.y + edit_param_f(at + 2u) * rel.z;
         }

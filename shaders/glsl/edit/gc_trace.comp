@@ -53,7 +53,7 @@ void main() {
         if ((push.flags & EDIT_FLAG_GC_ROOTS) != 0u && !gc_mark(ptr)) continue;
         uint children[8];
         edit_children(ptr, children);
-        for (uint o = 0u; o < 8u; ++o) {
+        [[unroll]] for (uint o = 0u; o < 8u; ++o) {
             uint c = children[o];
             if (!edit_is_ptr(c) || !gc_mark(c)) continue;
             if ((push.flags & EDIT_FLAG_GC_LAST) != 0u) continue;

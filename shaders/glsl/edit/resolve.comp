@@ -10,11 +10,16 @@ layout(local_size_x = 64) in;
 void main() {
     Words results = Words(push.dst);
     Addresses tables = Addresses(push.tables);
+    Words slots = Words(tables.a[EDIT_LEVEL_SLOTS]);
     uint stride = gl_NumWorkGroups.x * 64u;
     for (uint i = gl_GlobalInvocationID.x; i < push.count; i += stride) {
         uint at = (push.flags & EDIT_FLAG_RESULT_INDEX) != 0u ? Words(push.dst2).w[i] : i;
         uint r = results.w[at];
         if ((r & EDIT_TAG_MASK) != EDIT_PENDING) continue;
-        results.w[at] = edit_resolve(tables, i, r);
+        uint v = edit_resolve_slot(tables, slots.w[i], r);
+        if (v == r) {
+            atomicAdd(Words(tables.a[EDIT_LEVEL_MISSING]).w[0], 1u);
+        }
+        results.w[at] = v;
     }
 }

@@ -20,7 +20,7 @@ uint claim_item_word(uint slot, uint w) {
 // Whether `slot` holds `item` (the caller checked the tag).
 bool claim_slot_equals(HashWords table, uint slot, uint item[HASH_MAX_ITEM_WORDS]) {
     for (uint w = 0u; w < ITEM_WORDS; ++w) {
-        if (table.w[claim_item_word(slot, w)] != item[w]) return false;
+        if (table.w[claim_item_word(slot, w)] != hash_item_word_at(item, w)) return false;
     }
     return true;
 }
@@ -45,7 +45,7 @@ uint claim_first_copy(uint item[HASH_MAX_ITEM_WORDS], uint h, uint i, bool claim
             }
             if (atomicCompSwap(table.w[slot], PROBE_EMPTY, PROBE_WRITING) == PROBE_EMPTY) {
                 for (uint w = 0u; w < ITEM_WORDS; ++w) {
-                    table.w[claim_item_word(slot, w)] = item[w];
+                    table.w[claim_item_word(slot, w)] = hash_item_word_at(item, w);
                 }
                 table.w[push.claim_slots + slot] = i;
                 // Publishes the copy (an atomic: lavapipe, the only single-lane user, orders

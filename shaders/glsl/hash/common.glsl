@@ -1,6 +1,7 @@
 // Slab hash tables: specialization constants, slab addressing and the item hash.
 // Twin of engine/hash/layout.rs. Include after shared/hash_layout.h.
 #extension GL_KHR_shader_subgroup_basic : require
+#extension GL_EXT_control_flow_attributes : require
 
 // Specialization constants shared by every hash pass.
 layout(local_size_x_id = 0) in;                     // workgroup size (a multiple of SUBGROUP_SIZE)
@@ -150,11 +151,25 @@ uint64_t hash_slab_address(uint64_t super_blocks, uint slab) {
          + uint64_t(local) * uint64_t(hash_slab_words() * 4u);
 }
 
+// Items live in register arrays indexed only by constants: an array indexed by a run-time
+// value (ITEM_WORDS differs per item in a mixed batch) is a loop over the SIMD lanes at every
+// access on lavapipe, so loops over an item's words are unrolled to HASH_MAX_ITEM_WORDS with
+// a test, or read a word through `hash_item_word_at`.
+
+// Word w of an item held in registers: one select per possible word.
+uint hash_item_word_at(uint item[HASH_MAX_ITEM_WORDS], uint w) {
+    uint v = 0u;
+    [[unroll]] for (uint k = 0u; k < HASH_MAX_ITEM_WORDS; ++k) {
+        v = k == w ? item[k] : v;
+    }
+    return v;
+}
+
 // Primary hash: murmur3-style mix of every word (twin of layout::hash_item).
 uint hash_item(uint item[HASH_MAX_ITEM_WORDS]) {
     uint h = HASH_SEED ^ ITEM_WORDS;
-    for (uint i = 0u; i < ITEM_WORDS; ++i) {
-        h = murmur_mix(h, item[i]);
+    [[unroll]] for (uint i = 0u; i < HASH_MAX_ITEM_WORDS; ++i) {
+        h = i < ITEM_WORDS ? murmur_mix(h, item[i]) : h;
     }
     return murmur_fmix32(h);
 }

@@ -25,12 +25,7 @@
 // Writes the item words the claim did not write, lanes in parallel.
 void write_item(HashWords slab, uint slot, uint item[HASH_MAX_ITEM_WORDS], uint first) {
     for (uint w = first + team_lane(); w < ITEM_WORDS; w += TEAM) {
-        uint v = 0u;
-        // Dynamic indexing of a register array: pick the word with a loop the compiler unrolls.
-        for (uint k = 0u; k < HASH_MAX_ITEM_WORDS; ++k) {
-            if (k == w) v = item[k];
-        }
-        slab.w[hash_item_word(slot, w)] = v;
+        slab.w[hash_item_word(slot, w)] = hash_item_word_at(item, w);
     }
 }
 

@@ -8,18 +8,25 @@ bool team_size_ok() {
     return TEAM == 1u || gl_SubgroupSize == SUBGROUP_SIZE;
 }
 
-// Loads an item (every lane the same words).
+// Loads an item (every lane the same words): ITEM_WORDS loads, each word put in place by
+// selects; the words past the item are zero.
 void hash_load_item(uint64_t items, uint i, out uint item[HASH_MAX_ITEM_WORDS]) {
     HashWords src = HashWords(items);
-    for (uint w = 0u; w < HASH_MAX_ITEM_WORDS; ++w) {
-        item[w] = w < ITEM_WORDS ? src.w[i * ITEM_WORDS + w] : 0u;
+    [[unroll]] for (uint k = 0u; k < HASH_MAX_ITEM_WORDS; ++k) {
+        item[k] = 0u;
+    }
+    for (uint w = 0u; w < ITEM_WORDS; ++w) {
+        uint x = src.w[i * ITEM_WORDS + w];
+        [[unroll]] for (uint k = 0u; k < HASH_MAX_ITEM_WORDS; ++k) {
+            item[k] = k == w ? x : item[k];
+        }
     }
 }
 
 // Whether `slot` of the slab holds exactly `item`, words from `first` on.
 bool hash_slot_equals(HashWords slab, uint slot, uint item[HASH_MAX_ITEM_WORDS], uint first) {
     for (uint w = first; w < ITEM_WORDS; ++w) {
-        if (slab.w[hash_item_word(slot, w)] != item[w]) return false;
+        if (slab.w[hash_item_word(slot, w)] != hash_item_word_at(item, w)) return false;
     }
     return true;
 }
