@@ -20,6 +20,12 @@ use crate::gpu::{shaders, Buffer, Commands, ComputePipeline, GpuContext, Profile
 /// Entries of a mixed batch (GLSL `HASH_MIXED_SIZES`).
 pub const MIXED_SIZES: usize = 9;
 
+/// Items each invocation of a mixed pass takes (grid stride): what an invocation does once
+/// (reading the nine counts, and lavapipe's start of each workgroup) then serves several
+/// items. 4 made bunny 1024^3's 600 large spheres ~7 % faster on lavapipe than 1 (2 and 8 no
+/// better; docs/editing-gpu.md, "Speed, round 8").
+const ITEMS_PER_INVOCATION: u32 = 4;
+
 /// The search-and-claim and claimed insert pipelines of mixed batches.
 pub struct MixedPasses {
     claim: ComputePipeline,
@@ -85,7 +91,7 @@ impl MixedPasses {
             ..HashPush::default()
         };
         let groups = bound
-            .div_ceil(self.items_per_group)
+            .div_ceil(self.items_per_group * ITEMS_PER_INVOCATION)
             .clamp(1, self.max_groups);
         for (name, pipeline) in [
             ("hash search and claim", &self.claim),
