@@ -126,6 +126,18 @@ fn gpu_edit_report_profile_trace_and_render() {
         .as_object()
         .unwrap()
         .contains_key("edit traverse"));
+    // Per edit the temporary SVO's entries and items per level (5 levels at 64^3), no more
+    // items than entries; the first sphere builds leaves.
+    for edit in edits {
+        let nodes = edit["temporary_nodes"].as_array().unwrap();
+        let items = edit["items"].as_array().unwrap();
+        assert_eq!((nodes.len(), items.len()), (5, 5));
+        assert!(nodes
+            .iter()
+            .zip(items)
+            .all(|(n, i)| i.as_u64() <= n.as_u64()));
+    }
+    assert!(edits[0]["temporary_nodes"][0].as_u64().unwrap() > 0);
     assert_eq!(json["unique_nodes_per_level"].as_array().unwrap().len(), 5);
     // Undo depth 1: two live roots; the final GC freed what the dropped roots held.
     assert!(json["gc"]["freed_items"].as_u64().unwrap() > 0);

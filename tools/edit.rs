@@ -102,6 +102,12 @@ struct EditTime {
     /// GPU milliseconds per pass name (`--profile`, GPU only).
     #[serde(skip_serializing_if = "Option::is_none")]
     kernels_ms: Option<BTreeMap<String, f64>>,
+    /// Temporary SVO entries per level, index = level (GPU only): the edit's size.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    temporary_nodes: Option<Vec<u32>>,
+    /// Items built per level before deduplication (GPU only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    items: Option<Vec<u32>>,
 }
 
 /// What `voxdag edit --report` writes.
@@ -305,6 +311,8 @@ fn edit_cpu(
                     tool: tool_name(&tool),
                     ms: start.elapsed().as_secs_f64() * 1e3,
                     kernels_ms: None,
+                    temporary_nodes: None,
+                    items: None,
                 });
             }
             Step::Undo => report.undos += editor.undo() as usize,
@@ -389,7 +397,8 @@ fn edit_gpu(
             Step::Edit(tool) => {
                 let from = profiler.as_ref().map_or(0, |p| p.passes().len());
                 let start = Instant::now();
-                hd.edit(&tool, profiler.as_mut())
+                let edit = hd
+                    .edit(&tool, profiler.as_mut())
                     .with_context(|| format!("{}:{line}", args.replay.display()))?;
                 let ms = start.elapsed().as_secs_f64() * 1e3;
                 report
@@ -400,6 +409,8 @@ fn edit_gpu(
                     tool: tool_name(&tool),
                     ms,
                     kernels_ms: profiler.as_ref().map(|p| kernel_times(p, from)),
+                    temporary_nodes: Some(edit.temporary_nodes),
+                    items: Some(edit.items),
                 });
             }
             Step::Undo => report.undos += hd.undo() as usize,
