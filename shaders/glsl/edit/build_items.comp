@@ -26,6 +26,11 @@ layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer Wor
     uint64_t p[];
 };
 
+// Leaf voxels 8g..8g+7 (a 2^3 sub-block) of the masks lo (voxels 0-31) and hi (32-63).
+uint leaf_byte(uint lo, uint hi, uint g) {
+    return ((g < 4u ? lo : hi) >> (8u * (g & 3u))) & 0xffu;
+}
+
 void main() {
     Words input_words = Words(push.src);
     Words below = Words(push.src2);
@@ -72,7 +77,7 @@ void main() {
                     uint x = mats[g] ^ (first * 0x11111111u);
                     x = (x | (x >> 1u)) & 0x55555555u;
                     x = (x | (x >> 2u)) & 0x11111111u;
-                    uint set = ((g < 4u ? lo : hi) >> (8u * (g & 3u))) & 0xffu;
+                    uint set = leaf_byte(lo, hi, g);
                     [[unroll]] for (uint b = 0u; b < 8u; ++b) {
                         differ |= (x >> (4u * b)) & (set >> b) & 1u;
                     }
@@ -134,7 +139,7 @@ void main() {
                     uint queued = 0u;
                     uint next = at + 2u;
                     [[unroll]] for (uint g = 0u; g < 8u; ++g) {
-                        uint set = ((g < 4u ? lo : hi) >> (8u * (g & 3u))) & 0xffu;
+                        uint set = leaf_byte(lo, hi, g);
                         uint packed = 0u;
                         uint n = 0u;
                         [[unroll]] for (uint b = 0u; b < 8u; ++b) {

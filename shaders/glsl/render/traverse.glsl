@@ -141,6 +141,12 @@ ivec3 traverse_entry_cell(uvec3 cursor, uint side, ivec3 outer_base) {
     return outer_base + ivec3(cursor & ~uvec3(side - 1u));
 }
 
+// The clip box [clip_lo, clip_hi) narrowed to the cube [cell, cell + side)^3.
+void traverse_clip(inout ivec3 clip_lo, inout ivec3 clip_hi, ivec3 cell, uint side) {
+    clip_lo = max(clip_lo, cell);
+    clip_hi = min(clip_hi, cell + ivec3(side));
+}
+
 // Morton code of a point inside a 16^3 cell (4 bits per axis).
 uint traverse_morton16(uvec3 p) {
     uint code = 0u;
@@ -462,16 +468,13 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
                 if (shifts >= 1u) {
                     shift_depth = traverse_entry_depth(sh_entry0);
                     uint side = n >> shift_depth;
-                    ivec3 cell = traverse_entry_cell(cursor, side, ivec3(0));
-                    clip_lo = max(clip_lo, cell);
-                    clip_hi = min(clip_hi, cell + ivec3(side));
+                    traverse_clip(clip_lo, clip_hi, traverse_entry_cell(cursor, side, ivec3(0)), side);
                 }
                 if (shifts >= 2u) {
                     shift_depth = traverse_entry_depth(sh_entry1);
                     uint side = n >> shift_depth;
-                    ivec3 cell = traverse_entry_cell(cursor, side, traverse_entry_shift(sh_entry0));
-                    clip_lo = max(clip_lo, cell);
-                    clip_hi = min(clip_hi, cell + ivec3(side));
+                    ivec3 outer_base = traverse_entry_shift(sh_entry0);
+                    traverse_clip(clip_lo, clip_hi, traverse_entry_cell(cursor, side, outer_base), side);
                 }
                 continue;
             }
@@ -517,8 +520,7 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
             sh_entry0 = shifts == 0u ? entry : sh_entry0;
             sh_entry1 = shifts == 1u ? entry : sh_entry1;
             sh_entry2 = shifts == 2u ? entry : sh_entry2;
-            clip_lo = max(clip_lo, fetch_child);
-            clip_hi = min(clip_hi, fetch_child + ivec3(half_size));
+            traverse_clip(clip_lo, clip_hi, fetch_child, half_size);
             base += shift;
             shifts += 1u;
             shift_depth = depth;
