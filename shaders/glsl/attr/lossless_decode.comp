@@ -21,7 +21,11 @@ layout(push_constant, std430) uniform Push { DECODE_PUSH_MEMBERS } push;
 void main() {
     DecodedColors out_colors = DecodedColors(push.out_colors);
     uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
-    for (uint i = gl_GlobalInvocationID.x; i < push.count; i += stride) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    uint i = gl_GlobalInvocationID.x;
+    if (i < push.count) for (;;) {
         out_colors.c[i] = lossless_color(push.chunk, i);
+        i += stride;
+        if (i >= push.count) break;
     }
 }

@@ -36,13 +36,15 @@ uint varbit_color(uint64_t chunk_words_address, uint index) {
     uint lo = words.w[2u + 2u * m];
     uint hi = m + 1u < macro_count ? words.w[4u + 2u * m] : block_count;
     // The last block whose first colour is <= local.
-    while (hi - lo > 1u) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    if (hi - lo > 1u) for (;;) {
         uint mid = (lo + hi) / 2u;
         if ((words.w[header + 2u * mid] & (VARBIT_MACRO_BLOCK_COLORS - 1u)) <= local) {
             lo = mid;
         } else {
             hi = mid;
         }
+        if (hi - lo <= 1u) break;
     }
     uint head = words.w[header + 2u * lo];
     uint color = words.w[header + 2u * lo + 1u];

@@ -50,7 +50,9 @@ void main() {
     Words slots = Words(tables.a[EDIT_LEVEL_SLOTS]);
     uint missing = 0u;
     uint stride = gl_NumWorkGroups.x * 64u;
-    for (uint i = gl_GlobalInvocationID.x; i < push.count; i += stride) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    uint i = gl_GlobalInvocationID.x;
+    if (i < push.count) for (;;) {
         uint c[8];
         uint lo = 0u;
         uint hi = 0u;
@@ -174,6 +176,8 @@ void main() {
         }
         uint at = (push.flags & EDIT_FLAG_RESULT_INDEX) != 0u ? Words(push.dst2).w[i] : i;
         results.w[at] = result;
+        i += stride;
+        if (i >= push.count) break;
     }
     if (missing != 0u) {
         // Children left pending (a pool ran out): counted once per invocation.

@@ -10,12 +10,16 @@ void main() {
     Words offsets = Words(push.src2);
     Words out_nodes = Words(push.dst);
     uint stride = gl_NumWorkGroups.x * 64u;
-    for (uint i = gl_GlobalInvocationID.x; i < push.count; i += stride) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    uint i = gl_GlobalInvocationID.x;
+    if (i < push.count) for (;;) {
         uint at = offsets.w[i];
         uint mask = words.w[at];
         uint next = at + 1u;
         for (uint o = 0u; o < 8u; ++o) {
             out_nodes.w[i * 8u + o] = (mask >> o & 1u) != 0u ? EDIT_TEMP | words.w[next++] : EDIT_EMPTY;
         }
+        i += stride;
+        if (i >= push.count) break;
     }
 }

@@ -21,7 +21,9 @@ void main() {
     uint c = (a + 2u) % 3u;
     uint n = dims[a];
     uint stride = gl_NumWorkGroups.x * 64u;
-    for (uint r = gl_GlobalInvocationID.x; r < push.count; r += stride) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    uint r = gl_GlobalInvocationID.x;
+    if (r < push.count) for (;;) {
         uint ub = r % dims[b];
         uint uc = r / dims[b];
         uint base = ub * strides[b] + uc * strides[c];
@@ -48,5 +50,7 @@ void main() {
             }
         }
         if (changed) atomicAdd(Words(push.counters).w[0], 1u);
+        r += stride;
+        if (r >= push.count) break;
     }
 }

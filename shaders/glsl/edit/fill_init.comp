@@ -13,11 +13,15 @@ void main() {
     uint start = edit_param(EDIT_P_START);
     uint root_level = edit_param(EDIT_P_ROOT_LEVEL);
     uint stride = gl_NumWorkGroups.x * 64u;
-    for (uint i = gl_GlobalInvocationID.x; i < push.count; i += stride) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    uint i = gl_GlobalInvocationID.x;
+    if (i < push.count) for (;;) {
         uvec3 p = lo + uvec3(i % dims.x, i / dims.x % dims.y, i / dims.x / dims.y);
         if (edit_voxel_inside(p) && edit_lookup(push.root, root_level, p) == EDIT_EMPTY) {
             atomicOr(Words(push.dst).w[i >> 5u], 1u << (i & 31u));
         }
         if (i == start) atomicOr(Words(push.dst2).w[i >> 5u], 1u << (i & 31u));
+        i += stride;
+        if (i >= push.count) break;
     }
 }

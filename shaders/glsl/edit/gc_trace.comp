@@ -47,18 +47,23 @@ void main() {
     Words next = Words(push.dst);
     Words counters = Words(push.counters);
     uint stride = gl_NumWorkGroups.x * 64u;
-    for (uint i = gl_GlobalInvocationID.x; i < push.count; i += stride) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    uint i = gl_GlobalInvocationID.x;
+    if (i < push.count) for (;;) {
         uint ptr = frontier.w[i];
         // Roots are distinct and the bits clear between collections: a false here is a bad root.
-        if ((push.flags & EDIT_FLAG_GC_ROOTS) != 0u && !gc_mark(ptr)) continue;
-        uint children[8];
-        edit_children(ptr, children);
-        [[unroll]] for (uint o = 0u; o < 8u; ++o) {
-            uint c = children[o];
-            if (!edit_is_ptr(c) || !gc_mark(c)) continue;
-            if ((push.flags & EDIT_FLAG_GC_LAST) != 0u) continue;
-            uint at = atomicAdd(counters.w[0], 1u);
-            if (at < push.capacity) next.w[at] = c;
+        if ((push.flags & EDIT_FLAG_GC_ROOTS) == 0u || gc_mark(ptr)) {
+            uint children[8];
+            edit_children(ptr, children);
+            [[unroll]] for (uint o = 0u; o < 8u; ++o) {
+                uint c = children[o];
+                if (!edit_is_ptr(c) || !gc_mark(c)) continue;
+                if ((push.flags & EDIT_FLAG_GC_LAST) != 0u) continue;
+                uint at = atomicAdd(counters.w[0], 1u);
+                if (at < push.capacity) next.w[at] = c;
+            }
         }
+        i += stride;
+        if (i >= push.count) break;
     }
 }

@@ -18,7 +18,9 @@ void main() {
     uint rec = materials ? 10u : 2u;
     uint stride = gl_NumWorkGroups.x * 64u;
     uint count = edit_count();
-    for (uint i = gl_GlobalInvocationID.x; i < count; i += stride) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    uint i = gl_GlobalInvocationID.x;
+    if (i < count) for (;;) {
         uvec4 e = entries.e[i];
         bool stored = edit_is_ptr(e.w);
         // The stored leaf (edit_lookup at level 0), found and its masks read once for the 64
@@ -33,9 +35,9 @@ void main() {
         }
         uint lo = 0u;
         uint hi = 0u;
-        for (uint w = 0u; w < 8u; ++w) {
+        [[unroll]] for (uint w = 0u; w < 8u; ++w) {
             uint mats = 0u;
-            for (uint k = 0u; k < 8u; ++k) {
+            [[unroll]] for (uint k = 0u; k < 8u; ++k) {
                 uint v = w * 8u + k;
                 uvec3 local = uvec3(v & 1u | (v >> 2u & 2u), v >> 1u & 1u | (v >> 3u & 2u), v >> 2u & 1u | (v >> 4u & 2u));
                 uint old;
@@ -64,5 +66,7 @@ void main() {
         }
         leaves.w[i * rec] = lo;
         leaves.w[i * rec + 1u] = hi;
+        i += stride;
+        if (i >= count) break;
     }
 }

@@ -18,8 +18,12 @@ void main() {
         if (n < 2u) continue;
         Words reps = Words(tables.a[EDIT_LEVEL_REPS + s]);
         Words handles = Words(tables.a[EDIT_LEVEL_HANDLES + s]);
-        for (uint i = gl_GlobalInvocationID.x; i < n; i += stride) {
+        // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+        uint i = gl_GlobalInvocationID.x;
+        if (i < n) for (;;) {
             if (reps.w[i] != i && handles.w[i] == HASH_MISS) handles.w[i] = HASH_INVALID;
+            i += stride;
+            if (i >= n) break;
         }
     }
 }

@@ -12,14 +12,19 @@ void main() {
     Addresses tables = Addresses(push.tables);
     Words slots = Words(tables.a[EDIT_LEVEL_SLOTS]);
     uint stride = gl_NumWorkGroups.x * 64u;
-    for (uint i = gl_GlobalInvocationID.x; i < push.count; i += stride) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    uint i = gl_GlobalInvocationID.x;
+    if (i < push.count) for (;;) {
         uint at = (push.flags & EDIT_FLAG_RESULT_INDEX) != 0u ? Words(push.dst2).w[i] : i;
         uint r = results.w[at];
-        if ((r & EDIT_TAG_MASK) != EDIT_PENDING) continue;
-        uint v = edit_resolve_slot(tables, slots.w[i], r);
-        if (v == r) {
-            atomicAdd(Words(tables.a[EDIT_LEVEL_MISSING]).w[0], 1u);
+        if ((r & EDIT_TAG_MASK) == EDIT_PENDING) {
+            uint v = edit_resolve_slot(tables, slots.w[i], r);
+            if (v == r) {
+                atomicAdd(Words(tables.a[EDIT_LEVEL_MISSING]).w[0], 1u);
+            }
+            results.w[at] = v;
         }
-        results.w[at] = v;
+        i += stride;
+        if (i >= push.count) break;
     }
 }

@@ -31,7 +31,9 @@ void main() {
     uint child_side = 2u << push.level;
     uint stride = gl_NumWorkGroups.x * 64u;
     uint count = edit_count();
-    for (uint i = gl_GlobalInvocationID.x; i < count; i += stride) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    uint i = gl_GlobalInvocationID.x;
+    if (i < count) for (;;) {
         uvec4 e = entries.e[i];
         uint children[8];
         edit_children(e.w, children);
@@ -80,5 +82,7 @@ void main() {
             uint last = min(first + n, push.capacity) - 1u;
             atomicMax(counters.w[1], min(last / 64u + 1u, 65535u));
         }
+        i += stride;
+        if (i >= count) break;
     }
 }

@@ -20,7 +20,9 @@
 void main() {
     // Single lanes only (TEAM == 1): the host makes this pipeline for no other team size.
     uint batch_count = hash_count();
-    for (uint k = team_index(); k < batch_count; k += team_count()) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    uint k = team_index();
+    if (k < batch_count) for (;;) {
         uint i = hash_select(k);
         HashWords handles = HashWords(push.handles);
         HashWords reps = HashWords(push.reps);
@@ -37,5 +39,7 @@ void main() {
         }
         handles.w[i] = found;
         reps.w[i] = i;
+        k += team_count();
+        if (k >= batch_count) break;
     }
 }

@@ -154,11 +154,15 @@ void probe_insert(uint i) {
 }
 
 void main() {
-    for (uint i = team_index(); i < push.count; i += team_count()) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    uint i = team_index();
+    if (i < push.count) for (;;) {
         if (TEAM == 1u) {
             probe_insert(i);
         } else {
             insert(i);
         }
+        i += team_count();
+        if (i >= push.count) break;
     }
 }

@@ -10,7 +10,9 @@ void main() {
     HashWords handles = HashWords(push.handles);
     uint pool_slabs = push.blocks * HASH_SLABS_PER_BLOCK;
     uint stride = gl_NumWorkGroups.x * gl_WorkGroupSize.x;
-    for (uint base = gl_WorkGroupID.x * gl_WorkGroupSize.x; base < push.count; base += stride) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    uint base = gl_WorkGroupID.x * gl_WorkGroupSize.x;
+    if (base < push.count) for (;;) {
         uint i = base + gl_LocalInvocationID.x;
         uint handle = i < push.count ? handles.w[i] : HASH_MISS;
         bool sentinel = handle == HASH_MISS || handle == HASH_INVALID;
@@ -36,5 +38,7 @@ void main() {
                 atomicAdd(GcCountersRef(push.items).bad_handles, bad_count);
             }
         }
+        base += stride;
+        if (base >= push.count) break;
     }
 }

@@ -118,7 +118,11 @@ void main() {
         HashStatus(push.status).subgroup_mismatch = gl_SubgroupSize;
         return;
     }
-    for (uint bucket = team_index(); bucket < push.buckets; bucket += team_count()) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    uint bucket = team_index();
+    if (bucket < push.buckets) for (;;) {
         sweep_bucket(bucket);
+        bucket += team_count();
+        if (bucket >= push.buckets) break;
     }
 }

@@ -60,13 +60,14 @@ uint claim_atomic64_single(uint64_t slab_addr, uint first, uint item[HASH_MAX_IT
 uint first_empty_atomic64(uint64_t slab_addr) {
     uint lo = 0u;
     uint hi = HASH_SLAB_SLOTS;
-    while (lo < hi) {
+    for (;;) {
         uint mid = (lo + hi) / 2u;
         if (slot_empty_atomic64(slab_addr, mid)) {
             hi = mid;
         } else {
             lo = mid + 1u;
         }
+        if (lo >= hi) break;
     }
     return lo;
 }
@@ -216,44 +217,52 @@ uint insert_item(uint item[HASH_MAX_ITEM_WORDS], uint h, uint rng) {
     return HASH_MISS;
 }
 
+// Inserts batch item `i` unless the search found it (a claimed batch: unless another copy
+// owns it); its handle, HASH_INVALID, or HASH_MISS (exhausted) goes to handles[i].
+void insert_batch_item(uint i) {
+    HashWords handles = HashWords(push.handles);
+    if (handles.w[i] != HASH_MISS) {
+        return;
+    }
+    uint item[HASH_MAX_ITEM_WORDS];
+    hash_load_item(push.items, i, item);
+    uint handle;
+    if (!hash_item_valid(item)) {
+        handle = HASH_INVALID;
+        if (team_leader()) {
+            atomicAdd(HashStatus(push.status).invalid_items, 1u);
+        }
+    } else {
+        uint h = hash_item(item);
+        if (TEAM == 1u && (push.flags & HASH_FLAG_CLAIMS) != 0u) {
+            // Only the owner of the item's first claim-table copy inserts it; the other
+            // copies name it as their representative.
+            uint owner = claim_first_copy(item, h, i, false);
+            HashWords(push.reps).w[i] = owner;
+            if (owner != i) {
+                handles.w[i] = HASH_INVALID;
+                return;
+            }
+        }
+        handle = insert_item(item, h, murmur_fmix32(push.seed ^ (i * 0x9e3779b9u)));
+    }
+    if (team_leader()) {
+        handles.w[i] = handle;
+    }
+}
+
 void main() {
     if (!team_size_ok()) {
         HashStatus(push.status).subgroup_mismatch = gl_SubgroupSize;
         return;
     }
-    uint first = team_index();
     uint stride = team_count();
     uint batch_count = hash_count();
-    for (uint k = first; k < batch_count; k += stride) {
-        uint i = hash_select(k);
-        HashWords handles = HashWords(push.handles);
-        if (handles.w[i] != HASH_MISS) {
-            continue;
-        }
-        uint item[HASH_MAX_ITEM_WORDS];
-        hash_load_item(push.items, i, item);
-        uint handle;
-        if (!hash_item_valid(item)) {
-            handle = HASH_INVALID;
-            if (team_leader()) {
-                atomicAdd(HashStatus(push.status).invalid_items, 1u);
-            }
-        } else {
-            uint h = hash_item(item);
-            if (TEAM == 1u && (push.flags & HASH_FLAG_CLAIMS) != 0u) {
-                // Only the owner of the item's first claim-table copy inserts it; the other
-                // copies name it as their representative.
-                uint owner = claim_first_copy(item, h, i, false);
-                HashWords(push.reps).w[i] = owner;
-                if (owner != i) {
-                    handles.w[i] = HASH_INVALID;
-                    continue;
-                }
-            }
-            handle = insert_item(item, h, murmur_fmix32(push.seed ^ (i * 0x9e3779b9u)));
-        }
-        if (team_leader()) {
-            handles.w[i] = handle;
-        }
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    uint k = team_index();
+    if (k < batch_count) for (;;) {
+        insert_batch_item(hash_select(k));
+        k += stride;
+        if (k >= batch_count) break;
     }
 }

@@ -13,7 +13,9 @@ void main() {
     HashWords handles = HashWords(push.handles);
     HashWords out_words = HashWords(push.items);
     uint pool_slabs = push.blocks * HASH_SLABS_PER_BLOCK;
-    for (uint i = gl_GlobalInvocationID.x; i < push.count; i += stride) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    uint i = gl_GlobalInvocationID.x;
+    if (i < push.count) for (;;) {
         uint handle = handles.w[i];
         uint slab = handle >> 5u;
         bool valid = handle != HASH_MISS && handle != HASH_INVALID && slab < pool_slabs;
@@ -21,5 +23,7 @@ void main() {
         for (uint w = 0u; w < ITEM_WORDS; ++w) {
             out_words.w[i * ITEM_WORDS + w] = valid ? words.w[hash_item_word(handle & 31u, w)] : 0u;
         }
+        i += stride;
+        if (i >= push.count) break;
     }
 }

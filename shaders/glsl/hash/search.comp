@@ -20,12 +20,16 @@ void main() {
     uint first = team_index();
     uint stride = team_count();
     HashWords handles = HashWords(push.handles);
-    for (uint i = first; i < push.count; i += stride) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    uint i = first;
+    if (i < push.count) for (;;) {
         uint item[HASH_MAX_ITEM_WORDS];
         hash_load_item(push.items, i, item);
         uint found = hash_item_valid(item) ? hash_search_chain(item, hash_item(item)) : HASH_MISS;
         if (team_leader()) {
             handles.w[i] = found;
         }
+        i += stride;
+        if (i >= push.count) break;
     }
 }

@@ -66,13 +66,15 @@ uint hash_find_in_slab_single(HashWords words, uint slab, uint item[HASH_MAX_ITE
     if (VARIANT == HASH_ACCEL8) {
         candidates &= hash_accel8_candidates(words, sec);
     }
-    while (candidates != 0u) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    if (candidates != 0u) for (;;) {
         uint slot = uint(findLSB(candidates));
         candidates &= candidates - 1u;
         if ((VARIANT != HASH_ACCEL32 || words.w[hash_hashes_offset() + slot] == sec)
             && hash_slot_equals(words, slot, item, 0u)) {
             return (slab << 5u) | slot;
         }
+        if (candidates == 0u) break;
     }
     return HASH_MISS;
 }
@@ -148,7 +150,9 @@ uint hash_search_chain(uint item[HASH_MAX_ITEM_WORDS], uint h) {
     uint link = heads.w[h % push.buckets];
     uint max_links = hash_allocated_slabs(push.status, false);
     uint found = HASH_MISS;
-    for (uint links = 0u; link != 0u && found == HASH_MISS; ++links) {
+    uint links = 0u;
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    if (link != 0u) for (;;) {
         if (links == max_links || hash_link_outside(link, push.blocks)) {
             if (team_leader()) hash_report_broken_chain(push.status);
             break;
@@ -156,6 +160,8 @@ uint hash_search_chain(uint item[HASH_MAX_ITEM_WORDS], uint h) {
         uint64_t addr = hash_slab_address(push.super_blocks, link - 1u);
         found = hash_find_in_slab(addr, link - 1u, item, sec);
         link = HashWords(addr).w[HASH_SLAB_NEXT];
+        links += 1u;
+        if (link == 0u || found != HASH_MISS) break;
     }
     return found;
 }

@@ -37,13 +37,15 @@ uint chunk_color(uint64_t i) {
     ColorTableRef starts = ColorTableRef(push.chunk_starts);
     uint lo = 0u;
     uint hi = push.chunk_count;
-    while (hi - lo > 1u) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    if (hi - lo > 1u) for (;;) {
         uint mid = lo + (hi - lo) / 2u;
         if (starts.v[mid] <= i) {
             lo = mid;
         } else {
             hi = mid;
         }
+        if (hi - lo <= 1u) break;
     }
     uint local = uint(i - starts.v[lo]); // chunks hold far fewer than 2^32 colours
     uint64_t chunk = push.color_words + 4ul * ColorTableRef(push.chunk_offsets).v[lo];

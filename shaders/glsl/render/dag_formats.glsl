@@ -187,13 +187,15 @@ void dag_child_masks(uint child, uint xform, uint child_level, out uint mask, ou
 uint64_t dag_voxels_before(uint node, uint xform, uint aux, uint level, uint c) {
     uint64_t sum = 0ul;
     uint before = dag_frame_mask(aux, xform) & ((1u << c) - 1u);
-    while (before != 0u) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    if (before != 0u) for (;;) {
         uint k = uint(findLSB(before));
         before &= before - 1u;
         uint so = xform_stored_octant(xform, k);
         uint below = aux & ((1u << (2u * so)) - 1u);
         uint at = node + 1u + uint(bitCount(below & 0x5555u)) + 2u * uint(bitCount(below & 0xaaaau));
         sum += dag_node_voxels(at);
+        if (before == 0u) break;
     }
     return sum;
 }
@@ -429,7 +431,8 @@ void dag_child_masks(uint child, uint xform, uint child_level, out uint mask, ou
 uint64_t dag_voxels_before(uint node, uint xform, uint aux, uint level, uint c) {
     uint64_t sum = 0ul;
     uint before = dag_frame_mask(aux, xform) & ((1u << c) - 1u);
-    while (before != 0u) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    if (before != 0u) for (;;) {
         uint k = uint(findLSB(before));
         before &= before - 1u;
         uint sib;
@@ -438,6 +441,7 @@ uint64_t dag_voxels_before(uint node, uint xform, uint aux, uint level, uint c) 
         uint at;
         dag_child(node, xform, aux, level, k, sib, sib_xform, sib_shift, at);
         sum += dag_child_count(sib, level - 1u, at, any(notEqual(sib_shift, ivec3(0))));
+        if (before == 0u) break;
     }
     return sum;
 }

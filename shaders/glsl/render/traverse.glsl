@@ -165,7 +165,8 @@ uint traverse_leaf_before(uint leaf, uint xform, ivec3 org, ivec3 lo, ivec3 hi, 
     uint count = 0u;
     for (uint sb = 0u; sb < 8u; sb++) {
         uint byte_mask = ((sb < 4u ? bits.x : bits.y) >> (8u * (sb & 3u))) & 0xffu;
-        while (byte_mask != 0u) {
+        // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+        if (byte_mask != 0u) for (;;) {
             uint vb = uint(findLSB(byte_mask));
             byte_mask &= byte_mask - 1u;
             ivec3 p = org + ivec3((uvec3(sb, sb >> 1u, sb >> 2u) & 1u) * 2u + (uvec3(vb, vb >> 1u, vb >> 2u) & 1u));
@@ -173,6 +174,7 @@ uint traverse_leaf_before(uint leaf, uint xform, ivec3 org, ivec3 lo, ivec3 hi, 
                 traverse_morton16(uvec3(p - cell)) < target) {
                 count += 1u;
             }
+            if (byte_mask == 0u) break;
         }
     }
     return count;

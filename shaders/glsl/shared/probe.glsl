@@ -25,10 +25,12 @@ uint probe_skip(uint64_t table, uint slots, uint slot, uint ready, inout uint pr
     ProbeTags tags = ProbeTags(table);
     uint mask = slots - 1u;
     tag = tags.w[slot];
-    while (tag != PROBE_EMPTY && tag != ready && probes < slots) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    if (tag != PROBE_EMPTY && tag != ready && probes < slots) for (;;) {
         slot = (slot + 1u) & mask;
         probes += 1u;
         tag = tags.w[slot];
+        if (tag == PROBE_EMPTY || tag == ready || probes >= slots) break;
     }
     return slot;
 }
