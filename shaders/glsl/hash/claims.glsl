@@ -19,8 +19,12 @@ uint claim_item_word(uint slot, uint w) {
 
 // Whether `slot` holds `item` (the caller checked the tag).
 bool claim_slot_equals(HashWords table, uint slot, uint item[HASH_MAX_ITEM_WORDS]) {
-    for (uint w = 0u; w < ITEM_WORDS; ++w) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    uint w = 0u; // an item has at least one word
+    for (;;) {
         if (table.w[claim_item_word(slot, w)] != hash_item_word_at(item, w)) return false;
+        w += 1u;
+        if (w >= ITEM_WORDS) break;
     }
     return true;
 }
@@ -44,8 +48,11 @@ uint claim_first_copy(uint item[HASH_MAX_ITEM_WORDS], uint h, uint i, bool claim
                 break;
             }
             if (atomicCompSwap(table.w[slot], PROBE_EMPTY, PROBE_WRITING) == PROBE_EMPTY) {
-                for (uint w = 0u; w < ITEM_WORDS; ++w) {
+                uint w = 0u; // the exit test at the end, as in claim_slot_equals
+                for (;;) {
                     table.w[claim_item_word(slot, w)] = hash_item_word_at(item, w);
+                    w += 1u;
+                    if (w >= ITEM_WORDS) break;
                 }
                 table.w[push.claim_slots + slot] = i;
                 // Publishes the copy (an atomic: lavapipe, the only single-lane user, orders

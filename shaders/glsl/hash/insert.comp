@@ -24,8 +24,12 @@
 
 // Writes the item words the claim did not write, lanes in parallel.
 void write_item(HashWords slab, uint slot, uint item[HASH_MAX_ITEM_WORDS], uint first) {
-    for (uint w = first + team_lane(); w < ITEM_WORDS; w += TEAM) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    uint w = first + team_lane();
+    if (w < ITEM_WORDS) for (;;) {
         slab.w[hash_item_word(slot, w)] = hash_item_word_at(item, w);
+        w += TEAM;
+        if (w >= ITEM_WORDS) break;
     }
 }
 

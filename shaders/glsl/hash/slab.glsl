@@ -15,18 +15,27 @@ void hash_load_item(uint64_t items, uint i, out uint item[HASH_MAX_ITEM_WORDS]) 
     [[unroll]] for (uint k = 0u; k < HASH_MAX_ITEM_WORDS; ++k) {
         item[k] = 0u;
     }
-    for (uint w = 0u; w < ITEM_WORDS; ++w) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe"): in a mixed batch
+    // ITEM_WORDS is a run-time value, so the loop is not unrolled.
+    uint w = 0u; // an item has at least one word
+    for (;;) {
         uint x = src.w[i * ITEM_WORDS + w];
         [[unroll]] for (uint k = 0u; k < HASH_MAX_ITEM_WORDS; ++k) {
             item[k] = k == w ? x : item[k];
         }
+        w += 1u;
+        if (w >= ITEM_WORDS) break;
     }
 }
 
 // Whether `slot` of the slab holds exactly `item`, words from `first` on.
 bool hash_slot_equals(HashWords slab, uint slot, uint item[HASH_MAX_ITEM_WORDS], uint first) {
-    for (uint w = first; w < ITEM_WORDS; ++w) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    uint w = first;
+    if (w < ITEM_WORDS) for (;;) {
         if (slab.w[hash_item_word(slot, w)] != hash_item_word_at(item, w)) return false;
+        w += 1u;
+        if (w >= ITEM_WORDS) break;
     }
     return true;
 }

@@ -554,11 +554,15 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
         ranked_depth = traverse_entry_depth(sh_entry0);
     }
 #endif
-    for (uint d = 0u; d < ranked_depth; d++) {
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
+    uint d = 0u;
+    if (d < ranked_depth) for (;;) {
         uint st = stack_state[d];
         uint cd = uint(findLSB((st >> 16u) & 0xffu)) ^ r.mirror;
         color += dag_voxels_before(stack_node[d], (st >> 24u) & 63u, st & 0xffffu, root_level - d,
                                    cd);
+        d += 1u;
+        if (d >= ranked_depth) break;
     }
 #if defined(TSVDAG_TRANSLATIONS)
     if (shifts > 0u) {
