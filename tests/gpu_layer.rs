@@ -6,8 +6,8 @@ use std::sync::Arc;
 use voxdag::dag::{Svdag, VoxelIndex};
 use voxdag::gpu::test_layouts::{FillPush, ImagePush};
 use voxdag::gpu::{
-    shaders, BindingKind, Bound, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError,
-    GpuOptions, MemLocation, Profiler,
+    shaders, BindingKind, Bound, BufferSlice, ComputePipeline, ComputePipelineDesc, GpuContext,
+    GpuError, GpuOptions, MemLocation, Profiler,
 };
 use voxdag::render::gpu::GpuRenderer;
 use voxdag::render::{render_cpu, Camera, RenderOutput, RenderSettings};
@@ -139,10 +139,27 @@ fn buffer_round_trip_and_range_errors() {
         ));
         assert!(cmd.fill_range(&buf, 2, 4, 0).is_err());
         assert!(cmd.fill_range(&buf, 4, 6, 0).is_err());
+        // A slice names its bytes by address; its fill changes only them.
+        let slice = buf.slice(400, 8).unwrap();
+        assert_eq!(slice.address(), buf.address() + 400);
+        assert_eq!(
+            (slice.offset(), slice.size(), slice.name()),
+            (400, 8, "round trip")
+        );
+        assert!(matches!(
+            buf.slice(400_008, 8),
+            Err(GpuError::OutOfRange { .. })
+        ));
+        assert_eq!(BufferSlice::from(&buf).size(), buf.size());
+        cmd.fill_slice(slice, 0x5151).unwrap();
         cmd.submit().unwrap();
         assert_eq!(
             ctx.read_buffer::<u32>(&buf, 4, 5).unwrap(),
             vec![data[1], 0xabcd, 0xabcd, 0xabcd, data[5]]
+        );
+        assert_eq!(
+            ctx.read_buffer::<u32>(&buf, 396, 4).unwrap(),
+            vec![data[99], 0x5151, 0x5151, data[102]]
         );
         // Host-visible buffers are written and read through their mapping.
         let mut host = ctx

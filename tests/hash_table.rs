@@ -450,7 +450,7 @@ fn mixed_batches_claim_and_insert_every_size_at_once() {
         for (k, (items, handles, reps, claims)) in buffers.iter().enumerate() {
             let claims = Claims {
                 table: claims,
-                reps,
+                reps: reps.into(),
             };
             entries[k] = tables[k]
                 .claimed_entry(items, handles, counts[k], claims)

@@ -31,8 +31,8 @@ use super::item::{
 use super::tool::{self, CopyRegion, Shape, Tool};
 use crate::dag::{DagError, Svdag};
 use crate::gpu::{
-    shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError,
-    MemLocation, Profiler, Readback,
+    shaders, Buffer, BufferSlice, Commands, ComputePipeline, ComputePipelineDesc, GpuContext,
+    GpuError, MemLocation, Profiler, Readback,
 };
 use crate::hash::claim::{ClaimTable, Claims};
 use crate::hash::dedup::{DedupError, DedupResult, GpuDedup};
@@ -63,14 +63,22 @@ const TOOL_SHIFT: u32 = 4;
 const TOOL_PARAMS: usize = 28;
 /// Flood passes (one per axis) recorded per host wait of the fill.
 const FLOOD_ROUNDS_PER_WAIT: u32 = 2;
-/// Words of the per-level address buffer (GLSL `EDIT_LEVEL_*`): 9 items, 1 slots, 9 reps,
-/// 9 handles, the level below's address buffer (0: resolved by its own pass), the missing
-/// handle counter.
-const LEVEL_ADDRESSES: usize = 30;
+/// Words of the per-level address buffer (GLSL `EDIT_LEVEL_*`): 9 items, slots, reps,
+/// handles, their stride per size, the level below's address buffer (0: resolved by its own
+/// pass), the missing handle counter.
+const LEVEL_ADDRESSES: usize = 15;
+/// `EDIT_LEVEL_SLOTS`: the node's index among the items of its size.
+const LEVEL_SLOTS: usize = 9;
+/// `EDIT_LEVEL_REPS`: every size's dedup representatives.
+const LEVEL_REPS: usize = 10;
+/// `EDIT_LEVEL_HANDLES`: every size's handles.
+const LEVEL_HANDLES: usize = 11;
+/// `EDIT_LEVEL_STRIDE`: words between two sizes' representatives (and handles).
+const LEVEL_STRIDE: usize = 12;
 /// `EDIT_LEVEL_BELOW`: where build_items finds the level below's pending results.
-const LEVEL_BELOW: usize = 28;
+const LEVEL_BELOW: usize = 13;
 /// `EDIT_LEVEL_MISSING`: the counter of nodes left without a handle (`merge_errors`).
-const LEVEL_MISSING: usize = 29;
+const LEVEL_MISSING: usize = 14;
 /// Counters of a merge: one item count per size.
 const COUNTERS: usize = TABLE_COUNT as usize;
 /// Invocations per workgroup of every edit pass.
@@ -241,12 +249,21 @@ struct MergeLevel<'b> {
     result_index: Option<&'b Buffer>,
 }
 
-/// The buffers of one level's merge (`GpuHashDag::merge_buffers`).
+/// The buffers of one level's merge (`GpuHashDag::merge_buffers`): per size its items, their
+/// dedup representatives and their handles, each kind in one buffer (a level makes three
+/// buffers, not 27).
 struct MergeBuffers {
-    /// Per size: the level's items, their dedup representatives, their handles.
-    items: Vec<Buffer>,
-    reps: Vec<Buffer>,
-    handles: Vec<Buffer>,
+    /// Every size's items, size `s` from byte `item_offsets[s]` (`item_caps[s]` items).
+    items: Buffer,
+    item_offsets: [u64; TABLE_COUNT as usize],
+    item_caps: [u64; TABLE_COUNT as usize],
+    /// Representatives and handles: size `s` from word `s * stride` (`EDIT_LEVEL_STRIDE`; 0
+    /// where the level has one possible size), `count` words each. build_items finds a
+    /// child's from its size by arithmetic, with no load of a per-size address.
+    reps: Buffer,
+    handles: Buffer,
+    stride: u64,
+    count: u64,
     /// One slot per node (read by the passes through `addresses`).
     _slots: Buffer,
     /// Items per size (build_items' counters).
@@ -256,6 +273,32 @@ struct MergeBuffers {
     addresses: [u64; LEVEL_ADDRESSES],
     /// Push constants of build_items and resolve.
     push: EditPush,
+}
+
+impl MergeBuffers {
+    /// Size `s`'s items.
+    fn items(&self, s: usize) -> BufferSlice<'_> {
+        let words = s as u64 + MIN_ITEM_WORDS as u64;
+        self.items
+            .slice(self.item_offsets[s], 4 * words * self.item_caps[s])
+            .expect("inside the buffer made for it")
+    }
+
+    /// Size `s`'s representatives.
+    fn reps(&self, s: usize) -> BufferSlice<'_> {
+        Self::per_size(&self.reps, s, self.stride, self.count)
+    }
+
+    /// Size `s`'s handles.
+    fn handles(&self, s: usize) -> BufferSlice<'_> {
+        Self::per_size(&self.handles, s, self.stride, self.count)
+    }
+
+    fn per_size(buffer: &Buffer, s: usize, stride: u64, count: u64) -> BufferSlice<'_> {
+        buffer
+            .slice(4 * s as u64 * stride, 4 * count)
+            .expect("inside the buffer made for it")
+    }
 }
 
 /// One level of the recorded merge, made before the recording: its buffers, its claim tables
@@ -1104,8 +1147,8 @@ impl GpuHashDag {
             .map(|&s| {
                 Ok(self.tables[s].record_insert_round(
                     cmd,
-                    &b.items[s],
-                    &b.handles[s],
+                    b.items(s),
+                    b.handles(s),
                     counts[s],
                     profiler.as_deref_mut(),
                 )?)
@@ -1117,21 +1160,23 @@ impl GpuHashDag {
     fn merge_buffers(&self, level: &MergeLevel<'_>) -> Result<MergeBuffers, GpuDagError> {
         let ctx = Arc::clone(&self.ctx);
         let n = level.count.max(1) as u64;
-        let mut items = Vec::new();
-        let mut reps = Vec::new();
-        let mut handles = Vec::new();
         let sizes = self.possible_sizes(level.leaves);
-        for words in MIN_ITEM_WORDS..=MAX_ITEM_WORDS {
-            let possible = sizes.contains(&((words - MIN_ITEM_WORDS) as usize));
-            let cap = if possible { n } else { 1 };
-            items.push(ctx.create_buffer(
-                "edit level items",
-                4 * words as u64 * cap,
-                MemLocation::GpuOnly,
-            )?);
-            reps.push(ctx.create_buffer("edit level reps", 4 * cap, MemLocation::GpuOnly)?);
-            handles.push(ctx.create_buffer("edit level handles", 4 * cap, MemLocation::GpuOnly)?);
+        let mut item_offsets = [0u64; TABLE_COUNT as usize];
+        let mut item_caps = [1u64; TABLE_COUNT as usize];
+        let mut item_bytes = 0;
+        for s in 0..TABLE_COUNT as usize {
+            if sizes.contains(&s) {
+                item_caps[s] = n;
+            }
+            item_offsets[s] = item_bytes;
+            item_bytes += 4 * (s as u64 + MIN_ITEM_WORDS as u64) * item_caps[s];
         }
+        let items = ctx.create_buffer("edit level items", item_bytes, MemLocation::GpuOnly)?;
+        let stride = if sizes.len() > 1 { n } else { 0 };
+        let regions = if stride > 0 { TABLE_COUNT as u64 } else { 1 };
+        let per_kind = 4 * n * regions;
+        let reps = ctx.create_buffer("edit level reps", per_kind, MemLocation::GpuOnly)?;
+        let handles = ctx.create_buffer("edit level handles", per_kind, MemLocation::GpuOnly)?;
         let slots = ctx.create_buffer("edit level slots", 4 * n, MemLocation::GpuOnly)?;
         let counters = ctx.create_buffer(
             "edit level counters",
@@ -1140,11 +1185,12 @@ impl GpuHashDag {
         )?;
         let mut addresses = [0u64; LEVEL_ADDRESSES];
         for s in 0..TABLE_COUNT as usize {
-            addresses[s] = items[s].address();
-            addresses[10 + s] = reps[s].address();
-            addresses[19 + s] = handles[s].address();
+            addresses[s] = items.address() + item_offsets[s];
         }
-        addresses[9] = slots.address();
+        addresses[LEVEL_SLOTS] = slots.address();
+        addresses[LEVEL_REPS] = reps.address();
+        addresses[LEVEL_HANDLES] = handles.address();
+        addresses[LEVEL_STRIDE] = stride;
         addresses[LEVEL_MISSING] = self.merge_errors.address();
         let address_buf = ctx.create_buffer(
             "edit level addresses",
@@ -1170,8 +1216,12 @@ impl GpuHashDag {
         };
         Ok(MergeBuffers {
             items,
+            item_offsets,
+            item_caps,
             reps,
             handles,
+            stride,
+            count: n,
             _slots: slots,
             counters,
             address_buf,
@@ -1316,7 +1366,6 @@ impl GpuHashDag {
             return self.merge_items_claimed(b, counts, after, profiler);
         }
         let ctx = Arc::clone(&self.ctx);
-        let (items, reps, handles) = (&b.items, &b.reps, &b.handles);
         let max = *counts.iter().max().unwrap_or(&0);
         self.ensure_iota(max)?;
         let sizes: Vec<usize> = (0..counts.len()).filter(|&s| counts[s] > 0).collect();
@@ -1348,21 +1397,21 @@ impl GpuHashDag {
                 Some(k) => {
                     pending_dedup.push(self.dedups[s].record_dedup(
                         &mut cmd,
-                        &items[s],
+                        b.items(s),
                         values,
                         counts[s],
-                        &reps[s],
+                        b.reps(s),
                         &scratch[k],
                         profiler.as_deref_mut(),
                     )?);
                     cmd.barrier();
                 }
-                None => cmd.fill_buffer(&reps[s], 0),
+                None => cmd.fill_slice(b.reps(s), 0)?,
             }
             self.tables[s].record_search(
                 &mut cmd,
-                &items[s],
-                &handles[s],
+                b.items(s),
+                b.handles(s),
                 counts[s],
                 profiler.as_deref_mut(),
             )?;
@@ -1383,10 +1432,10 @@ impl GpuHashDag {
                 // an error): the overflow pool ran out; the batch runs again on its own,
                 // before any representative is used.
                 self.dedups[s].dedup_buffers(
-                    &items[s],
+                    b.items(s),
                     values,
                     counts[s],
-                    &reps[s],
+                    b.reps(s),
                     profiler.as_deref_mut(),
                 )?;
             }
@@ -1437,13 +1486,13 @@ impl GpuHashDag {
         let mut cmd = ctx.begin_commands("edit merge")?;
         let claims_of = |k: usize, s: usize| Claims {
             table: &claim_tables[k],
-            reps: &b.reps[s],
+            reps: b.reps(s),
         };
         for (k, &s) in sizes.iter().enumerate() {
             self.tables[s].record_search_claim(
                 &mut cmd,
-                &b.items[s],
-                &b.handles[s],
+                b.items(s),
+                b.handles(s),
                 counts[s],
                 claims_of(k, s),
                 profiler.as_deref_mut(),
@@ -1455,8 +1504,8 @@ impl GpuHashDag {
             .map(|(k, &s)| {
                 self.tables[s].record_claimed_insert_round(
                     &mut cmd,
-                    &b.items[s],
-                    &b.handles[s],
+                    b.items(s),
+                    b.handles(s),
                     counts[s],
                     claims_of(k, s),
                     profiler.as_deref_mut(),
@@ -1569,10 +1618,10 @@ impl GpuHashDag {
             for (&s, table) in sizes[k].iter().zip(&claim_tables) {
                 let claims = Claims {
                     table,
-                    reps: &b.reps[s],
+                    reps: b.reps(s),
                 };
                 entries[s] =
-                    tables[s].claimed_entry(&b.items[s], &b.handles[s], level.count, claims)?;
+                    tables[s].claimed_entry(b.items(s), b.handles(s), level.count, claims)?;
             }
             let entry_buf = ctx.create_buffer(
                 "edit level entries",
@@ -1667,13 +1716,12 @@ impl GpuHashDag {
         after: After<'_>,
         profiler: &mut Option<&mut Profiler>,
     ) -> Result<(u32, Back), GpuDagError> {
-        let (items, handles) = (&b.items, &b.handles);
         let mut retried = 0;
         for (pending, &s) in pending_insert.into_iter().zip(sizes) {
             let report = self.tables[s].finish_insert(
                 pending,
-                &items[s],
-                &handles[s],
+                b.items(s),
+                b.handles(s),
                 counts[s],
                 profiler.as_deref_mut(),
             )?;

@@ -13,8 +13,8 @@ use super::pipeline::MAX_BINDINGS_PER_KIND;
 use super::release::{Garbage, Recorder};
 use super::ring::RingKind;
 use super::{
-    vk_err, BindingKind, Buffer, ComputePipeline, GpuContext, GpuError, Image, MemLocation,
-    Profiler, TexelBuffer,
+    vk_err, BindingKind, Buffer, BufferSlice, ComputePipeline, GpuContext, GpuError, Image,
+    MemLocation, Profiler, TexelBuffer,
 };
 
 /// Transfers up to this size go through a staging ring; larger ones (or ones that find the ring
@@ -782,6 +782,12 @@ impl<'a> Commands<'a> {
         }
         self.fill_raw(dst, offset, len, value);
         Ok(())
+    }
+
+    /// Fills a buffer range with a repeated `u32` (its offset a multiple of 4 bytes, its size
+    /// rounded down to one).
+    pub fn fill_slice(&mut self, dst: BufferSlice<'a>, value: u32) -> Result<(), GpuError> {
+        self.fill_range(dst.buffer(), dst.offset(), dst.size() & !3, value)
     }
 
     /// `vkCmdFillBuffer` of a checked range, ordered like one between barriers.

@@ -128,6 +128,64 @@ impl Buffer {
     }
 }
 
+/// A byte range of a buffer: where a pass reads or writes part of a larger buffer (several
+/// per-size regions of one allocation, for instance). Passes see it as a device address.
+#[derive(Clone, Copy, Debug)]
+pub struct BufferSlice<'a> {
+    buffer: &'a Buffer,
+    offset: u64,
+    size: u64,
+}
+
+impl<'a> BufferSlice<'a> {
+    /// The buffer the range is in.
+    pub fn buffer(&self) -> &'a Buffer {
+        self.buffer
+    }
+
+    /// Byte offset of the range in its buffer.
+    pub fn offset(&self) -> u64 {
+        self.offset
+    }
+
+    /// Size of the range in bytes.
+    pub fn size(&self) -> u64 {
+        self.size
+    }
+
+    /// GPU virtual address of the range's first byte.
+    pub fn address(&self) -> u64 {
+        self.buffer.address + self.offset
+    }
+
+    /// Debug name of the buffer.
+    pub fn name(&self) -> &'a str {
+        &self.buffer.name
+    }
+}
+
+impl<'a> From<&'a Buffer> for BufferSlice<'a> {
+    fn from(buffer: &'a Buffer) -> Self {
+        BufferSlice {
+            buffer,
+            offset: 0,
+            size: buffer.size,
+        }
+    }
+}
+
+impl Buffer {
+    /// Bytes `[offset, offset + size)` of the buffer, checked against its size.
+    pub fn slice(&self, offset: u64, size: u64) -> Result<BufferSlice<'_>, GpuError> {
+        self.check_range(offset, size)?;
+        Ok(BufferSlice {
+            buffer: self,
+            offset,
+            size,
+        })
+    }
+}
+
 impl Drop for Buffer {
     fn drop(&mut self) {
         if let Some(a) = self.allocation.take() {

@@ -26,7 +26,7 @@ use std::sync::Arc;
 use super::dedup::DedupLayout;
 use super::layout::HashPush;
 use super::HashError;
-use crate::gpu::{Buffer, Commands, GpuContext, MemLocation};
+use crate::gpu::{Buffer, BufferSlice, Commands, GpuContext, MemLocation};
 
 /// What the claim passes of one batch use: its claim table and the representatives (one `u32`
 /// per item: the index of the item whose handle is this item's).
@@ -34,8 +34,8 @@ use crate::gpu::{Buffer, Commands, GpuContext, MemLocation};
 pub struct Claims<'a> {
     /// The batch's claim table.
     pub table: &'a ClaimTable,
-    /// The representatives buffer.
-    pub reps: &'a Buffer,
+    /// The representatives (one `u32` per item).
+    pub reps: BufferSlice<'a>,
 }
 
 impl Claims<'_> {

@@ -31,8 +31,8 @@ use super::gpu_shared::DedupPush;
 use super::layout::murmur_words;
 use super::TeamMode;
 use crate::gpu::{
-    shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, DeviceType, GpuContext,
-    GpuError, MemLocation, Profiler, Readback,
+    shaders, Buffer, BufferSlice, Commands, ComputePipeline, ComputePipelineDesc, DeviceType,
+    GpuContext, GpuError, MemLocation, Profiler, Readback,
 };
 
 /// Most workgroups one dedup dispatch launches (the passes loop over the rest).
@@ -341,10 +341,10 @@ impl GpuDedup {
             MemLocation::GpuOnly,
         )?;
         let (entries, attempts, out) = self.dedup_flow(
-            &key_buf,
+            (&key_buf).into(),
             &value_buf,
             count,
-            &reps,
+            (&reps).into(),
             Some((keys, values)),
             profiler,
         )?;
@@ -358,15 +358,15 @@ impl GpuDedup {
     /// Runs the passes on GPU buffers: `count` keys and values in, `count` representatives out.
     /// Returns the table entries made and the attempts needed (one submission and one host wait
     /// per attempt).
-    pub fn dedup_buffers(
+    pub fn dedup_buffers<'a>(
         &self,
-        keys: &Buffer,
+        keys: impl Into<BufferSlice<'a>>,
         values: &Buffer,
         count: u32,
-        reps: &Buffer,
+        reps: impl Into<BufferSlice<'a>>,
         profiler: Option<&mut Profiler>,
     ) -> Result<(u32, u32), DedupError> {
-        self.dedup_flow(keys, values, count, reps, None, profiler)
+        self.dedup_flow(keys.into(), values, count, reps.into(), None, profiler)
             .map(|(e, a, _)| (e, a))
     }
 
@@ -414,16 +414,17 @@ impl GpuDedup {
     pub fn record_dedup<'a>(
         &'a self,
         cmd: &mut Commands<'a>,
-        keys: &'a Buffer,
+        keys: impl Into<BufferSlice<'a>>,
         values: &'a Buffer,
         count: u32,
-        reps: &'a Buffer,
+        reps: impl Into<BufferSlice<'a>>,
         scratch: &'a DedupScratch,
         mut profiler: Option<&mut Profiler>,
     ) -> Result<PendingDedup, DedupError> {
+        let (keys, reps) = (keys.into(), reps.into());
         let key_words = self.layout.key_words as u64;
         let n = count as u64;
-        for (buffer, words) in [(keys, n * key_words), (values, n), (reps, n)] {
+        for (buffer, words) in [(keys, n * key_words), (values.into(), n), (reps, n)] {
             if buffer.size() < words * 4 {
                 return Err(DedupError::InvalidInput(format!(
                     "buffer '{}' has {} bytes, needs {}",
@@ -536,10 +537,10 @@ impl GpuDedup {
     /// attempt reads the representatives back in its own submission when it uploaded.
     fn dedup_flow(
         &self,
-        keys: &Buffer,
+        keys: BufferSlice<'_>,
         values: &Buffer,
         count: u32,
-        reps: &Buffer,
+        reps: BufferSlice<'_>,
         upload: Option<(&[u32], &[u32])>,
         mut profiler: Option<&mut Profiler>,
     ) -> Result<(u32, u32, Option<Vec<u32>>), DedupError> {
@@ -553,7 +554,7 @@ impl GpuDedup {
             let scratch = self.scratch(count, pool_slabs)?;
             let mut cmd = self.ctx.begin_commands("dedup")?;
             if let (Some((k, v)), 1) = (upload, attempt) {
-                cmd.upload(keys, 0, k)?;
+                cmd.upload(keys.buffer(), keys.offset(), k)?;
                 cmd.upload(values, 0, v)?;
             }
             let pending = self.record_dedup(
@@ -566,7 +567,9 @@ impl GpuDedup {
                 profiler.as_deref_mut(),
             )?;
             let back = match upload {
-                Some(_) => Some(cmd.readback::<u32>(reps, 0, count as usize)?),
+                Some(_) => {
+                    Some(cmd.readback::<u32>(reps.buffer(), reps.offset(), count as usize)?)
+                }
                 None => None,
             };
             cmd.submit_async()?;

@@ -23,8 +23,8 @@ use super::layout::{
 use super::reference::TableImage;
 use super::HashError;
 use crate::gpu::{
-    shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, DeviceType, GpuContext,
-    GpuError, MemLocation, Profiler, Readback,
+    shaders, Buffer, BufferSlice, Commands, ComputePipeline, ComputePipelineDesc, DeviceType,
+    GpuContext, GpuError, MemLocation, Profiler, Readback,
 };
 
 /// How a table is built.
@@ -350,7 +350,7 @@ impl GpuHashTable {
     }
 
     fn check_count(
-        buffer: &Buffer,
+        buffer: BufferSlice<'_>,
         count: u32,
         words_each: u32,
         what: &str,
@@ -379,12 +379,12 @@ impl GpuHashTable {
     pub fn record_search<'a>(
         &'a self,
         cmd: &mut Commands<'a>,
-        items: &'a Buffer,
-        handles: &'a Buffer,
+        items: impl Into<BufferSlice<'a>>,
+        handles: impl Into<BufferSlice<'a>>,
         count: u32,
         profiler: Option<&mut Profiler>,
     ) -> Result<(), HashError> {
-        self.record_search_pass(cmd, items, handles, count, None, profiler)
+        self.record_search_pass(cmd, items.into(), handles.into(), count, None, profiler)
     }
 
     /// The search pass, or with `claims` the search-and-claim pass (which clears the claim
@@ -392,8 +392,8 @@ impl GpuHashTable {
     fn record_search_pass<'a>(
         &'a self,
         cmd: &mut Commands<'a>,
-        items: &'a Buffer,
-        handles: &'a Buffer,
+        items: BufferSlice<'a>,
+        handles: BufferSlice<'a>,
         count: u32,
         claims: Option<Claims<'a>>,
         mut profiler: Option<&mut Profiler>,
@@ -430,12 +430,12 @@ impl GpuHashTable {
     pub fn record_insert_round<'a>(
         &'a self,
         cmd: &mut Commands<'a>,
-        items: &'a Buffer,
-        handles: &'a Buffer,
+        items: impl Into<BufferSlice<'a>>,
+        handles: impl Into<BufferSlice<'a>>,
         count: u32,
         profiler: Option<&mut Profiler>,
     ) -> Result<PendingInsert, HashError> {
-        self.record_round(cmd, items, handles, count, None, profiler)
+        self.record_round(cmd, items.into(), handles.into(), count, None, profiler)
     }
 
     /// Records the insert round that follows [`GpuHashTable::record_search_claim`] (single
@@ -447,20 +447,27 @@ impl GpuHashTable {
     pub fn record_claimed_insert_round<'a>(
         &'a self,
         cmd: &mut Commands<'a>,
-        items: &'a Buffer,
-        handles: &'a Buffer,
+        items: impl Into<BufferSlice<'a>>,
+        handles: impl Into<BufferSlice<'a>>,
         count: u32,
         claims: Claims<'a>,
         profiler: Option<&mut Profiler>,
     ) -> Result<PendingInsert, HashError> {
-        self.record_round(cmd, items, handles, count, Some(claims), profiler)
+        self.record_round(
+            cmd,
+            items.into(),
+            handles.into(),
+            count,
+            Some(claims),
+            profiler,
+        )
     }
 
     fn record_round<'a>(
         &'a self,
         cmd: &mut Commands<'a>,
-        items: &'a Buffer,
-        handles: &'a Buffer,
+        items: BufferSlice<'a>,
+        handles: BufferSlice<'a>,
         count: u32,
         claims: Option<Claims<'a>>,
         mut profiler: Option<&mut Profiler>,
@@ -485,8 +492,8 @@ impl GpuHashTable {
     /// `claims` (checked: single lanes, sized for the batch) when given.
     fn batch_push(
         &self,
-        items: &Buffer,
-        handles: &Buffer,
+        items: BufferSlice<'_>,
+        handles: BufferSlice<'_>,
         count: u32,
         claims: Option<Claims<'_>>,
     ) -> Result<HashPush, HashError> {
@@ -504,8 +511,8 @@ impl GpuHashTable {
     /// claimed round) with a fresh seed for its random block choice.
     fn insert_push(
         &self,
-        items: &Buffer,
-        handles: &Buffer,
+        items: BufferSlice<'_>,
+        handles: BufferSlice<'_>,
         count: u32,
         claims: Option<Claims<'_>>,
     ) -> Result<HashPush, HashError> {
@@ -530,14 +537,14 @@ impl GpuHashTable {
 
     /// This table's entry in a mixed batch ([`super::mixed`]): the claim passes' parameters
     /// for its items and handles (at most `bound`), its claims, and a fresh insert seed.
-    pub fn claimed_entry(
+    pub fn claimed_entry<'a>(
         &self,
-        items: &Buffer,
-        handles: &Buffer,
+        items: impl Into<BufferSlice<'a>>,
+        handles: impl Into<BufferSlice<'a>>,
         bound: u32,
         claims: Claims<'_>,
     ) -> Result<HashPush, HashError> {
-        let mut push = self.insert_push(items, handles, bound, Some(claims))?;
+        let mut push = self.insert_push(items.into(), handles.into(), bound, Some(claims))?;
         push.item_words = self.config.item_words;
         Ok(push)
     }
@@ -578,13 +585,20 @@ impl GpuHashTable {
     pub fn record_search_claim<'a>(
         &'a self,
         cmd: &mut Commands<'a>,
-        items: &'a Buffer,
-        handles: &'a Buffer,
+        items: impl Into<BufferSlice<'a>>,
+        handles: impl Into<BufferSlice<'a>>,
         count: u32,
         claims: Claims<'a>,
         profiler: Option<&mut Profiler>,
     ) -> Result<(), HashError> {
-        self.record_search_pass(cmd, items, handles, count, Some(claims), profiler)
+        self.record_search_pass(
+            cmd,
+            items.into(),
+            handles.into(),
+            count,
+            Some(claims),
+            profiler,
+        )
     }
 
     /// Records an insert (`search_first == false`: the items are known to be absent; the
@@ -602,7 +616,7 @@ impl GpuHashTable {
         search_first: bool,
         mut profiler: Option<&mut Profiler>,
     ) -> Result<PendingInsert, HashError> {
-        Self::check_count(handles, count, 1, "handles")?;
+        Self::check_count(handles.into(), count, 1, "handles")?;
         if search_first {
             self.record_search(cmd, items, handles, count, profiler.as_deref_mut())?;
         } else {
@@ -615,15 +629,16 @@ impl GpuHashTable {
     /// after its round (waiting for the GPU if needed), reports pass errors, and while items
     /// were left out for lack of a slab grows the pool and runs another round (its own
     /// submission) for them, up to `max_insert_rounds`.
-    pub fn finish_insert(
+    pub fn finish_insert<'a>(
         &mut self,
         pending: PendingInsert,
-        items: &Buffer,
-        handles: &Buffer,
+        items: impl Into<BufferSlice<'a>>,
+        handles: impl Into<BufferSlice<'a>>,
         count: u32,
         mut profiler: Option<&mut Profiler>,
     ) -> Result<InsertReport, HashError> {
         let PendingInsert { before, after } = pending;
+        let (items, handles) = (items.into(), handles.into());
         let first = before.read()?[0];
         let mut first_after = Some(after);
         let mut report = InsertReport::default();
@@ -738,8 +753,8 @@ impl GpuHashTable {
         if count == 0 {
             return Ok((self.empty_report(), upload.map(|_| Vec::new())));
         }
-        Self::check_count(items, count, self.config.item_words, "items")?;
-        Self::check_count(handles, count, 1, "handles")?;
+        Self::check_count(items.into(), count, self.config.item_words, "items")?;
+        Self::check_count(handles.into(), count, 1, "handles")?;
         if self.config.grow_before_insert {
             // Every item may be new (find-or-insert cannot tell without a readback).
             self.reserve(count)?;
@@ -861,8 +876,8 @@ impl GpuHashTable {
         if count == 0 {
             return Ok(());
         }
-        Self::check_count(handles, count, 1, "handles")?;
-        Self::check_count(out, count, self.config.item_words, "output")?;
+        Self::check_count(handles.into(), count, 1, "handles")?;
+        Self::check_count(out.into(), count, self.config.item_words, "output")?;
         let push = self.push_constants(out.address(), handles.address(), count);
         let groups = count
             .div_ceil(self.workgroup)
@@ -999,7 +1014,7 @@ impl GpuHashTable {
         let table = ClaimTable::new(&self.ctx, self.config.item_words, count)?;
         let claims = Claims {
             table: &table,
-            reps: &reps,
+            reps: (&reps).into(),
         };
         if self.config.grow_before_insert {
             self.reserve(count)?;

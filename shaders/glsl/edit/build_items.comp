@@ -39,14 +39,14 @@ void main() {
     Words counters = Words(push.counters);
     bool leaves = (push.flags & EDIT_FLAG_LEAVES) != 0u;
     bool materials = edit_materials();
-    // Read once: where the level below's pending results resolve (0: already resolved) and
-    // this level's slot per node.
-    uint64_t below_level = leaves ? 0ul : tables.a[EDIT_LEVEL_BELOW];
-    Addresses below_tables = Addresses(below_level);
-    Words below_slots = Words(0ul);
-    if (below_level != 0ul) {
-        below_slots = Words(below_tables.a[EDIT_LEVEL_SLOTS]);
-    }
+    // Read once, and outside any `if` (lavapipe loads a uniform address once only there):
+    // where the level below's pending results resolve (0: already resolved, and the reads
+    // below come from this level's own buffer, unused) and this level's slot per node.
+    uint64_t below_level = tables.a[EDIT_LEVEL_BELOW];
+    uint64_t own_level = push.tables;
+    Addresses below_tables = Addresses(below_level != 0ul ? below_level : own_level);
+    Words below_slots = Words(below_tables.a[EDIT_LEVEL_SLOTS]);
+    EditLevelHandles below_handles = edit_level_handles(below_tables);
     Words slots = Words(tables.a[EDIT_LEVEL_SLOTS]);
     uint missing = 0u;
     uint stride = gl_NumWorkGroups.x * 64u;
@@ -106,7 +106,7 @@ void main() {
                     v = below.w[j];
                     if ((v & EDIT_TAG_MASK) == EDIT_PENDING && below_level != 0ul) {
                         uint r = v;
-                        v = edit_resolve_slot(below_tables, below_slots.w[j], r);
+                        v = edit_resolve_slot(below_handles, below_slots.w[j], r);
                         missing += v == r ? 1u : 0u;
                     }
                 }

@@ -55,16 +55,19 @@ layout(buffer_reference, std430, buffer_reference_align = 16) buffer Entries {
 #define EDIT_P_INVERSE 19u
 
 // The per-level address buffer (push.tables of build_items / resolve): per size table s
-// (0..9) its items, its dedup representatives and its handles, and one slot per node (the
-// index of its item in its size's buffer); the level below's address buffer when its results
-// are left pending for build_items to resolve (0: resolved by its own pass), and the counter
-// of nodes left without a handle.
+// (0..9) its items; one slot per node (the index of its item in its size's buffer); every
+// size's dedup representatives and handles, size s from word s * stride (the stride a u64
+// word: 0 where the level has one possible size), so that a child's size gives them by
+// arithmetic rather than by a load of a per-size address; the level below's address buffer
+// when its results are left pending for build_items to resolve (0: resolved by its own
+// pass), and the counter of nodes left without a handle.
 #define EDIT_LEVEL_ITEMS 0u
 #define EDIT_LEVEL_SLOTS 9u
 #define EDIT_LEVEL_REPS 10u
-#define EDIT_LEVEL_HANDLES 19u
-#define EDIT_LEVEL_BELOW 28u
-#define EDIT_LEVEL_MISSING 29u
+#define EDIT_LEVEL_HANDLES 11u
+#define EDIT_LEVEL_STRIDE 12u
+#define EDIT_LEVEL_BELOW 13u
+#define EDIT_LEVEL_MISSING 14u
 
 #define EDIT_SHAPE_SPHERE 0u
 #define EDIT_SHAPE_CUBE 1u
@@ -77,14 +80,28 @@ bool edit_is_full(uint v) {
     return (v & 0xFFFFFFF0u) == EDIT_FULL;
 }
 
+// Where a level's representatives and handles are (read once per invocation: on lavapipe a
+// load through a buffer address is a loop over the SIMD lanes, uniform or not).
+struct EditLevelHandles {
+    uint64_t reps;
+    uint64_t handles;
+    uint stride;
+};
+
+EditLevelHandles edit_level_handles(Addresses level) {
+    return EditLevelHandles(level.a[EDIT_LEVEL_REPS], level.a[EDIT_LEVEL_HANDLES],
+                            uint(level.a[EDIT_LEVEL_STRIDE]));
+}
+
 // The NodePtr of a pending result r (EDIT_PENDING | size) whose item is entry `index` of its
-// size's buffer in the level whose address buffer is `level`: the handle of the item's
-// representative, once the level's inserts ran. An item left without a handle (a pool ran
-// out) gives r back: the caller counts it as missing and keeps r.
-uint edit_resolve_slot(Addresses level, uint index, uint r) {
+// size's items in `level`: the handle of the item's representative, once the level's inserts
+// ran. An item left without a handle (a pool ran out) gives r back: the caller counts it as
+// missing and keeps r.
+uint edit_resolve_slot(EditLevelHandles level, uint index, uint r) {
     uint s = r & 15u;
-    uint rep = Words(level.a[EDIT_LEVEL_REPS + s]).w[index];
-    uint handle = Words(level.a[EDIT_LEVEL_HANDLES + s]).w[rep];
+    uint base = s * level.stride;
+    uint rep = Words(level.reps).w[base + index];
+    uint handle = Words(level.handles).w[base + rep];
     return handle >= (1u << 28u) ? r : s << 28u | handle;
 }
 

@@ -4,7 +4,7 @@
 // inserted. Sizes with fewer than two items are skipped (a single item is its own
 // representative).
 //   tables   the level's buffer addresses (EDIT_LEVEL_REPS: smallest equal index per item,
-//            EDIT_LEVEL_HANDLES)
+//            EDIT_LEVEL_HANDLES, EDIT_LEVEL_STRIDE)
 //   counters the level's 9 per-size item counts (build_items)
 #include "edit/common.glsl"
 layout(local_size_x = 64) in;
@@ -12,12 +12,14 @@ layout(local_size_x = 64) in;
 void main() {
     Addresses tables = Addresses(push.tables);
     Words counters = Words(push.counters);
+    EditLevelHandles level = edit_level_handles(tables);
     uint stride = gl_NumWorkGroups.x * 64u;
     for (uint s = 0u; s < 9u; ++s) {
         uint n = counters.w[s];
         if (n < 2u) continue;
-        Words reps = Words(tables.a[EDIT_LEVEL_REPS + s]);
-        Words handles = Words(tables.a[EDIT_LEVEL_HANDLES + s]);
+        uint64_t base = 4ul * uint64_t(s * level.stride);
+        Words reps = Words(level.reps + base);
+        Words handles = Words(level.handles + base);
         // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
         uint i = gl_GlobalInvocationID.x;
         if (i < n) for (;;) {

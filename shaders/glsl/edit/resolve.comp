@@ -11,6 +11,7 @@ void main() {
     Words results = Words(push.dst);
     Addresses tables = Addresses(push.tables);
     Words slots = Words(tables.a[EDIT_LEVEL_SLOTS]);
+    EditLevelHandles level = edit_level_handles(tables);
     uint stride = gl_NumWorkGroups.x * 64u;
     // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
     uint i = gl_GlobalInvocationID.x;
@@ -18,7 +19,7 @@ void main() {
         uint at = (push.flags & EDIT_FLAG_RESULT_INDEX) != 0u ? Words(push.dst2).w[i] : i;
         uint r = results.w[at];
         if ((r & EDIT_TAG_MASK) == EDIT_PENDING) {
-            uint v = edit_resolve_slot(tables, slots.w[i], r);
+            uint v = edit_resolve_slot(level, slots.w[i], r);
             if (v == r) {
                 atomicAdd(Words(tables.a[EDIT_LEVEL_MISSING]).w[0], 1u);
             }
