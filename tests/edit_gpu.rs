@@ -572,6 +572,8 @@ struct Scene {
     variant: HashVariant,
     /// Largest tool radius in voxels (keeps the brute-force reference fast).
     max_radius: u32,
+    /// `GpuHashDagConfig::word_views`.
+    word_views: bool,
 }
 
 /// Copy transforms the sequences draw from (None = identity).
@@ -655,7 +657,10 @@ fn steps(resolution: u32, max_radius: u32, len: usize) -> impl Strategy<Value = 
 /// from scratch.
 fn check_sequence(ctx: &Arc<GpuContext>, scene: &Scene, steps: &[Step]) {
     let n = scene.resolution;
-    let config = GpuHashDagConfig::new(scene.variant, 1024);
+    let config = GpuHashDagConfig {
+        word_views: scene.word_views,
+        ..GpuHashDagConfig::new(scene.variant, 1024)
+    };
     let (mut hd, cpu_dag, cpu_root, map) = match &scene.dag {
         Some(dag) => {
             let mut cpu = HashDag::new(n, scene.materials).unwrap();
@@ -754,6 +759,7 @@ fn random_tool_sequences_match_the_cpu_editor_and_brute_force() {
             dag: None,
             variant: HashVariant::AccelHash8,
             max_radius: 16,
+            word_views: true,
         },
         Scene {
             name: "teapot 64",
@@ -765,6 +771,8 @@ fn random_tool_sequences_match_the_cpu_editor_and_brute_force() {
             )),
             variant: HashVariant::TicketBoard,
             max_radius: 16,
+            // build_items through addresses (as for buffers beyond a word view).
+            word_views: false,
         },
         Scene {
             name: "synthetic 128",
@@ -773,6 +781,7 @@ fn random_tool_sequences_match_the_cpu_editor_and_brute_force() {
             dag: Some(Svdag::from_voxels(&synthetic(128, 11)).unwrap()),
             variant: HashVariant::Atomic64,
             max_radius: 12,
+            word_views: true,
         },
         Scene {
             name: "empty 256 with materials",
@@ -781,6 +790,7 @@ fn random_tool_sequences_match_the_cpu_editor_and_brute_force() {
             dag: None,
             variant: HashVariant::AccelHash32,
             max_radius: 12,
+            word_views: true,
         },
     ];
     for scene in &scenes {
@@ -858,21 +868,29 @@ fn fixed_tool_cases_match_the_cpu_editor_and_brute_force() {
             material: 1,
         }),
     ];
-    for (materials, variant) in [
-        (true, HashVariant::TicketBoard),
-        (false, HashVariant::Atomic64),
+    for (name, materials, variant, word_views) in [
+        (
+            "fixed 32 with materials",
+            true,
+            HashVariant::TicketBoard,
+            true,
+        ),
+        ("fixed 32", false, HashVariant::Atomic64, true),
+        (
+            "fixed 32 with materials, through addresses",
+            true,
+            HashVariant::Atomic64,
+            false,
+        ),
     ] {
         let scene = Scene {
-            name: if materials {
-                "fixed 32 with materials"
-            } else {
-                "fixed 32"
-            },
+            name,
             resolution: 32,
             materials,
             dag: None,
             variant,
             max_radius: 0,
+            word_views,
         };
         check_sequence(&ctx, &scene, &steps);
     }

@@ -16,6 +16,7 @@
 //! walks the tool's region top-down (`traverse`, then `leaves` with one invocation per voxel),
 //! building the temporary SVO the merge consumes. See `docs/editing-gpu.md`.
 
+mod build_items;
 mod load;
 
 use std::sync::{Arc, OnceLock};
@@ -43,6 +44,7 @@ use crate::hash::{
     TableImage, TeamMode,
 };
 use crate::scene::Voxels;
+use build_items::{BuildItemsPipelines, LevelTexels};
 
 /// Child value: empty cube (GLSL `EDIT_EMPTY`).
 const VALUE_EMPTY: u32 = 0xFFFF_FFFF;
@@ -152,6 +154,11 @@ pub struct GpuHashDagConfig {
     /// merge uses the tables' claim passes) and subgroups elsewhere (the dedup table and
     /// `mark`); tests force either.
     pub team: TeamMode,
+    /// `build_items` reads the level below and its input through word views (texel fetches,
+    /// which lavapipe gathers for all SIMD lanes) where every buffer fits in one
+    /// (`maxTexelBufferElements` words), else through addresses; false: always through
+    /// addresses (tests compare both).
+    pub word_views: bool,
 }
 
 /// Buckets per table for a scene of `svdag_words` svdag32 words: one per 64 words, a power of
@@ -184,6 +191,7 @@ impl GpuHashDagConfig {
             auto_gc_threshold: Some(gpu_gc::DEFAULT_AUTO_GC_THRESHOLD),
             traversal_budget: TRAVERSAL_BUDGET,
             team: TeamMode::Auto,
+            word_views: true,
         }
     }
 }
@@ -212,7 +220,7 @@ pub struct GpuHashDag {
     /// The tables' super-block table addresses (`u64` each), read by the passes.
     pub(super) table_addresses: Buffer,
     expand: ComputePipeline,
-    build_items: ComputePipeline,
+    build_items: BuildItemsPipelines,
     mark: ComputePipeline,
     resolve: ComputePipeline,
     traverse: ToolPipelines,
@@ -237,12 +245,12 @@ pub struct GpuHashDag {
 
 /// One level of a bottom-up merge: where its nodes are and where their results go.
 struct MergeLevel<'b> {
-    /// Temporary nodes (8 values) or leaves (2 words) at `input` (a device address).
-    input: u64,
+    /// Temporary nodes (8 values) or leaves (2 words, 10 with materials).
+    input: BufferSlice<'b>,
     count: u32,
     leaves: bool,
-    /// Results of the level below (device address; 0 for leaves).
-    below: u64,
+    /// Results of the level below (none for leaves).
+    below: Option<&'b Buffer>,
     /// Where results go.
     results: &'b Buffer,
     /// Result index per node (load: the node's svdag word offset).
@@ -273,6 +281,9 @@ struct MergeBuffers {
     addresses: [u64; LEVEL_ADDRESSES],
     /// Push constants of build_items and resolve.
     push: EditPush,
+    /// The word views build_items reads ([`LevelTexels`]; none where a buffer has more words
+    /// than a view takes: build_items then reads through addresses).
+    texels: Option<LevelTexels>,
 }
 
 impl MergeBuffers {
@@ -412,7 +423,7 @@ impl GpuHashDag {
             mixed,
             table_addresses,
             expand: pipeline("edit expand", shaders::EDIT_EXPAND)?,
-            build_items: pipeline("edit build items", shaders::EDIT_BUILD_ITEMS)?,
+            build_items: BuildItemsPipelines::new(ctx, materials)?,
             mark: pipeline("edit mark", shaders::EDIT_MARK)?,
             resolve: pipeline("edit resolve", shaders::EDIT_RESOLVE)?,
             traverse: ToolPipelines::new("edit traverse", shaders::EDIT_TRAVERSE, materials),
@@ -492,15 +503,17 @@ impl GpuHashDag {
                 Some(nodes)
             };
             let level_input = match &input {
-                Some(nodes) => nodes.address(),
-                None => words.address() + 4 * range.start as u64,
+                Some(nodes) => nodes.into(),
+                None => {
+                    words.slice(4 * range.start as u64, 4 * (range.end - range.start) as u64)?
+                }
             };
             hd.merge(
                 &[MergeLevel {
                     input: level_input,
                     count,
                     leaves: level == 0,
-                    below: results.address(),
+                    below: Some(&results),
                     results: &results,
                     result_index: Some(&offset_buf),
                 }],
@@ -756,13 +769,10 @@ impl GpuHashDag {
                 continue;
             };
             merge_levels.push(MergeLevel {
-                input: input.address(),
+                input: input.into(),
                 count: report.temporary_nodes[level],
                 leaves: level == 0,
-                below: match level {
-                    0 => 0,
-                    _ => results[level - 1].address(),
-                },
+                below: level.checked_sub(1).map(|l| &results[l]),
                 results: &results[level],
                 result_index: None,
             });
@@ -1178,6 +1188,20 @@ impl GpuHashDag {
         let reps = ctx.create_buffer("edit level reps", per_kind, MemLocation::GpuOnly)?;
         let handles = ctx.create_buffer("edit level handles", per_kind, MemLocation::GpuOnly)?;
         let slots = ctx.create_buffer("edit level slots", 4 * n, MemLocation::GpuOnly)?;
+        // Where nothing below is resolved here, this level's own buffers stand in (unread).
+        let texels = match self.config.word_views {
+            false => None,
+            true => LevelTexels::new(
+                &ctx,
+                [
+                    level.input.buffer(),
+                    level.below.unwrap_or(level.results),
+                    &slots,
+                    &reps,
+                    &handles,
+                ],
+            )?,
+        };
         let counters = ctx.create_buffer(
             "edit level counters",
             4 * COUNTERS as u64,
@@ -1202,14 +1226,15 @@ impl GpuHashDag {
             flags |= FLAG_RESULT_INDEX;
         }
         let push = EditPush {
-            src: level.input,
-            src2: level.below,
+            src: level.input.address(),
+            src2: level.below.map_or(0, |b| b.address()),
             dst: level.results.address(),
             dst2: level.result_index.map_or(0, |b| b.address()),
             tables: address_buf.address(),
             counters: counters.address(),
             count: level.count,
             level: 0,
+            first: (level.input.offset() / 4) as u32,
             flags,
             variant: self.config.variant.id(),
             ..EditPush::default()
@@ -1222,6 +1247,7 @@ impl GpuHashDag {
             handles,
             stride,
             count: n,
+            texels,
             _slots: slots,
             counters,
             address_buf,
@@ -1241,10 +1267,13 @@ impl GpuHashDag {
         cmd.fill_buffer(&b.counters, 0);
         cmd.begin_pass(profiler, "edit build items");
         cmd.dispatch(
-            &self.build_items,
+            self.build_items.get(&self.ctx, b.texels.is_some())?,
             groups(b.push.count),
             bytemuck::bytes_of(&b.push),
-            &[],
+            &b.texels
+                .as_ref()
+                .unwrap_or(&self.build_items.stand_in)
+                .bound(),
         )?;
         cmd.end_pass(profiler);
         cmd.barrier();
@@ -1609,6 +1638,12 @@ impl GpuHashDag {
             let mut b = self.merge_buffers(level)?;
             if let Some(below) = prepared.last() {
                 b.addresses[LEVEL_BELOW] = below.buffers.address_buf.address();
+                if let Some(texels) = &mut b.texels {
+                    let below = &below.buffers;
+                    if !texels.resolve_below(&ctx, &below._slots, &below.reps, &below.handles)? {
+                        b.texels = None;
+                    }
+                }
             }
             let claim_tables = sizes[k]
                 .iter()

@@ -39,7 +39,10 @@ gpu_shared! {
         /// Where a count computed on the GPU lies (a `u32`; 0: none): the pass then processes
         /// `min(that, count)` records (`edit_count()`), `count` being the buffers' capacity.
         pub(crate) count_at: uint64_t,
+        /// Index of the input's first word in the word view build_items reads it through
+        /// (`src` is that word's address).
+        pub(crate) first: uint,
         /// Padding to the std430 size (a multiple of the `vec4`'s 16 bytes).
-        pub(crate) pad: uint64_t,
+        pub(crate) pad: uint,
     }
 }

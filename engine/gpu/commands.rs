@@ -14,7 +14,7 @@ use super::release::{Garbage, Recorder};
 use super::ring::RingKind;
 use super::{
     vk_err, BindingKind, Buffer, BufferSlice, ComputePipeline, GpuContext, GpuError, Image,
-    MemLocation, Profiler, TexelBuffer,
+    MemLocation, Profiler, TexelBuffer, WordTexels,
 };
 
 /// Transfers up to this size go through a staging ring; larger ones (or ones that find the ring
@@ -31,6 +31,8 @@ pub enum Bound<'a> {
     Image(&'a Image),
     /// For [`BindingKind::TexelBuffer`].
     Texels(&'a TexelBuffer),
+    /// For [`BindingKind::TexelBuffer`]: a word view of a buffer.
+    Words(&'a WordTexels),
 }
 
 impl Bound<'_> {
@@ -38,7 +40,7 @@ impl Bound<'_> {
     pub fn kind(&self) -> BindingKind {
         match self {
             Bound::Image(_) => BindingKind::StorageImage,
-            Bound::Texels(_) => BindingKind::TexelBuffer,
+            Bound::Texels(_) | Bound::Words(_) => BindingKind::TexelBuffer,
         }
     }
 }
@@ -516,7 +518,7 @@ impl<'a> Commands<'a> {
                         image_view: image.view,
                         image_layout: vk::ImageLayout::GENERAL,
                     }],
-                    Bound::Texels(_) => [vk::DescriptorImageInfo::default()],
+                    Bound::Texels(_) | Bound::Words(_) => [vk::DescriptorImageInfo::default()],
                 })
                 .collect();
             let writes: Vec<vk::WriteDescriptorSet> = bound
@@ -530,6 +532,7 @@ impl<'a> Commands<'a> {
                     match b {
                         Bound::Image(_) => write.image_info(&image_infos[i]),
                         Bound::Texels(t) => write.texel_buffer_view(std::slice::from_ref(&t.view)),
+                        Bound::Words(t) => write.texel_buffer_view(std::slice::from_ref(&t.view)),
                     }
                 })
                 .collect();

@@ -239,6 +239,65 @@ impl Drop for TexelBuffer {
     }
 }
 
+/// An `R32_UINT` uniform texel view of a buffer's words, bound per dispatch
+/// ([`super::Bound::Words`]): passes read its words with `texelFetch`, which lavapipe runs for
+/// all SIMD lanes at once where a load through an address is a loop over them.
+pub struct WordTexels {
+    pub(crate) view: vk::BufferView,
+    ctx: Arc<GpuContext>,
+    texels: u64,
+}
+
+impl std::fmt::Debug for WordTexels {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("WordTexels")
+            .field("texels", &self.texels)
+            .finish()
+    }
+}
+
+impl WordTexels {
+    /// Number of texels (words).
+    pub fn texels(&self) -> u64 {
+        self.texels
+    }
+}
+
+impl Drop for WordTexels {
+    fn drop(&mut self) {
+        self.ctx.defer(Garbage::BufferView(self.view));
+    }
+}
+
+impl GpuContext {
+    /// A word view of all of `buffer` (at most `maxTexelBufferElements` words).
+    pub fn word_texels(self: &Arc<Self>, buffer: &Buffer) -> Result<WordTexels, GpuError> {
+        let texels = buffer.size / 4;
+        let max = self.info().max_texel_buffer_elements as u64;
+        if texels == 0 || texels > max {
+            return Err(GpuError::InvalidArgument(format!(
+                "word view of '{}': {texels} words, the device takes 1 to {max} \
+                 (maxTexelBufferElements)",
+                buffer.name
+            )));
+        }
+        let info = vk::BufferViewCreateInfo::default()
+            .buffer(buffer.raw)
+            .format(vk::Format::R32_UINT)
+            .offset(0)
+            .range(texels * 4);
+        // SAFETY: a view of our buffer (created with UNIFORM_TEXEL_BUFFER usage) in a format
+        // whose uniform texel buffer support Vulkan requires.
+        let view = unsafe { self.device.create_buffer_view(&info, None) }
+            .map_err(vk_err("vkCreateBufferView"))?;
+        Ok(WordTexels {
+            view,
+            ctx: Arc::clone(self),
+            texels,
+        })
+    }
+}
+
 /// A 2D RGBA8 (unorm) storage image, kept in `GENERAL` layout; bound at set 0, binding 0.
 pub struct Image {
     pub(crate) raw: vk::Image,

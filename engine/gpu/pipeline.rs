@@ -24,7 +24,7 @@ pub struct ComputePipelineDesc<'a> {
 
 /// Most bindings of one kind a pipeline may have (the recorders' descriptor pools are sized for
 /// it).
-pub(crate) const MAX_BINDINGS_PER_KIND: u32 = 2;
+pub(crate) const MAX_BINDINGS_PER_KIND: u32 = 5;
 
 /// A descriptor a pipeline binds (one per binding of set 0; the resource is given per dispatch,
 /// `Commands::dispatch`).

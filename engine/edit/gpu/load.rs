@@ -158,10 +158,10 @@ impl GpuHashDag {
             )?;
             hd.merge(
                 &[MergeLevel {
-                    input: input.address(),
+                    input: (&input).into(),
                     count,
                     leaves: level == 0,
-                    below: below.as_ref().map_or(0, |b| b.address()),
+                    below: below.as_ref(),
                     results: &results,
                     result_index: None,
                 }],

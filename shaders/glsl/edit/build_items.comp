@@ -3,7 +3,8 @@
 // (engine/edit/item.rs). Nodes whose children are all one empty or full value become EDIT_EMPTY / EDIT_FULL | m in the results; the
 // others append their item to the buffer of its size and leave EDIT_PENDING | size index.
 //   src      temporary nodes (8 child values) or leaves (2 mask words, + 8 material words
-//            with materials (edit_materials()): nibble v = material of voxel v)
+//            with materials (edit_materials()): nibble v = material of voxel v); word
+//            push.first of the input view
 //   src2     the level below's results (EDIT_TEMP | i children read entry i; pending ones
 //            are resolved here when the address buffer names the level below's, as in
 //            resolve.comp, whose pass the recorded merge leaves out)
@@ -12,19 +13,67 @@
 //   tables   the level's buffer addresses (EDIT_LEVEL_* in edit/common.glsl)
 //   counters 9 per-size item counts
 //
-// Shaped by lavapipe (docs/editing-gpu.md, "Speed, round 8"): every load or store through a
-// buffer address is a loop over the SIMD lanes, run for every child slot whether or not a
-// lane needs it, and an array indexed by a per-lane value is another such loop. So the child
+// Shaped by lavapipe (docs/editing-gpu.md, "Speed, round 8" and "round 10"): every load or
+// store through a buffer address is a loop over the SIMD lanes, run for every child slot
+// whether or not a lane needs it, and an array indexed by a per-lane value is another such
+// loop. So the reads go through word views (texel fetches, gathered for all lanes), the child
 // loops are unrolled (constant indices), the addresses every node shares are read once per
-// invocation, a node's 8 child values come in 4 64-bit loads, and an item's words go straight
-// from registers to its size's buffer (no array of them).
+// invocation, and an item's words go straight from registers to its size's buffer (no array
+// of them).
 #include "edit/common.glsl"
 layout(local_size_x = 64) in;
+
+// Whether the reads go through the word views below (1) or through addresses (0: a buffer has
+// more words than a view takes; engine/edit/gpu/build_items.rs).
+layout(constant_id = 2) const uint EDIT_SPEC_TEXELS = 1u;
+
+// lavapipe fetches a texel for all SIMD lanes at once, where a load through a buffer address
+// is a loop over them (docs/editing-gpu.md, "Speed, round 10"): the input (word push.first on
+// is src's first), the level below's results (src2), and the slots, representatives and
+// handles of the level whose pending results this pass resolves.
+layout(set = 0, binding = 0) uniform usamplerBuffer input_texels;
+layout(set = 0, binding = 1) uniform usamplerBuffer below_results_texels;
+layout(set = 0, binding = 2) uniform usamplerBuffer below_slots_texels;
+layout(set = 0, binding = 3) uniform usamplerBuffer below_reps_texels;
+layout(set = 0, binding = 4) uniform usamplerBuffer below_handles_texels;
 
 // A node's child values two at a time (one 64-bit load is one loop over the lanes, a uvec2 two).
 layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer WordPairs {
     uint64_t p[];
 };
+
+uint texel_word(usamplerBuffer t, uint i) {
+    return texelFetch(t, int(i)).x;
+}
+
+// Word i of the input.
+uint input_word(uint i) {
+    if (EDIT_SPEC_TEXELS != 0u) return texel_word(input_texels, push.first + i);
+    return Words(push.src).w[i];
+}
+
+// Words 2k and 2k + 1 of the input.
+uvec2 input_pair(uint k) {
+    if (EDIT_SPEC_TEXELS != 0u) return uvec2(input_word(2u * k), input_word(2u * k + 1u));
+    return unpackUint2x32(WordPairs(push.src).p[k]);
+}
+
+// Entry j of the level below's results.
+uint below_result(uint j) {
+    if (EDIT_SPEC_TEXELS != 0u) return texel_word(below_results_texels, j);
+    return Words(push.src2).w[j];
+}
+
+// The NodePtr of the level below's pending result r of node j (edit_resolve_slot through the
+// views), or r where its item has no handle.
+uint below_resolve(EditLevelHandles level, Words slots, uint j, uint r) {
+    if (EDIT_SPEC_TEXELS == 0u) return edit_resolve_slot(level, slots.w[j], r);
+    uint s = r & 15u;
+    uint base = s * level.stride;
+    uint rep = texel_word(below_reps_texels, base + texel_word(below_slots_texels, j));
+    uint handle = texel_word(below_handles_texels, base + rep);
+    return handle >= (1u << 28u) ? r : s << 28u | handle;
+}
 
 // Leaf voxels 8g..8g+7 (a 2^3 sub-block) of the masks lo (voxels 0-31) and hi (32-63).
 uint leaf_byte(uint lo, uint hi, uint g) {
@@ -32,8 +81,6 @@ uint leaf_byte(uint lo, uint hi, uint g) {
 }
 
 void main() {
-    Words input_words = Words(push.src);
-    Words below = Words(push.src2);
     Words results = Words(push.dst);
     Addresses tables = Addresses(push.tables);
     Words counters = Words(push.counters);
@@ -63,14 +110,14 @@ void main() {
         uint mats[8];
         if (leaves) {
             uint rec = materials ? 10u : 2u;
-            lo = input_words.w[i * rec];
-            hi = input_words.w[i * rec + 1u];
+            lo = input_word(i * rec);
+            hi = input_word(i * rec + 1u);
             words = 2u;
             bool one_material = true;
             uint first = 0u;
             if (materials) {
                 [[unroll]] for (uint g = 0u; g < 8u; ++g) {
-                    mats[g] = input_words.w[i * rec + 2u + g];
+                    mats[g] = input_word(i * rec + 2u + g);
                 }
                 first = mats[0] & 15u;
                 // The set voxels whose material differs from voxel 0's: a nibble-wise compare.
@@ -95,7 +142,7 @@ void main() {
             }
         } else {
             [[unroll]] for (uint k = 0u; k < 4u; ++k) {
-                uvec2 pair = unpackUint2x32(WordPairs(push.src).p[i * 4u + k]);
+                uvec2 pair = input_pair(i * 4u + k);
                 c[2u * k] = pair.x;
                 c[2u * k + 1u] = pair.y;
             }
@@ -103,10 +150,10 @@ void main() {
                 uint v = c[o];
                 if ((v & EDIT_TAG_MASK) == EDIT_TEMP) {
                     uint j = v & EDIT_INDEX_MASK;
-                    v = below.w[j];
+                    v = below_result(j);
                     if ((v & EDIT_TAG_MASK) == EDIT_PENDING && below_level != 0ul) {
                         uint r = v;
-                        v = edit_resolve_slot(below_handles, below_slots.w[j], r);
+                        v = below_resolve(below_handles, below_slots, j, r);
                         missing += v == r ? 1u : 0u;
                     }
                 }
