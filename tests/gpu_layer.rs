@@ -484,12 +484,25 @@ fn texel_buffer_fetches_word_pairs() {
         let bad = (0..got.len()).position(|i| got[i] != want[i]);
         assert_eq!(bad, None, "first wrong word");
         assert!(ctx.upload_texels("none", &[]).is_err());
+        // A word view of any buffer: texel k is (word k, 0).
+        let words: Vec<u32> = pairs.iter().map(|p| p[0]).collect();
+        let word_buffer = ctx.upload("test words", &words).unwrap();
+        let word_view = ctx.word_texels(&word_buffer).unwrap();
+        assert_eq!(word_view.texels(), count as u64);
+        let mut cmd = ctx.begin_commands("word texels").unwrap();
+        cmd.dispatch(&pipeline, [8, 1, 1], &push, &[Bound::Words(&word_view)])
+            .unwrap();
+        cmd.submit().unwrap();
+        let got = ctx.download::<u32>(&out).unwrap();
+        let want: Vec<u32> = words.iter().flat_map(|&w| [w + seed, seed]).collect();
+        let bad = (0..got.len()).position(|i| got[i] != want[i]);
+        assert_eq!(bad, None, "first wrong word of the word view");
         let too_many = ctx.create_compute_pipeline(&ComputePipelineDesc {
-            name: "three texel buffers",
+            name: "six texel buffers",
             spirv: shaders::TEST_TEXELS,
             spec_constants: &[],
             push_constant_size: std::mem::size_of::<FillPush>() as u32,
-            bindings: &[BindingKind::TexelBuffer; 3],
+            bindings: &[BindingKind::TexelBuffer; 6],
         });
         assert!(too_many.is_err());
     }
