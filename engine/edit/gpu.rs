@@ -272,8 +272,8 @@ struct MergeBuffers {
     handles: Buffer,
     stride: u64,
     count: u64,
-    /// One slot per node (read by the passes through `addresses`).
-    _slots: Buffer,
+    /// One slot per node (read through `addresses`, or the level above's word view).
+    slots: Buffer,
     /// Items per size (build_items' counters).
     counters: Buffer,
     /// The per-level address buffer and its contents (`EDIT_LEVEL_*`).
@@ -1248,7 +1248,7 @@ impl GpuHashDag {
             stride,
             count: n,
             texels,
-            _slots: slots,
+            slots,
             counters,
             address_buf,
             addresses,
@@ -1640,7 +1640,7 @@ impl GpuHashDag {
                 b.addresses[LEVEL_BELOW] = below.buffers.address_buf.address();
                 if let Some(texels) = &mut b.texels {
                     let below = &below.buffers;
-                    if !texels.resolve_below(&ctx, &below._slots, &below.reps, &below.handles)? {
+                    if !texels.resolve_below(&ctx, &below.slots, &below.reps, &below.handles)? {
                         b.texels = None;
                     }
                 }
