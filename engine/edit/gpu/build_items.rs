@@ -1,8 +1,8 @@
 //! `build_items`' reads through word views (`docs/editing-gpu.md`, "Speed, round 10").
 //!
 //! On lavapipe a load through a buffer address is a loop over the SIMD lanes with a branch per
-//! lane, run at every load site whether or not a lane needs it, while a texel fetch is one
-//! gather for all lanes. build_items reads a node's input words and, per child slot, the level
+//! lane, run at every load site whether or not a lane needs it, while a texel fetch gathers
+//! for all lanes at once (a call of a short function). build_items reads a node's input words and, per child slot, the level
 //! below's result, slot, representative and handle: most of its load sites. It reads them as
 //! `R32_UINT` uniform texel views of those buffers ([`LevelTexels`]) where every buffer fits in
 //! a view (`maxTexelBufferElements` words, 2^27 on lavapipe and common GPUs), and through
