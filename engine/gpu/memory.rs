@@ -273,28 +273,45 @@ impl GpuContext {
     /// A word view of all of `buffer` (at most `maxTexelBufferElements` words).
     pub fn word_texels(self: &Arc<Self>, buffer: &Buffer) -> Result<WordTexels, GpuError> {
         let texels = buffer.size / 4;
-        let max = self.info().max_texel_buffer_elements as u64;
-        if texels == 0 || texels > max {
-            return Err(GpuError::InvalidArgument(format!(
-                "word view of '{}': {texels} words, the device takes 1 to {max} \
-                 (maxTexelBufferElements)",
-                buffer.name
-            )));
-        }
-        let info = vk::BufferViewCreateInfo::default()
-            .buffer(buffer.raw)
-            .format(vk::Format::R32_UINT)
-            .offset(0)
-            .range(texels * 4);
-        // SAFETY: a view of our buffer (created with UNIFORM_TEXEL_BUFFER usage) in a format
-        // whose uniform texel buffer support Vulkan requires.
-        let view = unsafe { self.device.create_buffer_view(&info, None) }
-            .map_err(vk_err("vkCreateBufferView"))?;
+        self.check_texels(&format!("word view of '{}'", buffer.name), texels)?;
         Ok(WordTexels {
-            view,
+            view: self.texel_view(buffer, vk::Format::R32_UINT, texels * 4)?,
             ctx: Arc::clone(self),
             texels,
         })
+    }
+
+    /// Errors unless a texel buffer view of `texels` texels fits the device (1 to
+    /// `maxTexelBufferElements`); `what` names the view in the error.
+    fn check_texels(&self, what: &str, texels: u64) -> Result<(), GpuError> {
+        let max = self.info().max_texel_buffer_elements;
+        if texels == 0 || texels > max as u64 {
+            return Err(GpuError::InvalidArgument(format!(
+                "{what}: {texels} texels, the device takes 1 to {max} (maxTexelBufferElements)"
+            )));
+        }
+        Ok(())
+    }
+
+    /// A uniform texel buffer view of the first `range` bytes of `buffer` in `format` (a
+    /// format whose uniform texel buffer support Vulkan requires), named after the buffer.
+    fn texel_view(
+        &self,
+        buffer: &Buffer,
+        format: vk::Format,
+        range: u64,
+    ) -> Result<vk::BufferView, GpuError> {
+        let info = vk::BufferViewCreateInfo::default()
+            .buffer(buffer.raw)
+            .format(format)
+            .offset(0)
+            .range(range);
+        // SAFETY: a view of our buffer (created with UNIFORM_TEXEL_BUFFER usage) inside it, in
+        // a format the caller checked; the buffer outlives the view (its owner's duty).
+        let view = unsafe { self.device.create_buffer_view(&info, None) }
+            .map_err(vk_err("vkCreateBufferView"))?;
+        self.set_name(view, &format!("{} (view)", buffer.name));
+        Ok(view)
     }
 }
 
@@ -502,27 +519,10 @@ impl GpuContext {
         name: &str,
         texels: &[[u32; 2]],
     ) -> Result<TexelBuffer, GpuError> {
-        let max = self.info().max_texel_buffer_elements;
-        if texels.is_empty() || texels.len() as u64 > max as u64 {
-            return Err(GpuError::InvalidArgument(format!(
-                "texel buffer '{name}': {} texels, the device takes 1 to {max} \
-                 (maxTexelBufferElements)",
-                texels.len()
-            )));
-        }
+        self.check_texels(&format!("texel buffer '{name}'"), texels.len() as u64)?;
         let buffer = self.upload(name, texels)?;
-        let info = vk::BufferViewCreateInfo::default()
-            .buffer(buffer.raw)
-            .format(vk::Format::R32G32_UINT)
-            .offset(0)
-            .range(buffer.size);
-        // SAFETY: a view of our buffer (created with UNIFORM_TEXEL_BUFFER usage) in a format
-        // whose uniform texel buffer support Vulkan requires; the buffer outlives the view.
-        let view = unsafe { self.device.create_buffer_view(&info, None) }
-            .map_err(vk_err("vkCreateBufferView"))?;
-        self.set_name(view, &format!("{name} (view)"));
         Ok(TexelBuffer {
-            view,
+            view: self.texel_view(&buffer, vk::Format::R32G32_UINT, buffer.size)?,
             buffer,
             texels: texels.len() as u64,
         })
