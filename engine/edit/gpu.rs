@@ -1166,8 +1166,14 @@ impl GpuHashDag {
             .collect()
     }
 
-    /// The buffers of one level's merge (sized by its node count) and its push constants.
-    fn merge_buffers(&self, level: &MergeLevel<'_>) -> Result<MergeBuffers, GpuDagError> {
+    /// The buffers of one level's merge (sized by its node count) and its push constants;
+    /// with `below`, its build_items resolves the pending results of that level (whose own
+    /// resolve pass is left out: `merge_recorded`).
+    fn merge_buffers(
+        &self,
+        level: &MergeLevel<'_>,
+        below: Option<&MergeBuffers>,
+    ) -> Result<MergeBuffers, GpuDagError> {
         let ctx = Arc::clone(&self.ctx);
         let n = level.count.max(1) as u64;
         let sizes = self.possible_sizes(level.leaves);
@@ -1189,6 +1195,10 @@ impl GpuHashDag {
         let handles = ctx.create_buffer("edit level handles", per_kind, MemLocation::GpuOnly)?;
         let slots = ctx.create_buffer("edit level slots", 4 * n, MemLocation::GpuOnly)?;
         // Where nothing below is resolved here, this level's own buffers stand in (unread).
+        let [below_slots, below_reps, below_handles] = below
+            .map_or([&slots, &reps, &handles], |b| {
+                [&b.slots, &b.reps, &b.handles]
+            });
         let texels = match self.config.word_views {
             false => None,
             true => LevelTexels::new(
@@ -1196,9 +1206,9 @@ impl GpuHashDag {
                 [
                     level.input.buffer(),
                     level.below.unwrap_or(level.results),
-                    &slots,
-                    &reps,
-                    &handles,
+                    below_slots,
+                    below_reps,
+                    below_handles,
                 ],
             )?,
         };
@@ -1216,6 +1226,7 @@ impl GpuHashDag {
         addresses[LEVEL_HANDLES] = handles.address();
         addresses[LEVEL_STRIDE] = stride;
         addresses[LEVEL_MISSING] = self.merge_errors.address();
+        addresses[LEVEL_BELOW] = below.map_or(0, |b| b.address_buf.address());
         let address_buf = ctx.create_buffer(
             "edit level addresses",
             8 * LEVEL_ADDRESSES as u64,
@@ -1326,14 +1337,14 @@ impl GpuHashDag {
                 root: None,
             });
         };
-        let mut current = self.merge_buffers(first)?;
+        let mut current = self.merge_buffers(first, None)?;
         let mut cmd = self.ctx.begin_commands("edit build items")?;
         let mut counts = self.record_build_items(&mut cmd, &current, &mut profiler)?;
         cmd.submit_async()?;
         for at in 0..levels.len() {
             let level_counts = counts.read()?;
             let next = match levels.get(at + 1) {
-                Some(level) => Some(self.merge_buffers(level)?),
+                Some(level) => Some(self.merge_buffers(level, None)?),
                 None => None,
             };
             let total: u32 = level_counts.iter().sum();
@@ -1635,16 +1646,7 @@ impl GpuHashDag {
         // below through its address buffer), then one recording of all levels.
         let mut prepared: Vec<PreparedLevel> = Vec::with_capacity(levels.len());
         for (k, level) in levels.iter().enumerate() {
-            let mut b = self.merge_buffers(level)?;
-            if let Some(below) = prepared.last() {
-                b.addresses[LEVEL_BELOW] = below.buffers.address_buf.address();
-                if let Some(texels) = &mut b.texels {
-                    let below = &below.buffers;
-                    if !texels.resolve_below(&ctx, &below.slots, &below.reps, &below.handles)? {
-                        b.texels = None;
-                    }
-                }
-            }
+            let b = self.merge_buffers(level, prepared.last().map(|p| &p.buffers))?;
             let claim_tables = sizes[k]
                 .iter()
                 .map(|&s| ClaimTable::new(&ctx, s as u32 + MIN_ITEM_WORDS, level.count))

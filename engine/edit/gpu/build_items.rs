@@ -2,8 +2,9 @@
 //!
 //! On lavapipe a load through a buffer address is a loop over the SIMD lanes with a branch per
 //! lane, run at every load site whether or not a lane needs it, while a texel fetch gathers
-//! for all lanes at once (a call of a short function). build_items reads a node's input words and, per child slot, the level
-//! below's result, slot, representative and handle: most of its load sites. It reads them as
+//! for all lanes at once (a call of a short function). build_items reads a node's input words
+//! and, per child slot, the level below's result, slot, representative and handle: most of its
+//! load sites. It reads them as
 //! `R32_UINT` uniform texel views of those buffers ([`LevelTexels`]) where every buffer fits in
 //! a view (`maxTexelBufferElements` words, 2^27 on lavapipe and common GPUs), and through
 //! addresses otherwise (the loads of scenes that large; a second pipeline, specialization
@@ -40,24 +41,6 @@ impl LevelTexels {
             ctx.word_texels(d)?,
             ctx.word_texels(e)?,
         ])))
-    }
-
-    /// Makes the views of slots, representatives and handles those of the level below (whose
-    /// pending results this level's build_items resolves); false where one does not fit.
-    pub(super) fn resolve_below(
-        &mut self,
-        ctx: &Arc<GpuContext>,
-        slots: &Buffer,
-        reps: &Buffer,
-        handles: &Buffer,
-    ) -> Result<bool, GpuError> {
-        if ![slots, reps, handles].iter().all(|b| fits(ctx, b)) {
-            return Ok(false);
-        }
-        self.0[2] = ctx.word_texels(slots)?;
-        self.0[3] = ctx.word_texels(reps)?;
-        self.0[4] = ctx.word_texels(handles)?;
-        Ok(true)
     }
 
     /// The dispatch's bindings.

@@ -68,11 +68,9 @@ uint below_result(uint j) {
 // views), or r where its item has no handle.
 uint below_resolve(EditLevelHandles level, Words slots, uint j, uint r) {
     if (EDIT_SPEC_TEXELS == 0u) return edit_resolve_slot(level, slots.w[j], r);
-    uint s = r & 15u;
-    uint base = s * level.stride;
+    uint base = (r & 15u) * level.stride;
     uint rep = texel_word(below_reps_texels, base + texel_word(below_slots_texels, j));
-    uint handle = texel_word(below_handles_texels, base + rep);
-    return handle >= (1u << 28u) ? r : s << 28u | handle;
+    return edit_resolved(r, texel_word(below_handles_texels, base + rep));
 }
 
 // Leaf voxels 8g..8g+7 (a 2^3 sub-block) of the masks lo (voxels 0-31) and hi (32-63).

@@ -93,16 +93,20 @@ EditLevelHandles edit_level_handles(Addresses level) {
                             uint(level.a[EDIT_LEVEL_STRIDE]));
 }
 
+// The NodePtr of a pending result r (EDIT_PENDING | size) whose item's representative has
+// `handle`, or r where that item has none (HASH_MISS / HASH_INVALID, at or above 2^28).
+uint edit_resolved(uint r, uint handle) {
+    return handle >= (1u << 28u) ? r : (r & 15u) << 28u | handle;
+}
+
 // The NodePtr of a pending result r (EDIT_PENDING | size) whose item is entry `index` of its
 // size's items in `level`: the handle of the item's representative, once the level's inserts
 // ran. An item left without a handle (a pool ran out) gives r back: the caller counts it as
 // missing and keeps r.
 uint edit_resolve_slot(EditLevelHandles level, uint index, uint r) {
-    uint s = r & 15u;
-    uint base = s * level.stride;
+    uint base = (r & 15u) * level.stride;
     uint rep = Words(level.reps).w[base + index];
-    uint handle = Words(level.handles).w[base + rep];
-    return handle >= (1u << 28u) ? r : s << 28u | handle;
+    return edit_resolved(r, Words(level.handles).w[base + rep]);
 }
 
 // ---- reading items (twin of hash/common.glsl with the item size a run-time value) ----
