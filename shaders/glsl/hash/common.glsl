@@ -41,9 +41,16 @@ layout(buffer_reference, std430, buffer_reference_align = 8) coherent buffer Has
     uint64_t w[];
 };
 
-// A mixed batch's per-size counts, read once by hash_count: every read through a buffer
-// address is a loop over the SIMD lanes on lavapipe, and hash_select needs them per item.
+layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer HashEntries {
+    HashParams entry[];
+};
+
+// A mixed batch's per-size counts and entries, read once by hash_count: a read through a
+// buffer address is a loop over the SIMD lanes on lavapipe unless the address is the same
+// for every lane (here: push constants and constant indices, at the top of main), and
+// hash_select needs them per item.
 uint g_mixed_counts[HASH_MIXED_SIZES];
+HashParams g_mixed_entries[HASH_MIXED_SIZES];
 
 // Items of the batch: push.count, or in a mixed batch the sum of its sizes' counts, which an
 // earlier pass wrote at count_at. Call before hash_select.
@@ -53,16 +60,14 @@ uint hash_count() {
     }
     HashWords counts = HashWords(pc.batch.count_at);
     uint total = 0u;
-    for (uint s = 0u; s < HASH_MIXED_SIZES; ++s) {
+    HashEntries entries = HashEntries(pc.batch.mixed);
+    [[unroll]] for (uint s = 0u; s < HASH_MIXED_SIZES; ++s) {
         g_mixed_counts[s] = counts.w[s];
+        g_mixed_entries[s] = entries.entry[s];
         total += g_mixed_counts[s];
     }
     return total;
 }
-
-layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer HashEntries {
-    HashParams entry[];
-};
 
 // Item `i` of the batch: in a mixed batch, selects its size's entry (push, ITEM_WORDS) and
 // returns its index among the items of that size; otherwise `i`.
@@ -72,13 +77,14 @@ uint hash_select(uint i) {
     }
     // Unrolled, with constant indices: no loads, no dynamic register indexing.
     uint s = 0u;
-    for (uint k = 0u; k + 1u < HASH_MIXED_SIZES; ++k) {
+    push = g_mixed_entries[0];
+    [[unroll]] for (uint k = 0u; k + 1u < HASH_MIXED_SIZES; ++k) {
         if (s == k && i >= g_mixed_counts[k]) {
             i -= g_mixed_counts[k];
             s = k + 1u;
+            push = g_mixed_entries[k + 1u];
         }
     }
-    push = HashEntries(pc.batch.mixed).entry[s];
     ITEM_WORDS = push.item_words;
     return i;
 }
