@@ -113,13 +113,19 @@ uint dag_header_mask(uint h) {
     return (x | (x >> 4u)) & 0x00ffu;
 }
 
+// The u16 index of the pointer of stored octant `so` (set in the header) of the node at u16
+// `node` with header h: the node's header, then its pointers of 1..3 u16 each.
+uint dag_pointer_index(uint node, uint h, uint so) {
+    uint below = h & ((1u << (2u * so)) - 1u);
+    return node + 1u + uint(bitCount(below & 0x5555u)) + 2u * uint(bitCount(below & 0xaaaau));
+}
+
 // The pointer of stored octant `so` of the node at u16 `node` with header h: its value, size
 // code (1..3 u16)
 // and the u16 index of its first word. The up to three u16 are read as one word pair (the
 // streams end with a zero word, so the pair never leaves the buffer).
 uint64_t dag_read_pointer(uint node, uint h, uint so, out uint code, out uint at) {
-    uint below = h & ((1u << (2u * so)) - 1u);
-    at = node + 1u + uint(bitCount(below & 0x5555u)) + 2u * uint(bitCount(below & 0xaaaau));
+    at = dag_pointer_index(node, h, so);
     code = (h >> (2u * so)) & 3u;
     uint64_t pair = packUint2x32(dag_word_pair(g_dag_stream_base + (at >> 1u)));
     uint64_t v = pair >> ((at & 1u) << 4u);
@@ -191,10 +197,7 @@ uint64_t dag_voxels_before(uint node, uint xform, uint aux, uint level, uint c) 
     if (before != 0u) for (;;) {
         uint k = uint(findLSB(before));
         before &= before - 1u;
-        uint so = xform_stored_octant(xform, k);
-        uint below = aux & ((1u << (2u * so)) - 1u);
-        uint at = node + 1u + uint(bitCount(below & 0x5555u)) + 2u * uint(bitCount(below & 0xaaaau));
-        sum += dag_node_voxels(at);
+        sum += dag_node_voxels(dag_pointer_index(node, aux, xform_stored_octant(xform, k)));
         if (before == 0u) break;
     }
     return sum;

@@ -19,6 +19,8 @@
 #ifndef VOXDAG_RENDER_TRAVERSE_GLSL
 #define VOXDAG_RENDER_TRAVERSE_GLSL
 
+#extension GL_EXT_control_flow_attributes : require
+
 // Stack frames: depth 0 = root ... root_level = 4^3 leaf, root_level + 1 = 2^3 sub-block.
 // 21 frames hold grids up to 2^21 per side, every valid .vdag (`MAX_GPU_FRAMES` /
 // `MAX_GPU_RESOLUTION` in params.rs).
@@ -156,99 +158,144 @@ uint traverse_morton16(uvec3 p) {
     return code;
 }
 
-// Voxels of the leaf (leaf, xform) placed at `org` that lie in [lo, hi) and before Morton code
-// `target` of the cell starting at `cell`.
-uint traverse_leaf_before(uint leaf, uint xform, ivec3 org, ivec3 lo, ivec3 hi, ivec3 cell,
-                          uint target) {
-    // The leaf's 64 bits in world order, loaded once (not once per sub-block).
-    uvec2 bits = dag_leaf_bits(leaf, xform);
-    uint count = 0u;
-    for (uint sb = 0u; sb < 8u; sb++) {
-        uint byte_mask = ((sb < 4u ? bits.x : bits.y) >> (8u * (sb & 3u))) & 0xffu;
-        // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
-        if (byte_mask != 0u) for (;;) {
-            uint vb = uint(findLSB(byte_mask));
-            byte_mask &= byte_mask - 1u;
-            ivec3 p = org + ivec3((uvec3(sb, sb >> 1u, sb >> 2u) & 1u) * 2u + (uvec3(vb, vb >> 1u, vb >> 2u) & 1u));
-            if (all(greaterThanEqual(p, lo)) && all(lessThan(p, hi)) &&
-                traverse_morton16(uvec3(p - cell)) < target) {
-                count += 1u;
-            }
-            if (byte_mask == 0u) break;
-        }
+// The voxels of a leaf whose coordinate along one axis is `l` (0..3): a voxel's index in the
+// leaf's 64 world-order bits holds that coordinate's low bit where `low` has its bits set and
+// its high bit where `high` has.
+uint64_t traverse_leaf_slice(uint64_t low, uint64_t high, uint l) {
+    return ((l & 1u) != 0u ? low : ~low) & ((l & 2u) != 0u ? high : ~high);
+}
+
+// Voxels of the leaf with world-order bits `bits` placed at `org` that lie in [lo, hi) and
+// before Morton code `target` of the 16^3 cell starting at `cell`. Bit-sliced over the 64
+// voxels (no loop over them): per axis the voxels inside the clip box and the voxels whose
+// cell coordinate has each of its 4 bits set, then the 12-bit Morton code compared with
+// `target` from its top bit down as 64-bit masks.
+uint traverse_leaf_before(uvec2 bits, ivec3 org, ivec3 lo, ivec3 hi, ivec3 cell, uint target) {
+    // Voxel index bits: x in 0 and 3, y in 1 and 4, z in 2 and 5.
+    uint64_t low_bit[3] = uint64_t[3](0xAAAAAAAAAAAAAAAAul, 0xCCCCCCCCCCCCCCCCul,
+                                      0xF0F0F0F0F0F0F0F0ul);
+    uint64_t high_bit[3] = uint64_t[3](0xFF00FF00FF00FF00ul, 0xFFFF0000FFFF0000ul,
+                                       0xFFFFFFFF00000000ul);
+    uint64_t inside = ~0ul;
+    // code_bit[3 b + a]: the voxels whose cell coordinate along axis a has bit b set, i.e.
+    // bit 3 b + a of their Morton code (`traverse_morton16`).
+    uint64_t code_bit[12];
+    [[unroll]] for (uint j = 0u; j < 12u; j++) {
+        code_bit[j] = 0ul;
     }
-    return count;
+    [[unroll]] for (uint a = 0u; a < 3u; a++) {
+        uint64_t in_range = 0ul;
+        [[unroll]] for (uint l = 0u; l < 4u; l++) {
+            uint64_t slice = traverse_leaf_slice(low_bit[a], high_bit[a], l);
+            int p = org[a] + int(l);
+            in_range |= p >= lo[a] && p < hi[a] ? slice : 0ul;
+            uint q = uint(p - cell[a]);
+            [[unroll]] for (uint b = 0u; b < 4u; b++) {
+                code_bit[3u * b + a] |= ((q >> b) & 1u) != 0u ? slice : 0ul;
+            }
+        }
+        inside &= in_range;
+    }
+    uint64_t before = 0ul;
+    uint64_t equal = ~0ul;
+    [[unroll]] for (int j = 11; j >= 0; j--) {
+        uint64_t t = ((target >> uint(j)) & 1u) != 0u ? ~0ul : 0ul;
+        before |= equal & t & ~code_bit[j];
+        equal &= ~(code_bit[j] ^ t);
+    }
+    uvec2 counted = unpackUint2x32(packUint2x32(bits) & inside & before);
+    return uint(bitCount(counted.x) + bitCount(counted.y));
 }
 
 // World-order rank of voxel `v` inside the translated cell [cell, cell + side) holding the
 // subtree (node, xform) of `level` placed at `org` (its translation applied): the voxels of the
 // subtree inside the cell with a smaller Morton code in the cell. Translated subtrees are at
-// most 16^3, so this walks them (nested translations clip to their own cells too).
+// most 16^3 (level <= 2), so this walks them (nested translations clip to their own cells
+// too), deciding what it can without a child fetch: the Morton order grows along every axis,
+// so a child whose part of the clip box starts at or after `v`'s code holds nothing before
+// it, and a child wholly inside the clip box that ends before it counts whole (its pointer's
+// voxel count). Only the children around `v` are fetched, and only a level-2 subtree's
+// children get a frame of their own: the two frames live in registers (an array indexed per
+// lane is a loop over the lanes at every access on lavapipe).
 uint traverse_shifted_rank(uint node, uint xform, uint level, ivec3 org, ivec3 cell, uint side,
                            ivec3 v) {
     uint target = traverse_morton16(uvec3(v - cell));
+    if (level == 0u) {
+        return traverse_leaf_before(dag_leaf_bits(node, xform), org, cell, cell + ivec3(side),
+                                    cell, target);
+    }
+    // Frame 0: the subtree's root; frame 1: a child of a level-2 root.
+    uint aux0 = dag_node_aux(node, xform, level);
+    uint todo0 = dag_frame_mask(aux0, xform);
     ivec3 lo0 = cell;
     ivec3 hi0 = cell + ivec3(side);
-    if (level == 0u) {
-        return traverse_leaf_before(node, xform, org, lo0, hi0, cell, target);
-    }
-    uint s_node[TRAVERSE_MAX_SHIFTS];
-    uint s_xform[TRAVERSE_MAX_SHIFTS];
-    uint s_next[TRAVERSE_MAX_SHIFTS];
-    ivec3 s_org[TRAVERSE_MAX_SHIFTS];
-    ivec3 s_lo[TRAVERSE_MAX_SHIFTS];
-    ivec3 s_hi[TRAVERSE_MAX_SHIFTS];
-    s_node[0] = node;
-    s_xform[0] = xform;
-    s_next[0] = 0u;
-    s_org[0] = org;
-    s_lo[0] = lo0;
-    s_hi[0] = hi0;
-    uint top = 0u;
+    uint node1 = 0u;
+    uint xform1 = 0u;
+    uint aux1 = 0u;
+    uint todo1 = 0u;
+    ivec3 org1 = ivec3(0);
+    ivec3 lo1 = ivec3(0);
+    ivec3 hi1 = ivec3(0);
+    bool in1 = false;
     uint count = 0u;
     for (;;) {
-        if (s_next[top] == 8u) {
-            if (top == 0u) {
+        if ((in1 ? todo1 : todo0) == 0u) {
+            if (!in1) {
                 break;
             }
-            top -= 1u;
+            in1 = false;
             continue;
         }
-        uint c = s_next[top];
-        s_next[top] = c + 1u;
-        uint lvl = level - top;
-        uint aux = dag_node_aux(s_node[top], s_xform[top], lvl);
-        uint mask = dag_frame_mask(aux, s_xform[top]);
-        if ((mask & (1u << c)) == 0u) {
-            continue;
-        }
+        uint f_node = in1 ? node1 : node;
+        uint f_xform = in1 ? xform1 : xform;
+        uint f_aux = in1 ? aux1 : aux0;
+        ivec3 lo = in1 ? lo1 : lo0;
+        ivec3 hi = in1 ? hi1 : hi0;
+        uint todo = in1 ? todo1 : todo0;
+        uint c = uint(findLSB(todo));
+        todo &= todo - 1u;
+        todo1 = in1 ? todo : todo1;
+        todo0 = in1 ? todo0 : todo;
+        uint lvl = in1 ? level - 1u : level;
         int half_side = 2 << lvl;
-        ivec3 corg = s_org[top] + ivec3(uvec3(c, c >> 1u, c >> 2u) & 1u) * half_side;
+        // The child's cube here (a translated child's cell, before its move): its voxels lie
+        // in its part of the clip box.
+        ivec3 cube = (in1 ? org1 : org) + ivec3(uvec3(c, c >> 1u, c >> 2u) & 1u) * half_side;
+        ivec3 cube_last = cube + ivec3(half_side - 1);
+        ivec3 part_lo = max(lo, cube);
+        if (any(greaterThan(part_lo, min(hi - 1, cube_last))) ||
+            traverse_morton16(uvec3(part_lo - cell)) >= target) {
+            continue;
+        }
+        if (all(greaterThanEqual(cube, lo)) && all(lessThan(cube_last, hi)) &&
+            traverse_morton16(uvec3(cube_last - cell)) < target) {
+            uint so = xform_stored_octant(f_xform, c);
+            count += uint(dag_node_voxels(dag_pointer_index(f_node, f_aux, so)));
+            continue;
+        }
         uint child;
         uint child_xform;
         ivec3 shift;
         uint at;
-        dag_child(s_node[top], s_xform[top], aux, lvl, c, child, child_xform, shift, at);
-        ivec3 lo = s_lo[top];
-        ivec3 hi = s_hi[top];
+        dag_child(f_node, f_xform, f_aux, lvl, c, child, child_xform, shift, at);
+        ivec3 corg = cube;
         if (any(notEqual(shift, ivec3(0)))) {
-            lo = max(lo, corg);
-            hi = min(hi, corg + ivec3(half_side));
+            lo = part_lo;
+            hi = min(hi, cube + ivec3(half_side));
             corg += shift;
         }
-        if (any(greaterThanEqual(max(lo, corg), min(hi, corg + ivec3(half_side))))) {
-            continue;
-        }
         if (lvl == 1u) {
-            count += traverse_leaf_before(child, child_xform, corg, lo, hi, cell, target);
+            count += traverse_leaf_before(dag_leaf_bits(child, child_xform), corg, lo, hi, cell,
+                                          target);
         } else {
-            top += 1u;
-            s_node[top] = child;
-            s_xform[top] = child_xform;
-            s_next[top] = 0u;
-            s_org[top] = corg;
-            s_lo[top] = lo;
-            s_hi[top] = hi;
+            node1 = child;
+            xform1 = child_xform;
+            aux1 = dag_node_aux(child, child_xform, lvl - 1u);
+            todo1 = dag_frame_mask(aux1, child_xform);
+            org1 = corg;
+            lo1 = lo;
+            hi1 = hi;
+            in1 = true;
         }
     }
     return count;
