@@ -238,49 +238,66 @@ uint traverse_shifted_rank(uint node, uint xform, uint level, ivec3 org, ivec3 c
     ivec3 hi1 = ivec3(0);
     bool in1 = false;
     uint count = 0u;
+    // Two loops, as in the traversal: the inner one decides children until a lane needs a
+    // fetch (or is done), the outer one fetches once, so the fetch's code does not run
+    // (masked) for every child decided without it. What the fetch needs follows from the frame
+    // and `c` after the inner loop.
+    uint c = 0u;
     for (;;) {
-        if ((in1 ? todo1 : todo0) == 0u) {
-            if (!in1) {
-                break;
+        bool fetch = false;
+        for (;;) {
+            if ((in1 ? todo1 : todo0) == 0u) {
+                if (!in1) {
+                    break;
+                }
+                in1 = false;
+                continue;
             }
-            in1 = false;
-            continue;
+            uint todo = in1 ? todo1 : todo0;
+            c = uint(findLSB(todo));
+            todo &= todo - 1u;
+            todo1 = in1 ? todo : todo1;
+            todo0 = in1 ? todo0 : todo;
+            ivec3 lo = in1 ? lo1 : lo0;
+            ivec3 hi = in1 ? hi1 : hi0;
+            int half_side = 2 << (in1 ? level - 1u : level);
+            // The child's cube here (a translated child's cell, before its move): its voxels
+            // lie in its part of the clip box.
+            ivec3 cube = (in1 ? org1 : org) + ivec3(uvec3(c, c >> 1u, c >> 2u) & 1u) * half_side;
+            ivec3 cube_last = cube + ivec3(half_side - 1);
+            ivec3 part_lo = max(lo, cube);
+            if (any(greaterThan(part_lo, min(hi - 1, cube_last))) ||
+                traverse_morton16(uvec3(part_lo - cell)) >= target) {
+                continue;
+            }
+            if (all(greaterThanEqual(cube, lo)) && all(lessThan(cube_last, hi)) &&
+                traverse_morton16(uvec3(cube_last - cell)) < target) {
+                uint f_xform = in1 ? xform1 : xform;
+                uint so = xform_stored_octant(f_xform, c);
+                count += uint(dag_node_voxels(dag_pointer_index(in1 ? node1 : node,
+                                                                in1 ? aux1 : aux0, so)));
+                continue;
+            }
+            fetch = true;
+            break;
         }
-        uint f_node = in1 ? node1 : node;
-        uint f_xform = in1 ? xform1 : xform;
-        uint f_aux = in1 ? aux1 : aux0;
-        ivec3 lo = in1 ? lo1 : lo0;
-        ivec3 hi = in1 ? hi1 : hi0;
-        uint todo = in1 ? todo1 : todo0;
-        uint c = uint(findLSB(todo));
-        todo &= todo - 1u;
-        todo1 = in1 ? todo : todo1;
-        todo0 = in1 ? todo0 : todo;
+        if (!fetch) {
+            break;
+        }
         uint lvl = in1 ? level - 1u : level;
         int half_side = 2 << lvl;
-        // The child's cube here (a translated child's cell, before its move): its voxels lie
-        // in its part of the clip box.
+        ivec3 lo = in1 ? lo1 : lo0;
+        ivec3 hi = in1 ? hi1 : hi0;
         ivec3 cube = (in1 ? org1 : org) + ivec3(uvec3(c, c >> 1u, c >> 2u) & 1u) * half_side;
-        ivec3 cube_last = cube + ivec3(half_side - 1);
-        ivec3 part_lo = max(lo, cube);
-        if (any(greaterThan(part_lo, min(hi - 1, cube_last))) ||
-            traverse_morton16(uvec3(part_lo - cell)) >= target) {
-            continue;
-        }
-        if (all(greaterThanEqual(cube, lo)) && all(lessThan(cube_last, hi)) &&
-            traverse_morton16(uvec3(cube_last - cell)) < target) {
-            uint so = xform_stored_octant(f_xform, c);
-            count += uint(dag_node_voxels(dag_pointer_index(f_node, f_aux, so)));
-            continue;
-        }
         uint child;
         uint child_xform;
         ivec3 shift;
         uint at;
-        dag_child(f_node, f_xform, f_aux, lvl, c, child, child_xform, shift, at);
+        dag_child(in1 ? node1 : node, in1 ? xform1 : xform, in1 ? aux1 : aux0, lvl, c, child,
+                  child_xform, shift, at);
         ivec3 corg = cube;
         if (any(notEqual(shift, ivec3(0)))) {
-            lo = part_lo;
+            lo = max(lo, cube);
             hi = min(hi, cube + ivec3(half_side));
             corg += shift;
         }
