@@ -579,6 +579,54 @@ fn build_from_a_vdag_re_encodes_the_same_voxels() {
     assert!(!refused.exists());
 }
 
+/// A scene saved without the voxel digest (`Svdag::save`, which `voxdag edit -o` uses)
+/// re-encodes to the compact encodings: they store the digest taken from its voxels, and
+/// `verify` proves the new file against it.
+#[test]
+fn build_from_a_vdag_without_voxel_digest() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/avocado/Avocado.gltf");
+    let built = dir.path().join("built.vdag");
+    voxdag_ok(&[
+        "-q",
+        "build",
+        s(&model),
+        "-r",
+        "32",
+        "--no-colors",
+        "-o",
+        s(&built),
+    ]);
+    let plain = dir.path().join("plain.vdag");
+    voxdag::dag::Svdag::load(&built)
+        .unwrap()
+        .save(&plain)
+        .unwrap();
+    assert!(
+        voxdag::dag::VdagFile::load(&plain)
+            .unwrap()
+            .digest
+            .is_none(),
+        "the test needs a file without the voxel digest"
+    );
+    for encoding in ["ssvdag", "tsvdag"] {
+        let out_path = dir.path().join(format!("{encoding}.vdag"));
+        voxdag_ok(&[
+            "-q",
+            "build",
+            s(&plain),
+            "--encoding",
+            encoding,
+            "-o",
+            s(&out_path),
+        ]);
+        let stored = voxdag::dag::VdagFile::load(&out_path).unwrap().digest;
+        let original = voxdag::dag::VdagFile::load(&built).unwrap().digest;
+        assert_eq!(stored, original, "{encoding}: the digest of the voxels");
+        voxdag_ok(&["verify", s(&out_path)]);
+    }
+}
+
 #[test]
 fn bench_pathtrace_keeps_colours_in_the_svdag32_cache_only() {
     let dir = tempfile::tempdir().unwrap();

@@ -11,8 +11,8 @@ use voxdag::atomic_file::{check_output_path, write_atomic};
 use voxdag::attr::{ChunkedColors, ColorCodec, LosslessVariant, Materials, StoredColors};
 use voxdag::dag::digest::ContentDigest;
 use voxdag::dag::encode::{
-    DigestBuilder, EncodedDag, SsvdagEncoding, TransformGraph, TsvdagEncoding, TsvdagOptions,
-    VoxelDigest,
+    voxel_digest, DigestBuilder, EncodedDag, SsvdagEncoding, TransformGraph, TsvdagEncoding,
+    TsvdagOptions, VoxelDigest,
 };
 use voxdag::dag::{
     analyze_symmetry, export_vox, export_xyz_u32_file, CanonicalDag, DagStats, Svdag,
@@ -367,8 +367,14 @@ fn transcode(args: &BuildArgs, quiet: bool) -> Result<()> {
     let mut file = VdagFile::load_encoded_colors(&args.input)?;
     let materials = file.materials.take();
     let stored_colors = file.stored_colors.take();
-    let digest = file.digest;
+    let mut digest = file.digest;
     let mut dag = file.into_svdag(&args.input)?;
+    if digest.is_none() && args.encoding != EncodingArg::Svdag32 {
+        // A scene saved without the voxel digest (an edited one: `voxdag edit -o`, or any
+        // `Svdag::save`): the compact encodings store it for `verify`, so it is taken from the
+        // voxels the file holds.
+        digest = Some(voxel_digest(&dag)?);
+    }
     if let Some(r) = args.resolution.filter(|&r| r != dag.resolution) {
         bail!(
             "--resolution {r}: {} is a {}^3 scene (a built scene keeps its resolution)",

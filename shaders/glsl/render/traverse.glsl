@@ -29,8 +29,6 @@
 #define TRAVERSE_PARALLEL_INV 1e36
 // `t_max` of unbounded rays (`T_UNBOUNDED`).
 #define TRAVERSE_T_UNBOUNDED 1e30
-// Translated subtrees nest at most 3 deep (pointers into levels 2, 1, 0).
-#define TRAVERSE_MAX_SHIFTS 3u
 
 #include "render/dag_formats.glsl"
 
