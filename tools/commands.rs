@@ -369,18 +369,18 @@ fn transcode(args: &BuildArgs, quiet: bool) -> Result<()> {
     let stored_colors = file.stored_colors.take();
     let mut digest = file.digest;
     let mut dag = file.into_svdag(&args.input)?;
-    if digest.is_none() && args.encoding != EncodingArg::Svdag32 {
-        // A scene saved without the voxel digest (an edited one: `voxdag edit -o`, or any
-        // `Svdag::save`): the compact encodings store it for `verify`, so it is taken from the
-        // voxels the file holds.
-        digest = Some(voxel_digest(&dag)?);
-    }
     if let Some(r) = args.resolution.filter(|&r| r != dag.resolution) {
         bail!(
             "--resolution {r}: {} is a {}^3 scene (a built scene keeps its resolution)",
             args.input.display(),
             dag.resolution
         );
+    }
+    if digest.is_none() && args.encoding != EncodingArg::Svdag32 {
+        // A scene saved without the voxel digest (an edited one: `voxdag edit -o`, or any
+        // `Svdag::save`): the compact encodings store it for `verify`, so it is taken from the
+        // voxels the file holds.
+        digest = Some(voxel_digest(&dag)?);
     }
     let (colors, stored_colors) = if args.no_colors || args.colors.0.is_none() {
         (Vec::new(), None)
