@@ -218,15 +218,14 @@ uint traverse_leaf_before(uvec2 bits, ivec3 org, ivec3 lo, ivec3 hi, ivec3 cell,
 uint traverse_shifted_rank(uint node, uint xform, uint level, ivec3 org, ivec3 cell, uint side,
                            ivec3 v) {
     uint target = traverse_morton16(uvec3(v - cell));
+    ivec3 lo0 = cell;
+    ivec3 hi0 = cell + ivec3(side);
     if (level == 0u) {
-        return traverse_leaf_before(dag_leaf_bits(node, xform), org, cell, cell + ivec3(side),
-                                    cell, target);
+        return traverse_leaf_before(dag_leaf_bits(node, xform), org, lo0, hi0, cell, target);
     }
     // Frame 0: the subtree's root; frame 1: a child of a level-2 root.
     uint aux0 = dag_node_aux(node, xform, level);
     uint todo0 = dag_frame_mask(aux0, xform);
-    ivec3 lo0 = cell;
-    ivec3 hi0 = cell + ivec3(side);
     uint node1 = 0u;
     uint xform1 = 0u;
     uint aux1 = 0u;
