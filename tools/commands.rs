@@ -11,8 +11,8 @@ use voxdag::atomic_file::{check_output_path, write_atomic};
 use voxdag::attr::{ChunkedColors, ColorCodec, LosslessVariant, Materials, StoredColors};
 use voxdag::dag::digest::ContentDigest;
 use voxdag::dag::encode::{
-    voxel_digest, DigestBuilder, EncodedDag, SsvdagEncoding, TransformGraph, TsvdagEncoding,
-    TsvdagOptions, VoxelDigest,
+    voxel_digest, EncodedDag, SsvdagEncoding, TransformGraph, TsvdagEncoding, TsvdagOptions,
+    VoxelDigest,
 };
 use voxdag::dag::{
     analyze_symmetry, export_vox, export_xyz_u32_file, CanonicalDag, DagStats, Svdag,
@@ -791,11 +791,7 @@ fn legacy_check(file: &VdagFile, name: &str, voxels: u64) -> Result<String> {
              position checksum"
         ));
     }
-    let mut builder = DigestBuilder::default();
-    for code in file.encoded.voxels() {
-        builder.push(code?);
-    }
-    let d = builder.finish();
+    let d = file.encoded.digest()?;
     if d != v1 {
         bail!(
             "{name}: decoded {} voxels with checksum {:#010x}, built from {} voxels with \
