@@ -426,9 +426,24 @@ fn leaf_bit_permutation_matches_voxel_transform() {
 /// formats' traversal uses) equals `Transform` for all 48 transforms: leaves (every single
 /// voxel and random masks), child masks, stored octants, compositions with every transform and
 /// translations (`T(p + tr) = T(p) + tr'`).
+/// The voxels of a 4^3 leaf (bit `morton(x, y, z)`) moved by `shift`, those leaving the leaf
+/// dropped: a translated leaf as the traversal sees it in its cell.
+fn shifted_leaf(leaf: u64, shift: [i32; 3]) -> u64 {
+    (0..64u64)
+        .filter(|&code| leaf >> code & 1 == 1)
+        .filter_map(|code| {
+            let p = morton::decode(code);
+            let q: [i32; 3] = std::array::from_fn(|a| p[a] as i32 + shift[a]);
+            q.iter()
+                .all(|c| (0..4).contains(c))
+                .then(|| 1u64 << morton::encode(q[0] as u32, q[1] as u32, q[2] as u32))
+        })
+        .fold(0, |m, bit| m | bit)
+}
+
 #[test]
 fn gpu_transform_arithmetic_equals_cpu() {
-    const OUT_WORDS: usize = 8;
+    const OUT_WORDS: usize = 10;
     let mut rng = Rng(0x51ed_2701_ab3c_9d44);
     // Records: leaf (2 words), child mask | octant << 8 | composed transform << 16, translation.
     let mut records: Vec<[u32; 4]> = Vec::new();
@@ -487,6 +502,13 @@ fn gpu_transform_arithmetic_equals_cpu() {
             let want: [i32; 3] = std::array::from_fn(|a| tq[a] as i32 - tp[a] as i32);
             let seen = [words[5] as i32, words[6] as i32, words[7] as i32];
             assert_eq!(seen, want, "translation {tr:?}: {what}");
+            let s = (case % 343) as i32;
+            let shift = [s % 7 - 3, s / 7 % 7 - 3, s / 49 - 3];
+            assert_eq!(
+                words[8] as u64 | (words[9] as u64) << 32,
+                shifted_leaf(leaf, shift),
+                "leaf moved by {shift:?}: {what}"
+            );
         }
     }
     ctx.wait_idle().unwrap();

@@ -421,7 +421,9 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     // translation says. Leaving a subtree derives the rest: the base less its translation, and
     // each enclosing cell from the cursor (`traverse_entry_cell`). Every value live across the
     // loops costs on every iteration (spills), and an entry written by selects costs one select
-    // per value, so the 12 values of three unpacked entries are 3 here.
+    // per value, so the 8 values of two unpacked entries are 2 here. Two are enough: only
+    // 16^3 and 8^3 subtrees get an entry (a translated leaf is moved in the fetch), and a
+    // translated subtree nests only inside a larger one.
     ivec3 base = ivec3(0);
     ivec3 clip_lo = ivec3(0);
     ivec3 clip_hi = ivec3(n);
@@ -431,7 +433,6 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     uint shift_depth = 0u;
     uint sh_entry0 = 0u;
     uint sh_entry1 = 0u;
-    uint sh_entry2 = 0u;
 #else
     const ivec3 base = ivec3(0);
     const uint shift_depth = 0u;
@@ -522,22 +523,16 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
                 // Leaving a translated subtree, back to the frame that holds its root: the base
                 // less its translation, the clip box the intersection of the enclosing cells;
                 // the inner loop then pops that frame as usual.
-                uint inner = shifts == 1u ? sh_entry0 : (shifts == 2u ? sh_entry1 : sh_entry2);
+                uint inner = shifts == 1u ? sh_entry0 : sh_entry1;
                 base -= traverse_entry_shift(inner);
                 shifts -= 1u;
                 clip_lo = ivec3(0);
                 clip_hi = ivec3(n);
                 shift_depth = 0u;
-                if (shifts >= 1u) {
+                if (shifts == 1u) {
                     shift_depth = traverse_entry_depth(sh_entry0);
                     uint side = n >> shift_depth;
                     traverse_clip(clip_lo, clip_hi, traverse_entry_cell(cursor, side, ivec3(0)), side);
-                }
-                if (shifts >= 2u) {
-                    shift_depth = traverse_entry_depth(sh_entry1);
-                    uint side = n >> shift_depth;
-                    ivec3 outer_base = traverse_entry_shift(sh_entry0);
-                    traverse_clip(clip_lo, clip_hi, traverse_entry_cell(cursor, side, outer_base), side);
                 }
                 continue;
             }
@@ -564,6 +559,11 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
         uvec2 bits;
         dag_child_masks(child_node, child_xform, level - 1u, child_mask, bits, child_aux);
         if (depth + 1u == leaf_depth) {
+#if defined(TSVDAG_TRANSLATIONS)
+            // A translated leaf is moved in its cell here, so it needs no frames of its own
+            // (docs/pathtracing.md, "Translated leaves moved in the fetch").
+            bits = xform_leaf_shift(bits, shift);
+#endif
             leaf_bits = bits;
             child_mask = traverse_block_mask(bits);
             child_aux = child_mask;
@@ -574,7 +574,7 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
         aux = child_aux;
         todo = traverse_order(child_mask, r.mirror);
 #if defined(TSVDAG_TRANSLATIONS)
-        if (any(notEqual(shift, ivec3(0)))) {
+        if (any(notEqual(shift, ivec3(0))) && depth != leaf_depth) {
             // Enter a translated subtree: its frames start at its translated origin (the base
             // moves, the cursor stays); only the voxels inside the cell (and any outer
             // translated cell) count.
@@ -582,7 +582,6 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
             uint entry = traverse_entry(depth, shift);
             sh_entry0 = shifts == 0u ? entry : sh_entry0;
             sh_entry1 = shifts == 1u ? entry : sh_entry1;
-            sh_entry2 = shifts == 2u ? entry : sh_entry2;
             traverse_clip(clip_lo, clip_hi, fetch_child, half_size);
             base += shift;
             shifts += 1u;

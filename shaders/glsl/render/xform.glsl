@@ -109,4 +109,38 @@ ivec3 xform_translation(uint t, ivec3 tr) {
     return mix(v, -v, notEqual(uvec3(t) & uvec3(1u, 2u, 4u), uvec3(0u)));
 }
 
+// The voxels of a 4^3 leaf (bits as in `xform_leaf`) moved by t along the axis whose
+// coordinate has its low bit at index bit `a` and its high bit at index bit a + 3 (x: a = 0,
+// y: a = 1; both inside each word), `low` / `high` the voxels with that bit set; |t| <= 3,
+// voxels moved out of the leaf dropped. A step of 1 moves coordinates 0 <-> 1 and 2 <-> 3 by
+// 1 << a and 1 <-> 2 by 7 << a, a step of 2 moves them by 8 << a; t = +-3 is a step of 1 then
+// one of 2 the same way (no voxel leaves and comes back).
+uvec2 xform_leaf_move(uvec2 m, uint a, uint low, uint high, int t) {
+    uint u = 1u << a;
+    uint h = 8u << a;
+    uvec2 plus1 = ((m & ~low) << u) | ((m & (low & ~high)) << (h - u));
+    uvec2 minus1 = ((m & low) >> u) | ((m & (~low & high)) >> (h - u));
+    uvec2 odd = (t & 1) == 0 ? m : (t > 0 ? plus1 : minus1);
+    uvec2 two = t > 0 ? (odd & ~high) << h : (odd & high) >> h;
+    return abs(t) >= 2 ? two : odd;
+}
+
+// The same along z, whose low bit is index bit 2 and whose high bit picks the word.
+uvec2 xform_leaf_move_z(uvec2 m, int t) {
+    const uint low = 0xf0f0f0f0u;
+    uvec2 plus1 = uvec2((m.x & ~low) << 4u, ((m.y & ~low) << 4u) | ((m.x & low) >> 4u));
+    uvec2 minus1 = uvec2(((m.x & low) >> 4u) | ((m.y & ~low) << 4u), (m.y & low) >> 4u);
+    uvec2 odd = (t & 1) == 0 ? m : (t > 0 ? plus1 : minus1);
+    uvec2 two = t > 0 ? uvec2(0u, odd.x) : uvec2(odd.y, 0u);
+    return abs(t) >= 2 ? two : odd;
+}
+
+// A leaf's world bits under the destructive translation tr (|tr| <= 3 per axis): voxel p
+// moves to p + tr, voxels leaving the 4^3 cell are dropped (`TsvdagEncoding::materialise`).
+uvec2 xform_leaf_shift(uvec2 bits, ivec3 tr) {
+    bits = xform_leaf_move(bits, 0u, 0xaaaaaaaau, 0xff00ff00u, tr.x);
+    bits = xform_leaf_move(bits, 1u, 0xccccccccu, 0xffff0000u, tr.y);
+    return xform_leaf_move_z(bits, tr.z);
+}
+
 #endif

@@ -2,7 +2,8 @@
 // Test pass of shaders/glsl/render/xform.glsl (tests/transform.rs): case i applies transform
 // i % 48 to input record i / 48 and writes XFORM_TEST_OUT_WORDS words: the leaf (2 words), the
 // child mask, the stored octant, the composition with the record's transform, the
-// translation (3 words).
+// translation (3 words), the record's leaf moved by shift i % 343 (x, y, z in -3..3: i % 7 - 3,
+// i / 7 % 7 - 3, i / 49 % 7 - 3; 2 words).
 #extension GL_EXT_buffer_reference : require
 #extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
 
@@ -23,7 +24,7 @@ layout(buffer_reference, std430, buffer_reference_align = 4) writeonly buffer Ou
 #include "gen/test.glsl"
 layout(push_constant, std430) uniform Push { DECODE_TEST_PUSH_MEMBERS } push;
 
-#define XFORM_TEST_OUT_WORDS 8u
+#define XFORM_TEST_OUT_WORDS 10u
 
 void main() {
     uint i = gl_GlobalInvocationID.x;
@@ -47,4 +48,9 @@ void main() {
     out_words.w[5] = uint(seen.x);
     out_words.w[6] = uint(seen.y);
     out_words.w[7] = uint(seen.z);
+    uint s = i % 343u;
+    ivec3 shift = ivec3(s % 7u, s / 7u % 7u, s / 49u) - 3;
+    uvec2 moved = xform_leaf_shift(uvec2(record.w[0], record.w[1]), shift);
+    out_words.w[8] = moved.x;
+    out_words.w[9] = moved.y;
 }
