@@ -141,10 +141,34 @@ ivec3 traverse_entry_cell(uvec3 cursor, uint side, ivec3 outer_base) {
     return outer_base + ivec3(cursor & ~uvec3(side - 1u));
 }
 
-// The clip box [clip_lo, clip_hi) narrowed to the cube [cell, cell + side)^3.
-void traverse_clip(inout ivec3 clip_lo, inout ivec3 clip_hi, ivec3 cell, uint side) {
-    clip_lo = max(clip_lo, cell);
-    clip_hi = min(clip_hi, cell + ivec3(side));
+// The base inside `shifts` (0..2) nested translated subtrees with entries e0 (outer) and e1
+// (inner): the sum of their translations.
+ivec3 traverse_translated_base(uint shifts, uint e0, uint e1) {
+    ivec3 t0 = traverse_entry_shift(e0);
+    return shifts == 0u ? ivec3(0) : (shifts == 1u ? t0 : t0 + traverse_entry_shift(e1));
+}
+
+// The translated-subtree state of a lane inside `shifts` (0..2) nested translated subtrees
+// with entries e0 (outer) and e1 (inner), derived from the entries and the cursor: the base
+// (the sum of their translations), the clip box (the intersection of their cells: the outer
+// one's seen from base 0, the inner one's from the outer translation) and the root frame depth
+// of the innermost (0 outside them).
+void traverse_translated_state(uint shifts, uint e0, uint e1, uvec3 cursor, uint n,
+                               out ivec3 base, out ivec3 clip_lo, out ivec3 clip_hi,
+                               out uint shift_depth) {
+    ivec3 t0 = traverse_entry_shift(e0);
+    base = traverse_translated_base(shifts, e0, e1);
+    uint d0 = traverse_entry_depth(e0);
+    uint d1 = traverse_entry_depth(e1);
+    uint s0 = n >> d0;
+    uint s1 = n >> d1;
+    ivec3 cell0 = traverse_entry_cell(cursor, s0, ivec3(0));
+    ivec3 cell1 = traverse_entry_cell(cursor, s1, t0);
+    clip_lo = shifts == 0u ? ivec3(0) : (shifts == 1u ? cell0 : max(cell0, cell1));
+    clip_hi = shifts == 0u ? ivec3(n)
+                           : (shifts == 1u ? cell0 + ivec3(s0)
+                                           : min(cell0 + ivec3(s0), cell1 + ivec3(s1)));
+    shift_depth = shifts == 0u ? 0u : (shifts == 1u ? d0 : d1);
 }
 
 // Morton code of a point inside a 16^3 cell (4 bits per axis).
@@ -424,13 +448,7 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     // per value, so the 8 values of two unpacked entries are 2 here. Two are enough: only
     // 16^3 and 8^3 subtrees get an entry (a translated leaf is moved in the fetch), and a
     // translated subtree nests only inside a larger one.
-    ivec3 base = ivec3(0);
-    ivec3 clip_lo = ivec3(0);
-    ivec3 clip_hi = ivec3(n);
     uint shifts = 0u;
-    // The root frame depth of the innermost translated subtree, 0 outside them: the advance
-    // loop stops when it would pop this frame, like the root frame's.
-    uint shift_depth = 0u;
     uint sh_entry0 = 0u;
     uint sh_entry1 = 0u;
 #else
@@ -450,6 +468,19 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     // "Fewer values carried through the loops").
     bool fetch = false;
     for (;;) {
+#if defined(TSVDAG_TRANSLATIONS)
+        // The base, the clip box and the root frame depth of the innermost translated subtree
+        // (the advance loop stops when it would pop that frame, like the root frame's):
+        // derived from the entries and the cursor once per iteration, so entering and leaving
+        // a subtree only write an entry and the count, and none of these values is carried
+        // from one iteration to the next.
+        ivec3 base;
+        ivec3 clip_lo;
+        ivec3 clip_hi;
+        uint shift_depth;
+        traverse_translated_state(shifts, sh_entry0, sh_entry1, cursor, n, base, clip_lo, clip_hi,
+                                  shift_depth);
+#endif
         for (;;) {
             if (todo == 0u) {
                 // Done with the root frame, or (S+A+T) leaving a translated subtree (the outer
@@ -520,20 +551,9 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
         if (!fetch) {
 #if defined(TSVDAG_TRANSLATIONS)
             if (!found && depth != 0u) {
-                // Leaving a translated subtree, back to the frame that holds its root: the base
-                // less its translation, the clip box the intersection of the enclosing cells;
-                // the inner loop then pops that frame as usual.
-                uint inner = shifts == 1u ? sh_entry0 : sh_entry1;
-                base -= traverse_entry_shift(inner);
+                // Leaving a translated subtree, back to the frame that holds its root (the
+                // inner loop then pops that frame as usual).
                 shifts -= 1u;
-                clip_lo = ivec3(0);
-                clip_hi = ivec3(n);
-                shift_depth = 0u;
-                if (shifts == 1u) {
-                    shift_depth = traverse_entry_depth(sh_entry0);
-                    uint side = n >> shift_depth;
-                    traverse_clip(clip_lo, clip_hi, traverse_entry_cell(cursor, side, ivec3(0)), side);
-                }
                 continue;
             }
 #endif
@@ -543,7 +563,6 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
         // Follow the pointer of world octant fetch_c of the frame at `depth`: the child's cube
         // is the cursor's, its octant the cursor's bits at the child's size.
         uint fetch_c = traverse_octant(cursor, n >> (depth + 1u));
-        ivec3 fetch_child = base + ivec3(cursor);
         // The frame's ordinals left when it descended: the ones still to visit and the
         // visited one, below them.
         stack_node[depth] = node;
@@ -578,14 +597,10 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
             // Enter a translated subtree: its frames start at its translated origin (the base
             // moves, the cursor stays); only the voxels inside the cell (and any outer
             // translated cell) count.
-            uint half_size = n >> depth;
             uint entry = traverse_entry(depth, shift);
             sh_entry0 = shifts == 0u ? entry : sh_entry0;
             sh_entry1 = shifts == 1u ? entry : sh_entry1;
-            traverse_clip(clip_lo, clip_hi, fetch_child, half_size);
-            base += shift;
             shifts += 1u;
-            shift_depth = depth;
         }
 #endif
     }
@@ -594,7 +609,11 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     }
     // The hit voxel is the cursor's cube; its slab test again, on the same values, gives the
     // same entry (inside a translated subtree the clipped box of a hit voxel is the voxel).
-    ivec3 hit_voxel = base + ivec3(cursor);
+#if defined(TSVDAG_TRANSLATIONS)
+    ivec3 hit_voxel = traverse_translated_base(shifts, sh_entry0, sh_entry1) + ivec3(cursor);
+#else
+    ivec3 hit_voxel = ivec3(cursor);
+#endif
     uint hit_c = traverse_octant(cursor, 1u);
     float hit_t_near;
     uint hit_axis;
