@@ -458,10 +458,10 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     // Two nested loops: the inner one advances (pops, slab tests, descents into the cheap
     // sub-block levels) until a lane needs a child fetch, has found its voxel or is done (or,
     // S+A+T, leaves a translated subtree); the outer one then runs the format's child fetch
-    // (or the restore of the outer frame) once. lavapipe runs every part of a loop body on
-    // every iteration (masked), so the fetch, the format's costly part, runs once per descent
-    // instead of once per iteration of the advance, and the advance carries only the clip box
-    // and base of the translated-subtree state.
+    // (or uncounts the translated subtree left) once. lavapipe runs every part of a loop body
+    // on every iteration (masked), so the fetch, the format's costly part, runs once per
+    // descent instead of once per iteration of the advance, and the advance only reads the
+    // translated-subtree state (base, clip box, innermost root depth) the outer loop derives.
     // Values a lane sets under its own mask inside a loop are carried from iteration to
     // iteration (one masked select each, and a register or a spill), so what the outer loop
     // and the hit need is derived from `cursor` after the advance loop (docs/pathtracing.md,
@@ -484,7 +484,7 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
         for (;;) {
             if (todo == 0u) {
                 // Done with the root frame, or (S+A+T) leaving a translated subtree (the outer
-                // loop restores the outer frame): one test in the loop, told apart outside it.
+                // loop uncounts it): one test in the loop, told apart outside it.
                 if (depth == shift_depth) {
                     break;
                 }
