@@ -442,8 +442,8 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     // The second stack: one entry per translated subtree on the path, packed (see
     // `traverse_entry`): the depth of its root frame and its translation. Voxels outside the
     // clip box (the intersection of the subtrees' cells) are dropped, as the destructive
-    // translation says. Leaving a subtree derives the rest: the base less its translation, and
-    // each enclosing cell from the cursor (`traverse_entry_cell`). Every value live across the
+    // translation says. The base, the clip box and the innermost root depth follow from the
+    // entries and the cursor (`traverse_translated_state`). Every value live across the
     // loops costs on every iteration (spills), and an entry written by selects costs one select
     // per value, so the 8 values of two unpacked entries are 2 here. Two are enough: only
     // 16^3 and 8^3 subtrees get an entry (a translated leaf is moved in the fetch), and a
