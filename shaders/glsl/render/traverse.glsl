@@ -518,13 +518,12 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
             // the clip box: a child the ray crosses only outside it holds no visible voxel.
             // Exact: a voxel lies wholly inside or outside the (cell-aligned) clip box, and a
             // box containing the hit voxel passes the slab test whenever the voxel does
-            // ((x - o) * inv is monotonic in x).
+            // ((x - o) * inv is monotonic in x). A child wholly outside it has an empty box,
+            // which the slab test rejects by the same monotony (its near parameter on the
+            // empty axis is at least its far one), so it needs no test of its own.
             // (Outside translated subtrees the clip box is the grid: no branch needed.)
             box_lo = max(box_lo, clip_lo);
             box_hi = min(box_hi, clip_hi);
-            if (any(greaterThanEqual(box_lo, box_hi))) {
-                continue;
-            }
 #endif
             traverse_slab_box(r, box_lo, box_hi, t_near, t_far, axis);
             t_enter = max(t_near, 0.0);
