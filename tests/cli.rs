@@ -609,6 +609,7 @@ fn build_from_a_vdag_without_voxel_digest() {
             .is_none(),
         "the test needs a file without the voxel digest"
     );
+    let original = voxdag::dag::VdagFile::load(&built).unwrap().digest;
     for encoding in ["ssvdag", "tsvdag"] {
         let out_path = dir.path().join(format!("{encoding}.vdag"));
         voxdag_ok(&[
@@ -621,7 +622,6 @@ fn build_from_a_vdag_without_voxel_digest() {
             s(&out_path),
         ]);
         let stored = voxdag::dag::VdagFile::load(&out_path).unwrap().digest;
-        let original = voxdag::dag::VdagFile::load(&built).unwrap().digest;
         assert_eq!(stored, original, "{encoding}: the digest of the voxels");
         voxdag_ok(&["verify", s(&out_path)]);
     }

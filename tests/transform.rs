@@ -422,10 +422,6 @@ fn leaf_bit_permutation_matches_voxel_transform() {
     }
 }
 
-/// The GPU's transform arithmetic (`shaders/glsl/render/xform.glsl`, which the transformed
-/// formats' traversal uses) equals `Transform` for all 48 transforms: leaves (every single
-/// voxel and random masks), child masks, stored octants, compositions with every transform and
-/// translations (`T(p + tr) = T(p) + tr'`).
 /// The voxels of a 4^3 leaf (bit `morton(x, y, z)`) moved by `shift`, those leaving the leaf
 /// dropped: a translated leaf as the traversal sees it in its cell.
 fn shifted_leaf(leaf: u64, shift: [i32; 3]) -> u64 {
@@ -441,6 +437,11 @@ fn shifted_leaf(leaf: u64, shift: [i32; 3]) -> u64 {
         .fold(0, |m, bit| m | bit)
 }
 
+/// The GPU's transform arithmetic (`shaders/glsl/render/xform.glsl`, which the transformed
+/// formats' traversal uses) equals `Transform` for all 48 transforms: leaves (every single
+/// voxel and random masks), child masks, stored octants, compositions with every transform and
+/// translations (`T(p + tr) = T(p) + tr'`); and a leaf moved in its cell (`xform_leaf_shift`)
+/// equals `shifted_leaf` for every shift in -3..3 per axis.
 #[test]
 fn gpu_transform_arithmetic_equals_cpu() {
     const OUT_WORDS: usize = 10;
