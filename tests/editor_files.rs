@@ -203,12 +203,14 @@ impl Editor {
         self.wait("a hovered voxel", |s| s["hover"].is_array());
     }
 
-    /// A click; waits until the undo depth or the voxel count changed.
+    /// A click; waits until the undo depth or the voxel count changed and a count is shown.
     fn click(&mut self) -> Value {
         let before = self.wait("a voxel count", |s| s["voxels"].as_u64().is_some());
         xdotool(&self.display, &["click", "1"]);
+        // The voxel count is absent while it is recounted after an edit: wait for the new one.
         self.wait("the edit", |s| {
-            s["voxels"] != before["voxels"] || s["undo_depth"] != before["undo_depth"]
+            s["voxels"].as_u64().is_some()
+                && (s["voxels"] != before["voxels"] || s["undo_depth"] != before["undo_depth"])
         })
     }
 
