@@ -1,12 +1,16 @@
 //! GPU traversal of every DAG format directly (no decoding to svdag32): on three scenes (two
 //! meshes and a synthetic scene of mirrored, permuted and translated copies), every format and
-//! mode gives exactly the svdag32 first-hit buffer (hit, voxel, normal, `t` bits, colour
+//! mode (the table modes also as the format-v1 encoder writes them, whose 16-bit pointers are
+//! all table indices) gives exactly the svdag32 first-hit buffer (hit, voxel, normal, `t` bits, colour
 //! index) and exactly the svdag32 image, on any Vulkan device (lavapipe in CI).
 
 mod common;
 
 use common::{build_scene, gpu, has_translated_pointer, repo};
-use voxdag::dag::encode::{EncodedDag, SsvdagEncoding, TsvdagEncoding, TsvdagOptions};
+use voxdag::dag::build_transform_dag;
+use voxdag::dag::encode::{
+    EncodedDag, SsvdagEncoding, TransformGraph, TsvdagEncoding, TsvdagOptions, TsvdagTuning,
+};
 use voxdag::dag::transform::{Transform, TransformSet};
 use voxdag::dag::Svdag;
 use voxdag::render::cpu::ColorSource;
@@ -126,6 +130,28 @@ fn encodings(dag: &Svdag) -> Vec<(String, EncodedDag)> {
                     TsvdagEncoding::build_with_translations(dag, set, translations, mode).unwrap();
                 let name = format!(
                     "tsvdag {set_name}{} {}",
+                    if translations { "t" } else { "" },
+                    mode.mode_name()
+                );
+                out.push((name, EncodedDag::Tsvdag(e)));
+            }
+            // The format-v1 encoder (no tagged pointers): every 16-bit pointer is a pointer
+            // table index, so the table modes read their tables on every scene (the tuned
+            // encoder above tags the pointers of small scenes and leaves their tables empty).
+            for mode in [modes[1], modes[2]] {
+                let graph = TransformGraph::from_transform_dag(build_transform_dag(
+                    dag,
+                    TransformSet::All,
+                    translations,
+                ));
+                let e = TsvdagEncoding::encode_tuned(&graph, mode, TsvdagTuning::V1).unwrap();
+                assert!(
+                    e.tables.iter().any(|t| !t.is_empty()),
+                    "the v1 {} encoding has no pointer table: the test would not cover them",
+                    mode.mode_name()
+                );
+                let name = format!(
+                    "tsvdag sa{} {} (v1 encoder)",
                     if translations { "t" } else { "" },
                     mode.mode_name()
                 );

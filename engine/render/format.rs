@@ -15,7 +15,8 @@
 //!   per level (where its stream and its tables start), so a child fetch reads its level's
 //!   constants with one fetch (the transforms are computed in the shader); after it (TSVDAG),
 //!   per child level its Huffman decode table (one word per entry, Huffman modes) and pointer
-//!   table (two words per entry, modes with tables), unchanged.
+//!   table (two words per entry, modes with tables): unchanged, except that in the Huffman
+//!   modes each pointer-table entry is stored decoded ([`predecoded_entry`]).
 //!
 //! The info block with its tables goes to the GPU as a uniform texel buffer of word pairs
 //! (`render/dag_tables.glsl`): the traversal reads it at per-invocation indices, which lavapipe
@@ -236,6 +237,7 @@ fn tsvdag_data(e: &TsvdagEncoding) -> Result<GpuDagData, EncodeError> {
     };
     for l in 0..e.levels.len() {
         let mut bits = 0;
+        let mut decode = Vec::new();
         if let Some((kind, count, symbols)) = codes.get(l) {
             let table = match kind {
                 2 => {
@@ -250,7 +252,8 @@ fn tsvdag_data(e: &TsvdagEncoding) -> Result<GpuDagData, EncodeError> {
             if (w.len() + table.len()) % 2 == 1 {
                 w.push(0);
             }
-            w.extend(table);
+            w.extend_from_slice(&table);
+            decode = table;
         }
         if w.len() as u64 >= 1 << info::TABLE_BITS_SHIFT {
             return Err(EncodeError::TooLarge(format!(
@@ -262,7 +265,14 @@ fn tsvdag_data(e: &TsvdagEncoding) -> Result<GpuDagData, EncodeError> {
         }
         w[info::LEVELS + 2 * l + 1] = w.len() as u32 | bits << info::TABLE_BITS_SHIFT;
         if let Some(t) = e.tables.get(l) {
-            w.extend(t.iter().flat_map(|&v| [v as u32, (v >> 32) as u32]));
+            for &v in t {
+                let pair = if e.options.huffman {
+                    predecoded_entry(v, &decode, bits, e.translations, l)?
+                } else {
+                    [v as u32, (v >> 32) as u32]
+                };
+                w.extend(pair);
+            }
         }
     }
     let mask_levels = e
@@ -293,6 +303,38 @@ fn tsvdag_data(e: &TsvdagEncoding) -> Result<GpuDagData, EncodeError> {
         node_voxels: flatten_counts(e.pointer_voxel_counts()?),
         info: w,
     })
+}
+
+/// A Huffman mode's pointer-table entry `E` of child level `level` as the GPU reads it:
+/// `[target, symbol | the 15 bits after the code << 16]`, decoded with the level's decode
+/// table `decode` (index bits `bits`) exactly as the shader decodes an inline pointer. A child
+/// fetch then makes one table read, the pre-decoded entry or the decode table's entry, instead
+/// of the entry and then its code (docs/pathtracing.md, "Pointer tables pre-decoded").
+fn predecoded_entry(
+    entry: u64,
+    decode: &[u32],
+    bits: u32,
+    translations: bool,
+    level: usize,
+) -> Result<[u32; 2], EncodeError> {
+    let code = decode[(entry & ((1u64 << bits) - 1)) as usize];
+    let (symbol, len) = (code & 0xffff, code >> 16);
+    let rest = entry >> len;
+    // The translation fields follow the code: one of `level + 3` bits per axis in the
+    // symbol's low 3 bits (translated levels only; elsewhere those bits are zero).
+    let used = if translations {
+        (symbol & 7).count_ones() * (level as u32 + 3)
+    } else {
+        0
+    };
+    let target = rest.checked_shr(used).unwrap_or(0);
+    let target = u32::try_from(target).map_err(|_| {
+        EncodeError::TooLarge(format!(
+            "the pointer table of level {level} names node {target}: the GPU traversal \
+             addresses 2^32 u16 of streams"
+        ))
+    })?;
+    Ok([target, symbol | ((rest as u32) & 0x7fff) << 16])
 }
 
 /// The decode table of a canonical Huffman code (`count[len]` codes of each length, `symbols`
@@ -394,7 +436,8 @@ mod tests {
 
     /// Every child level's record names its pointer table (at an even info word) and, in the
     /// `1 << bits` words before it, a decode table giving what `Huffman::decode` gives for every
-    /// index (a level with one implied symbol or none: one entry of length 0); the tables follow
+    /// index (a level with one implied symbol or none: one entry of length 0), then the pointer
+    /// table with every entry decoded; the tables follow
     /// the info block in level order, with at most one padding word between them; the DAG
     /// words hold the leaves and the node streams only.
     #[test]
@@ -429,11 +472,23 @@ mod tests {
                 previous_end = tables + 2 * table.len() as u32;
                 let decode = &data.info[start as usize..tables as usize];
                 let pointers = &data.info[tables as usize..previous_end as usize];
-                let stored: Vec<u32> = table
-                    .iter()
-                    .flat_map(|&v| [v as u32, (v >> 32) as u32])
-                    .collect();
-                assert_eq!(pointers, &stored[..], "level {l}: pointer table");
+                // Each entry decoded: the target and symbol `decode_pointer` gives, the
+                // translation fields after the symbol.
+                for (i, &v) in table.iter().enumerate() {
+                    let code = e.codes[l].as_ref();
+                    let (symbol, len) = code.map_or((0, 0), |c| c.decode(v).unwrap());
+                    let got = &pointers[2 * i..2 * i + 2];
+                    assert_eq!(
+                        got[1] & 0xffff,
+                        symbol as u32,
+                        "level {l}, entry {i}: symbol"
+                    );
+                    let fields = (v >> len) as u32 & 0x7fff;
+                    assert_eq!(got[1] >> 16, fields, "level {l}, entry {i}: fields");
+                    let used = (symbol & 7).count_ones() * (l as u32 + 3);
+                    let target = (v >> len) >> used;
+                    assert_eq!(got[0] as u64, target, "level {l}, entry {i}: target");
+                }
                 for (x, &entry) in decode.iter().enumerate() {
                     let expected = match &e.codes[l] {
                         Some(code) => code

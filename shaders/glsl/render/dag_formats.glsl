@@ -231,20 +231,6 @@ void dag_root(uint root_level, out uint node, out uint xform) {
     xform = dag_info(DAG_INFO_ROOT_XFORM);
 }
 
-#if defined(TSVDAG_HUFFMAN)
-// Canonical Huffman decode (`Huffman::decode`) of the low bits of e with the code of the child
-// level whose record's table word is `tables`: the symbol and its length, looked up in the
-// level's decode table (`huffman_decode_table` in engine/render/format.rs; a level with one
-// implied symbol has a one-entry table of length 0): one load, no branch.
-uint tsvdag_huffman(uint tables, uint64_t e, out uint len) {
-    uint bits = tables >> DAG_TABLE_BITS_SHIFT;
-    uint start = dag_level_tables(tables) - (1u << bits);
-    uint entry = dag_info(start + (uint(e) & ((1u << bits) - 1u)));
-    len = entry >> 16u;
-    return entry & 0xffffu;
-}
-#endif
-
 // Takes the low `bits` bits of e.
 uint tsvdag_take(inout uint64_t e, uint bits) {
     uint x = uint(e & ((1ul << bits) - 1ul));
@@ -264,19 +250,22 @@ void dag_child(uint node, uint xform, uint aux, uint level, uint c, out uint chi
     uint cl = level - 1u;
     uvec2 level_record = dag_level(cl);
     uint64_t e = v;
+    bool in_table = false;
+    uint index = 0u;
 #if defined(TSVDAG_LUT)
     bool tagged = ((g_dag_coding >> (8u + cl)) & 1u) != 0u;
-    bool in_table = true;
-    uint64_t index = v;
+    in_table = true;
+    index = uint(v);
     if (code != 1u || tagged) {
         in_table = (v & 1ul) != 0ul;
-        index = v >> 1u;
+        index = uint(v >> 1u);
         e = v >> 1u;
     }
+#if !defined(TSVDAG_HUFFMAN)
     if (in_table) {
-        uint w = dag_level_tables(level_record.y) + 2u * uint(index);
-        e = packUint2x32(dag_info_pair(w));
+        e = packUint2x32(dag_info_pair(dag_level_tables(level_record.y) + 2u * index));
     }
+#endif
 #endif
     uint t = 0u;
     ivec3 tr = ivec3(0);
@@ -285,15 +274,26 @@ void dag_child(uint node, uint xform, uint aux, uint level, uint c, out uint chi
     uint tb = cl + 3u;
     int side = 4 << cl;
 #endif
+    uint target;
 #if defined(TSVDAG_HUFFMAN)
-    uint len;
-    uint sym = tsvdag_huffman(level_record.y, e, len);
-    e >>= len;
+    // One read of the tables: a tabled pointer's entry, stored decoded as [target, symbol |
+    // the bits after the code << 16] (`predecoded_entry` in engine/render/format.rs), or the
+    // canonical Huffman decode entry (symbol | length << 16, `huffman_decode_table`) of an
+    // inline pointer's low bits, in the 1 << bits words before the pointer table (a level
+    // with one implied symbol or none: one entry of length 0).
+    uint tables = dag_level_tables(level_record.y);
+    uint bits = level_record.y >> DAG_TABLE_BITS_SHIFT;
+    uint w = in_table ? tables + 2u * index
+                      : tables - (1u << bits) + (uint(e) & ((1u << bits) - 1u));
+    uvec2 pair = dag_info_pair(w & ~1u);
+    uint decoded = (w & 1u) != 0u ? pair.y : pair.x;
+    uint sym = (in_table ? pair.y : decoded) & 0xffffu;
+    e >>= in_table ? 0u : decoded >> 16u;
     t = sym >> 3u;
 #if defined(TSVDAG_TRANSLATIONS)
     // The fields of the axes in the symbol's low 3 bits, x first, each tb bits (at most 15
     // bits in all: read from the low word with 32-bit shifts).
-    uint fields = uint(e);
+    uint fields = in_table ? pair.y >> 16u : uint(e);
     uint field_mask = (1u << tb) - 1u;
     uint off_y = (sym & 1u) * tb;
     uint off_z = off_y + ((sym >> 1u) & 1u) * tb;
@@ -303,6 +303,7 @@ void dag_child(uint node, uint xform, uint aux, uint level, uint c, out uint chi
     tr = mix(ivec3(0), value, notEqual(uvec3(sym) & uvec3(1u, 2u, 4u), uvec3(0u)));
     e >>= used;
 #endif
+    target = in_table ? pair.x : uint(e);
 #else
     uint set_word = g_dag_set;
     uint set = set_word & 3u;
@@ -339,8 +340,8 @@ void dag_child(uint node, uint xform, uint aux, uint level, uint c, out uint chi
         }
 #endif
     }
+    target = uint(e);
 #endif
-    uint target = uint(e);
     child = level_record.x + target;
     child_xform = xform_compose(xform, t);
     shift = xform_translation(xform, tr);
