@@ -86,7 +86,9 @@ uint dag_level_tables(uint record_y) {
 // are used: an array of them indexed by level costs more on lavapipe than the load (A/B in
 // docs/pathtracing.md, "Where the time goes on lavapipe").
 uint g_dag_stream_base;
+uint g_dag_root; // the root node: node 0 of the root level's stream
 #if defined(DAG_FORMAT_TSVDAG)
+uint g_dag_root_xform;
 uint g_dag_set;
 uint g_dag_coding;
 #endif
@@ -94,7 +96,9 @@ uint g_dag_coding;
 #define DAG_HAS_BEGIN 1
 void dag_begin(uint root_level) {
     g_dag_stream_base = dag_info(DAG_INFO_STREAM_BASE);
+    g_dag_root = dag_level(root_level).x;
 #if defined(DAG_FORMAT_TSVDAG)
+    g_dag_root_xform = dag_info(DAG_INFO_ROOT_XFORM);
     g_dag_set = dag_info(DAG_INFO_SET);
     g_dag_coding = dag_info(DAG_INFO_CODING);
 #endif
@@ -207,7 +211,7 @@ uint64_t dag_voxels_before(uint node, uint xform, uint aux, uint level, uint c) 
 #if defined(DAG_FORMAT_SSVDAG)
 // The root handle: node 0 of the root level, identity.
 void dag_root(uint root_level, out uint node, out uint xform) {
-    node = dag_level(root_level).x;
+    node = g_dag_root;
     xform = 0u;
 }
 
@@ -227,8 +231,8 @@ void dag_child(uint node, uint xform, uint aux, uint level, uint c, out uint chi
 
 #if defined(DAG_FORMAT_TSVDAG)
 void dag_root(uint root_level, out uint node, out uint xform) {
-    node = dag_level(root_level).x;
-    xform = dag_info(DAG_INFO_ROOT_XFORM);
+    node = g_dag_root;
+    xform = g_dag_root_xform;
 }
 
 // Takes the low `bits` bits of e.
