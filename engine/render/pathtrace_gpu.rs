@@ -1,5 +1,5 @@
-//! GPU path tracers: a megakernel (`pt_mega.comp`, one invocation per pixel runs the whole
-//! path) and a wavefront tracer (Laine, Karras & Aila 2013: `pt_generate`, then per bounce
+//! GPU path tracers: a megakernel (`pt_mega.comp`, one invocation runs whole paths, of
+//! `PT_MEGA_PATHS` pixels in turn) and a wavefront tracer (Laine, Karras & Aila 2013: `pt_generate`, then per bounce
 //! `pt_extend` -> `pt_shade` -> `pt_shadow`, then `pt_accumulate`), both over an uploaded
 //! [`GpuScene`] and both the twins of the CPU reference ([`super::pathtrace::render_pt_cpu`]):
 //! same RNG keys per (pixel, sample, bounce, seed), same arithmetic.
@@ -28,13 +28,16 @@ use crate::gpu::{
 
 /// Workgroup size of `pt_mega.comp` (specialization constants 0 and 1).
 const WORKGROUP: [u32; 2] = [8, 8];
+/// Pixels each megakernel invocation traces in turn (`PT_MEGA_PATHS` in `pt_mega.comp`): a
+/// workgroup covers 8 x (8 * PT_MEGA_PATHS) pixels.
+const PT_MEGA_PATHS: u32 = 4;
 /// Invocations per workgroup of the wavefront passes (`PT_WAVE_GROUP` in `pt_wave.glsl`).
 pub const PT_WAVE_GROUP: u32 = 64;
 
 /// Which GPU path tracer runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PtMode {
-    /// One invocation per pixel traces the whole path.
+    /// One invocation traces whole paths, of `PT_MEGA_PATHS` pixels in turn.
     Megakernel,
     /// Generate / extend / shade / shadow / accumulate passes connected by queues.
     Wavefront,
@@ -350,7 +353,7 @@ impl GpuPathTracer {
         let Some(w) = &target.wave else {
             let groups = [
                 target.width.div_ceil(WORKGROUP[0]),
-                target.height.div_ceil(WORKGROUP[1]),
+                target.height.div_ceil(PT_MEGA_PATHS * WORKGROUP[1]),
                 1,
             ];
             cmd.begin_pass(&mut profiler, "pt megakernel");
