@@ -1,6 +1,7 @@
 //! GPU path tracers: a megakernel (`pt_mega.comp`, one invocation runs whole paths, of
-//! `PT_MEGA_PATHS` pixels in turn) and a wavefront tracer (Laine, Karras & Aila 2013: `pt_generate`, then per bounce
-//! `pt_extend` -> `pt_shade` -> `pt_shadow`, then `pt_accumulate`), both over an uploaded
+//! `PT_MEGA_PATHS` pixels in turn) and a wavefront tracer (Laine, Karras & Aila 2013:
+//! `pt_generate`, then per bounce `pt_extend` -> `pt_shade` -> `pt_shadow`, then
+//! `pt_accumulate`), both over an uploaded
 //! [`GpuScene`] and both the twins of the CPU reference ([`super::pathtrace::render_pt_cpu`]):
 //! same RNG keys per (pixel, sample, bounce, seed), same arithmetic.
 //!
