@@ -504,4 +504,27 @@ mod tests {
             assert!(e.codes.iter().flatten().any(|c| c.single().is_none()));
         }
     }
+
+    /// A pre-decoded entry splits `E` at the code's length and the symbol's translation fields
+    /// (here: symbol 0b101 of length 2, fields of 4 bits for x and z at level 1) and refuses a
+    /// target beyond 32 bits.
+    #[test]
+    fn predecoded_entries_split_code_fields_and_target() {
+        // A 2-bit decode table: low bits 0b10 decode to symbol 5 (t = 0, axes x and z), length 2.
+        let decode = [0u32, 0, 5 | 2 << 16, 0];
+        let (x, z, target) = (0b1001u64, 0b0110u64, 12345u64);
+        let entry = 0b10 | (x | z << 4) << 2 | target << 10;
+        let got = predecoded_entry(entry, &decode, 2, true, 1).unwrap();
+        assert_eq!(
+            got,
+            [
+                12345,
+                5 | ((x | z << 4 | target << 8) as u32 & 0x7fff) << 16
+            ]
+        );
+        // Without translations the bits after the code are the target.
+        let plain = predecoded_entry(0b10 | 77 << 2, &decode, 2, false, 1).unwrap();
+        assert_eq!(plain, [77, 5 | 77 << 16]);
+        assert!(predecoded_entry(0b10 | 1 << 34, &decode, 2, false, 1).is_err());
+    }
 }
