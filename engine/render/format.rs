@@ -317,7 +317,13 @@ fn predecoded_entry(
     translations: bool,
     level: usize,
 ) -> Result<[u32; 2], EncodeError> {
-    let code = decode[(entry & ((1u64 << bits) - 1)) as usize];
+    let code = *decode
+        .get((entry & ((1u64 << bits) - 1)) as usize)
+        .ok_or_else(|| {
+            EncodeError::InvalidInput(format!(
+                "level {level} has a pointer table but no Huffman decode table"
+            ))
+        })?;
     let (symbol, len) = (code & 0xffff, code >> 16);
     let rest = entry >> len;
     // The translation fields follow the code: one of `level + 3` bits per axis in the
