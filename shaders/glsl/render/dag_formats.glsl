@@ -24,7 +24,8 @@
 // mirror bits, which are the transform ids 0..7) the stored node is seen through.
 //
 // What a format provides to traverse.glsl (names with a default below need not be defined):
-//   dag_root, dag_child(node, xform, aux, level, c, ...), dag_inner_mask, dag_leaf_byte;
+//   dag_root (or dag_root_frame, DAG_HAS_ROOT_FRAME: the root handle with its aux word and
+//     world mask), dag_child(node, xform, aux, level, c, ...), dag_inner_mask, dag_leaf_byte;
 //   dag_begin (DAG_HAS_BEGIN; default: nothing): per-invocation setup (constants into registers);
 //   dag_node_aux / dag_frame_mask (DAG_HAS_AUX; default: aux = the world child mask): the word
 //     a frame keeps for `dag_child` and the world mask derived from it (encoded: the header);
@@ -86,23 +87,17 @@ uint dag_level_tables(uint record_y) {
 // are used: an array of them indexed by level costs more on lavapipe than the load (A/B in
 // docs/pathtracing.md, "Where the time goes on lavapipe").
 uint g_dag_stream_base;
-uint g_dag_root; // the root node: node 0 of the root level's stream
-#if defined(DAG_FORMAT_TSVDAG)
+// The root frame: node 0 of the root level's stream, its transform (TSVDAG; SSVDAG: 0), its
+// header and world child mask. Read once per invocation: the root's header address comes from
+// a texel, so lavapipe would load it one lane at a time on every ray.
+uint g_dag_root;
 uint g_dag_root_xform;
+uint g_dag_root_aux;
+uint g_dag_root_mask;
+#if defined(DAG_FORMAT_TSVDAG)
 uint g_dag_set;
 uint g_dag_coding;
 #endif
-
-#define DAG_HAS_BEGIN 1
-void dag_begin(uint root_level) {
-    g_dag_stream_base = dag_info(DAG_INFO_STREAM_BASE);
-    g_dag_root = dag_level(root_level).x;
-#if defined(DAG_FORMAT_TSVDAG)
-    g_dag_root_xform = dag_info(DAG_INFO_ROOT_XFORM);
-    g_dag_set = dag_info(DAG_INFO_SET);
-    g_dag_coding = dag_info(DAG_INFO_CODING);
-#endif
-}
 
 // u16 `g` of the node streams.
 uint dag_u16(uint g) {
@@ -170,6 +165,30 @@ uint dag_frame_mask(uint aux, uint xform) {
     return xform_child_mask(xform, dag_header_mask(aux));
 }
 
+#define DAG_HAS_BEGIN 1
+void dag_begin(uint root_level) {
+    g_dag_stream_base = dag_info(DAG_INFO_STREAM_BASE);
+    g_dag_root = dag_level(root_level).x;
+    g_dag_root_xform = 0u;
+#if defined(DAG_FORMAT_TSVDAG)
+    g_dag_root_xform = dag_info(DAG_INFO_ROOT_XFORM);
+    g_dag_set = dag_info(DAG_INFO_SET);
+    g_dag_coding = dag_info(DAG_INFO_CODING);
+#endif
+    g_dag_root_aux = dag_node_aux(g_dag_root, g_dag_root_xform, root_level);
+    g_dag_root_mask = dag_frame_mask(g_dag_root_aux, g_dag_root_xform);
+}
+
+// The root handle, its aux word and world child mask.
+#define DAG_HAS_ROOT_FRAME 1
+void dag_root_frame(uint root_level, out uint node, out uint xform, out uint aux,
+                    out uint mask) {
+    node = g_dag_root;
+    xform = g_dag_root_xform;
+    aux = g_dag_root_aux;
+    mask = g_dag_root_mask;
+}
+
 // World child mask of the inner node (node, xform) at level >= 1.
 uint dag_inner_mask(uint node, uint xform, uint level) {
     return dag_frame_mask(dag_u16(node), xform);
@@ -209,12 +228,6 @@ uint64_t dag_voxels_before(uint node, uint xform, uint aux, uint level, uint c) 
 #endif
 
 #if defined(DAG_FORMAT_SSVDAG)
-// The root handle: node 0 of the root level, identity.
-void dag_root(uint root_level, out uint node, out uint xform) {
-    node = g_dag_root;
-    xform = 0u;
-}
-
 // The child at world octant c (set in the world mask) of the inner node (node, xform) at
 // `level`: its handle, the translation of its subtree (world frame) and the u16 index of the
 // pointer. SSVDAG: stored octant c ^ mirror, child mirror = mirror ^ pointer mirror.
@@ -230,11 +243,6 @@ void dag_child(uint node, uint xform, uint aux, uint level, uint c, out uint chi
 #endif
 
 #if defined(DAG_FORMAT_TSVDAG)
-void dag_root(uint root_level, out uint node, out uint xform) {
-    node = g_dag_root;
-    xform = g_dag_root_xform;
-}
-
 // Takes the low `bits` bits of e.
 uint tsvdag_take(inout uint64_t e, uint bits) {
     uint x = uint(e & ((1ul << bits) - 1ul));
@@ -416,6 +424,17 @@ uint dag_node_aux(uint node, uint xform, uint level) {
 
 uint dag_frame_mask(uint aux, uint xform) {
     return aux;
+}
+#endif
+
+#if !defined(DAG_HAS_ROOT_FRAME)
+// The root handle, its aux word and world child mask (formats whose root is known without a
+// load: svdag32's word 0, the hash DAG's push constant).
+void dag_root_frame(uint root_level, out uint node, out uint xform, out uint aux,
+                    out uint mask) {
+    dag_root(root_level, node, xform);
+    aux = dag_node_aux(node, xform, root_level);
+    mask = dag_frame_mask(aux, xform);
 }
 #endif
 

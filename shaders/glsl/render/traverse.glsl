@@ -424,9 +424,9 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
     uint leaf_state = 0u;
     uint node;
     uint xform;
-    dag_root(root_level, node, xform);
-    uint aux = dag_node_aux(node, xform, root_level);
-    uint mask = dag_frame_mask(aux, xform);
+    uint aux;
+    uint mask;
+    dag_root_frame(root_level, node, xform, aux, mask);
     uint todo = traverse_order(mask, r.mirror);
     uint depth = 0u;
     uvec2 leaf_bits = uvec2(0u);
