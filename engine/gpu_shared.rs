@@ -1,7 +1,7 @@
 //! One source for every struct and push-constant block shared by Rust and GLSL.
 //!
 //! Each GPU room keeps its shared structs in a file of its own, `<room>/gpu_shared.rs`, that holds
-//! nothing but one [`gpu_shared!`] invocation with GLSL field types (`uint`, `int`, `float`,
+//! nothing but one `gpu_shared!` invocation with GLSL field types (`uint`, `int`, `float`,
 //! `uint64_t`, `vec2`, `vec4`, `uvec2`, `uvec4`, `[T; N]`). That file is read twice:
 //! - here, where the macro expands it into `#[repr(C)]` `bytemuck::Pod` structs whose every field
 //!   offset and whose size are checked at compile time against the std430 rules the shaders use;

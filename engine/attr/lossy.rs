@@ -14,7 +14,7 @@
 //! cut before its first failing colour (or halved) and refitted.
 //!
 //! The block emitted is the one with the lowest rate-distortion cost per colour (64 header bits +
-//! weights + [`ERROR_WEIGHT`] × squared error) of: the longest run one single colour holds, the
+//! weights + `ERROR_WEIGHT` × squared error) of: the longest run one single colour holds, the
 //! longest within half the threshold, the Hough segment and the segment refitted by least squares,
 //! each at the fewest bits that hold it and one more, and the segment's prefixes that its
 //! line (clipped to the prefix) holds with fewer bits. Every candidate keeps the threshold; the

@@ -1,7 +1,7 @@
 //! GPU primitives for GPU-driven work: exclusive prefix sum, stream compaction (with
 //! indirect-dispatch arguments for the next pass) and a stable key/value LSD radix sort for 32-
-//! and 64-bit keys. Each has a CPU reference in [`reference`], records into a caller's
-//! [`Commands`] (barriers, debug labels and profiler passes included) and has a blocking
+//! and 64-bit keys. Each has a CPU reference in [`reference`](mod@reference), records into a caller's
+//! [`Commands`](crate::gpu::Commands) (barriers, debug labels and profiler passes included) and has a blocking
 //! convenience wrapper. Shaders: `shaders/glsl/compute/`; they work for any subgroup size.
 //! See `docs/gpu-primitives.md`.
 

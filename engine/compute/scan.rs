@@ -67,8 +67,8 @@ impl Primitives {
 
     /// Records the exclusive prefix sum of the first `n` `u32`s of `input` into `output` (sums
     /// wrap modulo 2^32; `input == output` is allowed) and their total into word 0 of `total`.
-    /// Barriers before and after are included; passes are profiled as "scan reduce L<level>"
-    /// and "scan block L<level>".
+    /// Barriers before and after are included; passes are profiled as `"scan reduce L<level>"`
+    /// and `"scan block L<level>"`.
     #[allow(clippy::too_many_arguments)]
     pub fn record_exclusive_scan<'a>(
         &'a self,

@@ -38,7 +38,7 @@ pub const SLAB_OCCUPANCY: u32 = 2;
 pub const FLAG_HOLES: u32 = 1;
 /// `HashPush::flags` bit: an insert round that first settles each missing item's
 /// representative through the claim table (`engine/hash/claim.rs`); only the representatives
-/// are inserted, the other copies get [`HANDLE_INVALID`](super::HANDLE_INVALID).
+/// are inserted, the other copies get [`HANDLE_INVALID`].
 pub const FLAG_CLAIMS: u32 = 2;
 
 /// Words of the status block (see [`HashStatus`]).

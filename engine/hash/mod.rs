@@ -8,7 +8,7 @@
 //! - [`table`]: [`GpuHashTable`], the batch passes (search, insert, find-or-insert, read).
 //! - [`claim`]: the claim table that folds a batch's duplicate detection into the search and
 //!   insert passes on single lanes.
-//! - [`reference`]: the sequential CPU reference on the same memory image, and the structural
+//! - [`reference`](mod@reference): the sequential CPU reference on the same memory image, and the structural
 //!   walk used by the tests on both.
 //!
 //! See `docs/hash.md`.

@@ -1,7 +1,7 @@
 //! The path tracer: in-core (every point loaded, each path traced alone) and out-of-core
 //! (batched ray traversal under a memory budget, optionally culled by the SVDAG proxies).
 //!
-//! Both run the same per-ray steps ([`Tracer::advance`], [`intersect_point`]), so the images are
+//! Both run the same per-ray steps (`Tracer::advance`, `intersect_point`), so the images are
 //! bit-identical: a ray visits the batching points its top-level BVH traversal finds in order of
 //! `(entry distance, point id)` while the entry is not behind its closest hit so far; the
 //! batched renderer only interleaves rays differently, and a proxy only removes points the ray
@@ -42,7 +42,7 @@ pub struct RenderOptions {
     pub rays_in_flight: usize,
     /// Out-of-core only: a ray whose next point is not resident first visits the resident
     /// points after it, and a chosen point's rays are traced again before it is loaded
-    /// ([`Tracer::speculate`]); off: the batched traversal of Pharr et al. as published.
+    /// (`Tracer::speculate`); off: the batched traversal of Pharr et al. as published.
     pub lookahead: bool,
     /// Out-of-core only: which resident point the cache evicts to make room.
     pub eviction: Eviction,

@@ -16,7 +16,7 @@
 //!   constants with one fetch (the transforms are computed in the shader); after it (TSVDAG),
 //!   per child level its Huffman decode table (one word per entry, Huffman modes) and pointer
 //!   table (two words per entry, modes with tables): unchanged, except that in the Huffman
-//!   modes each pointer-table entry is stored decoded ([`predecoded_entry`]).
+//!   modes each pointer-table entry is stored decoded (`predecoded_entry`).
 //!
 //! The info block with its tables goes to the GPU as a uniform texel buffer of word pairs
 //! (`render/dag_tables.glsl`): the traversal reads it at per-invocation indices, which lavapipe

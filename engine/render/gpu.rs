@@ -73,7 +73,7 @@ const FITTED_CHUNK_COLORS: u64 = 1 << 20;
 
 /// Raw colours (one RGBA8 word per voxel) whose words exceed `max_allocation` bytes (the
 /// device's largest buffer) or one chunk's index range, re-encoded for the upload as lossless
-/// RGB888 chunks of [`FITTED_CHUNK_COLORS`] colours: exact (alpha is 255 on the GPU either way)
+/// RGB888 chunks of `FITTED_CHUNK_COLORS` colours: exact (alpha is 255 on the GPU either way)
 /// and far smaller (sponza-crytek at 8192: 2.54 GB of raw words against lavapipe's 2 GiB
 /// limit, ~0.1 GB of chunks). `None` when the raw words fit as they are. The chunks follow the
 /// colour order, not SVO nodes (`chunk_depth` 0): they are made for the GPU, never stored.

@@ -71,7 +71,7 @@ pub struct Huffman {
 
 impl Huffman {
     /// Builds the canonical code of given lengths; `None` unless the lengths form a prefix code
-    /// (Kraft sum at most 1, lengths at most [`MAX_CODE_LEN`]) or name exactly one implied symbol.
+    /// (Kraft sum at most 1, lengths at most `MAX_CODE_LEN`) or name exactly one implied symbol.
     pub fn from_lengths(lengths: Vec<u8>, single: Option<u16>) -> Option<Huffman> {
         if lengths.len() > u16::MAX as usize {
             return None;
