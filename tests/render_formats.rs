@@ -1,9 +1,9 @@
 //! GPU traversal of every DAG format directly (no decoding to svdag32): on three scenes (two
 //! meshes and a synthetic scene of mirrored, permuted and translated copies), every format and
 //! mode (the table modes also as the format-v1 encoder writes them, whose 16-bit pointers are
-//! all table indices) gives exactly the svdag32 first-hit buffer (hit, voxel, normal, `t` bits, colour
+//! all table indices; and on teapot 256^3 the S+A+T table modes, whose tagged levels have
+//! tables) gives exactly the svdag32 first-hit buffer (hit, voxel, normal, `t` bits, colour
 //! index) and exactly the svdag32 image, on any Vulkan device (lavapipe in CI).
-
 mod common;
 
 use common::{build_scene, gpu, has_translated_pointer, repo};
@@ -178,11 +178,21 @@ fn cameras(dag: &Svdag) -> Vec<RenderSettings> {
 }
 
 fn check_scene(name: &str, dag: Svdag, expect_translations: bool) {
+    let encodings = encodings(&dag);
+    check_encodings(name, dag, &encodings, expect_translations);
+}
+
+/// Renders `encodings` of `dag` against svdag32 (see the module docs).
+fn check_encodings(
+    name: &str,
+    dag: Svdag,
+    encodings: &[(String, EncodedDag)],
+    expect_translations: bool,
+) {
     let dag = with_rank_colors(dag);
     let context = gpu();
     let renderer = GpuRenderer::new(&context).unwrap();
     let reference = renderer.upload(&dag).unwrap();
-    let encodings = encodings(&dag);
     let mut translated_modes = 0;
     for settings in cameras(&dag) {
         let (ref_image, ref_hits) = renderer.render_first_hits(&reference, &settings).unwrap();
@@ -191,7 +201,7 @@ fn check_scene(name: &str, dag: Svdag, expect_translations: bool) {
             hit_count > ref_hits.len() / 50,
             "{name}: only {hit_count} pixels hit, the camera misses the scene"
         );
-        for (enc_name, enc) in &encodings {
+        for (enc_name, enc) in encodings {
             let scene = renderer
                 .upload_encoded(enc, ColorSource::Raw(&dag.colors))
                 .unwrap();
@@ -256,6 +266,41 @@ fn avocado_every_format_matches_svdag32() {
 #[test]
 fn mirrored_and_translated_copies_every_format_matches_svdag32() {
     check_scene("copies 64", copies_scene(), true);
+}
+
+/// Tagged pointers into non-empty tables (a tag bit tells table index from inline value on
+/// every pointer of a tagged level): the tuned encoder writes them for teapot 256^3 with
+/// translations, not for the 64^3 scenes above.
+#[test]
+fn teapot_256_tagged_table_pointers_match_svdag32() {
+    let dag = build_scene(&repo().join("tests/data/teapot.obj"), Some(256));
+    let mut encodings = Vec::new();
+    for mode in [
+        TsvdagOptions {
+            lut: true,
+            huffman: false,
+        },
+        TsvdagOptions {
+            lut: true,
+            huffman: true,
+        },
+    ] {
+        let e =
+            TsvdagEncoding::build_with_translations(&dag, TransformSet::All, true, mode).unwrap();
+        let tagged_table = e
+            .tables
+            .iter()
+            .zip(&e.tagged)
+            .any(|(table, &tagged)| tagged && !table.is_empty());
+        assert!(
+            tagged_table,
+            "teapot 256 sat {}: no tagged level with a table, the test would not cover them",
+            mode.mode_name()
+        );
+        let name = format!("tsvdag sat {}", mode.mode_name());
+        encodings.push((name, EncodedDag::Tsvdag(e)));
+    }
+    check_encodings("teapot 256", dag, &encodings, true);
 }
 
 #[test]
