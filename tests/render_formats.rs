@@ -4,6 +4,7 @@
 //! all table indices; and on teapot 256^3 the S+A+T table modes, whose tagged levels have
 //! tables) gives exactly the svdag32 first-hit buffer (hit, voxel, normal, `t` bits, colour
 //! index) and exactly the svdag32 image, on any Vulkan device (lavapipe in CI).
+
 mod common;
 
 use common::{build_scene, gpu, has_translated_pointer, repo};
