@@ -98,24 +98,13 @@ fn encodings(dag: &Svdag) -> Vec<(String, EncodedDag)> {
         "ssvdag".to_string(),
         EncodedDag::Ssvdag(SsvdagEncoding::build(dag).unwrap()),
     )];
-    let modes = [
-        TsvdagOptions {
-            lut: false,
-            huffman: false,
-        },
-        TsvdagOptions {
-            lut: true,
-            huffman: false,
-        },
-        TsvdagOptions {
-            lut: true,
-            huffman: true,
-        },
-        TsvdagOptions {
-            lut: false,
-            huffman: true,
-        },
-    ];
+    // `voxdag build`'s three modes (base, lut, huffman) and Huffman without tables.
+    let [base, lut, huffman] = TsvdagOptions::MODES;
+    let huffman_nolut = TsvdagOptions {
+        lut: false,
+        huffman: true,
+    };
+    let modes = [base, lut, huffman, huffman_nolut];
     for (set, set_name) in [
         (TransformSet::All, "sa"),
         (TransformSet::Mirrors, "s"),
@@ -139,7 +128,7 @@ fn encodings(dag: &Svdag) -> Vec<(String, EncodedDag)> {
             // The format-v1 encoder (no tagged pointers): every 16-bit pointer is a pointer
             // table index, so the table modes read their tables on every scene (the tuned
             // encoder above tags the pointers of small scenes and leaves their tables empty).
-            for mode in [modes[1], modes[2]] {
+            for mode in [lut, huffman] {
                 let graph = TransformGraph::from_transform_dag(build_transform_dag(
                     dag,
                     TransformSet::All,
@@ -276,16 +265,8 @@ fn mirrored_and_translated_copies_every_format_matches_svdag32() {
 fn teapot_256_tagged_table_pointers_match_svdag32() {
     let dag = build_scene(&repo().join("tests/data/teapot.obj"), Some(256));
     let mut encodings = Vec::new();
-    for mode in [
-        TsvdagOptions {
-            lut: true,
-            huffman: false,
-        },
-        TsvdagOptions {
-            lut: true,
-            huffman: true,
-        },
-    ] {
+    // The table modes: lut and huffman.
+    for mode in TsvdagOptions::MODES.into_iter().filter(|m| m.lut) {
         let e =
             TsvdagEncoding::build_with_translations(&dag, TransformSet::All, true, mode).unwrap();
         let tagged_table = e
