@@ -29,8 +29,8 @@ use crate::gpu::{
 
 /// Workgroup size of `pt_mega.comp` (specialization constants 0 and 1).
 const WORKGROUP: [u32; 2] = [8, 8];
-/// Pixels each megakernel invocation traces in turn (`PT_MEGA_PATHS` in `pt_mega.comp`): a
-/// workgroup covers 8 x (8 * PT_MEGA_PATHS) pixels.
+/// Pixels each megakernel invocation traces in turn (`pt_mega.comp`'s specialization constant
+/// 3): a workgroup covers 8 x (8 * PT_MEGA_PATHS) pixels.
 const PT_MEGA_PATHS: u32 = 4;
 /// Invocations per workgroup of the wavefront passes (`PT_WAVE_GROUP` in `pt_wave.glsl`).
 pub const PT_WAVE_GROUP: u32 = 64;
@@ -148,7 +148,7 @@ impl GpuPathTracer {
             mega: make(
                 "megakernel",
                 shaders::RENDER_PT_MEGA_BY_FORMAT[i],
-                &WORKGROUP,
+                &[WORKGROUP[0], WORKGROUP[1], 1, PT_MEGA_PATHS],
             )?,
             generate: make("generate", shaders::RENDER_PT_GENERATE_BY_FORMAT[i], &[])?,
             extend: make("extend", shaders::RENDER_PT_EXTEND_BY_FORMAT[i], &[])?,
@@ -193,21 +193,21 @@ impl GpuPathTracer {
         colors: bool,
     ) -> Result<&'a ComputePipeline, GpuError> {
         let i = format.index();
-        // Constant 2 = PT_COLOR_INDEX; the extend pass has no constants 0 and 1 (ignored).
+        // Constant 2 = PT_COLOR_INDEX; the extend pass has no constants 0, 1 and 3 (ignored).
         let (full, plain, pass, spirv, spec) = match extend {
             false => (
                 &pipes.mega,
                 &pipes.mega_plain,
                 "megakernel, no colour index",
                 shaders::RENDER_PT_MEGA_BY_FORMAT[i],
-                [WORKGROUP[0], WORKGROUP[1], 0],
+                [WORKGROUP[0], WORKGROUP[1], 0, PT_MEGA_PATHS],
             ),
             true => (
                 &pipes.extend,
                 &pipes.extend_plain,
                 "extend, no colour index",
                 shaders::RENDER_PT_EXTEND_BY_FORMAT[i],
-                [0, 0, 0],
+                [0, 0, 0, 0],
             ),
         };
         if colors {

@@ -11,14 +11,15 @@ layout(local_size_x_id = 0, local_size_y_id = 1, local_size_z = 1) in;
 
 #include "render/pt_common.glsl"
 
-// Paths each invocation traces one after the other (`PT_MEGA_PATHS` in
-// engine/render/pathtrace_gpu.rs): invocation (x, y) takes the pixels (x, PT_MEGA_PATHS * y + k).
+// Paths each invocation traces one after the other (specialization constant 3, set from
+// `PT_MEGA_PATHS` in engine/render/pathtrace_gpu.rs, which sizes the dispatch by it):
+// invocation (x, y) takes the pixels (x, PT_MEGA_PATHS * y + k).
 // A lane whose path ends starts its next one at once, so the SIMD lanes of a group keep
 // tracing rays (path regeneration) where one path per invocation left finished lanes masked
 // while the group's longest path went on; every path uses its own pixel's RNG stream, so the
 // image does not depend on which invocation traced it (docs/pathtracing.md, "Path
 // regeneration in the megakernel").
-#define PT_MEGA_PATHS 4u
+layout(constant_id = 3) const uint PT_MEGA_PATHS = 4u;
 
 void main() {
     RenderParams p = PtRenderParamsRef(push.params).params;
