@@ -390,136 +390,170 @@ fn repeated_batch(
 /// A mixed batch (single lanes, `hash::mixed`): one search-and-claim and one claimed insert
 /// dispatch over four tables of different item sizes, the sizes' counts read on the GPU, a
 /// bound above their sum: each distinct item is stored once in its table, equal items resolve
-/// to one handle, stored items keep theirs; every variant.
+/// to one handle, stored items keep theirs; every variant. Large batches (two dispatches) and
+/// batches one workgroup takes (both passes in one dispatch, a workgroup barrier between).
 #[test]
 fn mixed_batches_claim_and_insert_every_size_at_once() {
     let ctx = common::gpu();
-    let sizes = [2u32, 3, 5, 9];
     for variant in [
         HashVariant::Atomic64,
         HashVariant::TicketBoard,
         HashVariant::AccelHash32,
         HashVariant::AccelHash8,
     ] {
-        let msg = format!("{variant:?}");
-        let mut tables: Vec<GpuHashTable> = sizes
-            .iter()
-            .map(|&w| {
-                let config = HashTableConfig {
-                    team: TeamMode::SingleLane,
-                    ..HashTableConfig::new(variant, w, 64)
-                };
-                GpuHashTable::new(&ctx, &config).unwrap()
-            })
-            .collect();
-        let mixed = MixedPasses::new(&ctx, &tables[0]).unwrap();
-        let mut taken = HashSet::new();
-        // Per size: its batch (new items up to three times, stored ones mixed in, scattered)
-        // and the handles its stored items had.
-        let mut batches = Vec::new();
-        let mut expected = Vec::new();
-        for (k, &w) in sizes.iter().enumerate() {
-            let stored = random_items(150, w, 500 + w as u64, &mut taken);
-            let (stored_handles, _) = tables[k].insert(&flat(&stored), None).unwrap();
-            tables[k].reserve(2000).unwrap();
-            let fresh = random_items(400 + 100 * k, w, 900 + w as u64, &mut taken);
-            let (batch, known) = repeated_batch(&fresh, &stored, &stored_handles, 3, 4);
-            batches.push(batch);
-            expected.push((known, stored.len() + fresh.len()));
-        }
-        let counts: Vec<u32> = (0..MIXED_SIZES)
-            .map(|s| batches.get(s).map_or(0, |b| b.len() as u32))
-            .collect();
-        let bound = counts.iter().sum::<u32>() + 100;
-        let buffers: Vec<_> = batches
-            .iter()
-            .zip(sizes)
-            .map(|(batch, w)| {
-                let n = batch.len() as u64;
-                (
-                    ctx.upload("items", &flat(batch)).unwrap(),
-                    ctx.create_buffer("handles", 4 * n, MemLocation::GpuOnly)
-                        .unwrap(),
-                    ctx.create_buffer("reps", 4 * n, MemLocation::GpuOnly)
-                        .unwrap(),
-                    ClaimTable::new(&ctx, w, n as u32).unwrap(),
-                )
-            })
-            .collect();
-        let mut entries = [HashPush::default(); MIXED_SIZES];
-        for (k, (items, handles, reps, claims)) in buffers.iter().enumerate() {
-            let claims = Claims {
-                table: claims,
-                reps: reps.into(),
+        check_mixed_batch(&ctx, variant, [150, 400, 100], false);
+        check_mixed_batch(&ctx, variant, [8, 10, 2], true);
+    }
+}
+
+/// One mixed batch of `variant` over four item sizes k = 0..3: per size `stored` items inserted
+/// before and `fresh + step k` new ones (up to three copies each, stored ones mixed in);
+/// `fused`: the batch is small enough for the one-dispatch pass, which the profiled pass names
+/// must show.
+fn check_mixed_batch(
+    ctx: &Arc<GpuContext>,
+    variant: HashVariant,
+    [stored, fresh, step]: [usize; 3],
+    fused: bool,
+) {
+    let ctx = ctx.clone();
+    let sizes = [2u32, 3, 5, 9];
+    let msg = format!("{variant:?}, {fresh} fresh items per size");
+    let mut tables: Vec<GpuHashTable> = sizes
+        .iter()
+        .map(|&w| {
+            let config = HashTableConfig {
+                team: TeamMode::SingleLane,
+                ..HashTableConfig::new(variant, w, 64)
             };
-            entries[k] = tables[k]
-                .claimed_entry(items, handles, counts[k], claims)
-                .unwrap();
-        }
-        let entry_buf = ctx.upload("entries", &entries).unwrap();
-        let count_buf = ctx.upload("counts", &counts).unwrap();
-        let mut cmd = ctx.begin_commands("mixed").unwrap();
-        let before: Vec<_> = tables
-            .iter()
-            .map(|t| t.record_status(&mut cmd).unwrap())
-            .collect();
-        for (_, _, _, claims) in &buffers {
-            claims.record_clear(&mut cmd).unwrap();
-        }
-        cmd.barrier();
-        mixed
-            .record(&mut cmd, &entry_buf, &count_buf, 0, bound, None)
+            GpuHashTable::new(&ctx, &config).unwrap()
+        })
+        .collect();
+    let mixed = MixedPasses::new(&ctx, &tables[0]).unwrap();
+    let mut taken = HashSet::new();
+    // Per size: its batch (new items up to three times, stored ones mixed in, scattered)
+    // and the handles its stored items had.
+    let mut batches = Vec::new();
+    let mut expected = Vec::new();
+    for (k, &w) in sizes.iter().enumerate() {
+        let stored = random_items(stored, w, 500 + w as u64, &mut taken);
+        let (stored_handles, _) = tables[k].insert(&flat(&stored), None).unwrap();
+        tables[k].reserve(2000).unwrap();
+        let fresh = random_items(fresh + step * k, w, 900 + w as u64, &mut taken);
+        let (batch, known) = repeated_batch(&fresh, &stored, &stored_handles, 3, 4);
+        batches.push(batch);
+        expected.push((known, stored.len() + fresh.len()));
+    }
+    let counts: Vec<u32> = (0..MIXED_SIZES)
+        .map(|s| batches.get(s).map_or(0, |b| b.len() as u32))
+        .collect();
+    let bound = counts.iter().sum::<u32>() + 100;
+    let buffers: Vec<_> = batches
+        .iter()
+        .zip(sizes)
+        .map(|(batch, w)| {
+            let n = batch.len() as u64;
+            (
+                ctx.upload("items", &flat(batch)).unwrap(),
+                ctx.create_buffer("handles", 4 * n, MemLocation::GpuOnly)
+                    .unwrap(),
+                ctx.create_buffer("reps", 4 * n, MemLocation::GpuOnly)
+                    .unwrap(),
+                ClaimTable::new(&ctx, w, n as u32).unwrap(),
+            )
+        })
+        .collect();
+    let mut entries = [HashPush::default(); MIXED_SIZES];
+    for (k, (items, handles, reps, claims)) in buffers.iter().enumerate() {
+        let claims = Claims {
+            table: claims,
+            reps: reps.into(),
+        };
+        entries[k] = tables[k]
+            .claimed_entry(items, handles, counts[k], claims)
             .unwrap();
-        let after: Vec<_> = tables
+    }
+    let entry_buf = ctx.upload("entries", &entries).unwrap();
+    let count_buf = ctx.upload("counts", &counts).unwrap();
+    let mut cmd = ctx.begin_commands("mixed").unwrap();
+    let before: Vec<_> = tables
+        .iter()
+        .map(|t| t.record_status(&mut cmd).unwrap())
+        .collect();
+    for (_, _, _, claims) in &buffers {
+        claims.record_clear(&mut cmd).unwrap();
+    }
+    cmd.barrier();
+    let mut profiler = Profiler::new(&ctx).unwrap();
+    mixed
+        .record(
+            &mut cmd,
+            &entry_buf,
+            &count_buf,
+            0,
+            bound,
+            Some(&mut profiler),
+        )
+        .unwrap();
+    let after: Vec<_> = tables
+        .iter()
+        .map(|t| t.record_status(&mut cmd).unwrap())
+        .collect();
+    cmd.submit().unwrap();
+    profiler.resolve().unwrap();
+    if profiler.is_available() {
+        let names: Vec<&str> = profiler.passes().iter().map(|p| p.name.as_str()).collect();
+        let expected_names = match fused {
+            true => vec!["hash search, claim and insert"],
+            false => vec!["hash search and claim", "hash insert"],
+        };
+        assert_eq!(names, expected_names, "{msg}: bound {bound}");
+    }
+    drop(profiler);
+    for (k, (before, after)) in before.into_iter().zip(after).enumerate() {
+        let check = tables[k]
+            .check_inserts(&before.read().unwrap()[0], after.read().unwrap()[0])
+            .unwrap();
+        assert_eq!(check, InsertCheck::default(), "{msg}: size {k}");
+    }
+    for (k, (_, handles, reps, _)) in buffers.iter().enumerate() {
+        let handles: Vec<u32> = ctx.download(handles).unwrap();
+        let reps: Vec<u32> = ctx.download(reps).unwrap();
+        // A copy's handle is its representative's.
+        let resolved: Vec<Handle> = handles
             .iter()
-            .map(|t| t.record_status(&mut cmd).unwrap())
+            .zip(&reps)
+            .map(|(&h, &r)| {
+                let h = if h == HANDLE_INVALID {
+                    handles[r as usize]
+                } else {
+                    h
+                };
+                Handle::from_raw(h).expect("every item has a handle")
+            })
             .collect();
-        cmd.submit().unwrap();
-        for (k, (before, after)) in before.into_iter().zip(after).enumerate() {
-            let check = tables[k]
-                .check_inserts(&before.read().unwrap()[0], after.read().unwrap()[0])
-                .unwrap();
-            assert_eq!(check, InsertCheck::default(), "{msg}: size {k}");
-        }
-        for (k, (_, handles, reps, _)) in buffers.iter().enumerate() {
-            let handles: Vec<u32> = ctx.download(handles).unwrap();
-            let reps: Vec<u32> = ctx.download(reps).unwrap();
-            // A copy's handle is its representative's.
-            let resolved: Vec<Handle> = handles
-                .iter()
-                .zip(&reps)
-                .map(|(&h, &r)| {
-                    let h = if h == HANDLE_INVALID {
-                        handles[r as usize]
-                    } else {
-                        h
-                    };
-                    Handle::from_raw(h).expect("every item has a handle")
-                })
-                .collect();
-            let (known, distinct) = &expected[k];
-            let mut handle_of: HashMap<&Vec<u32>, Handle> = HashMap::new();
-            for ((item, h), e) in batches[k].iter().zip(&resolved).zip(known) {
-                if let Some(e) = e {
-                    assert_eq!(h, e, "{msg} size {k}: a stored item's handle changed");
-                }
-                assert_eq!(
-                    *handle_of.entry(item).or_insert(*h),
-                    *h,
-                    "{msg} size {k}: two handles"
-                );
+        let (known, distinct) = &expected[k];
+        let mut handle_of: HashMap<&Vec<u32>, Handle> = HashMap::new();
+        for ((item, h), e) in batches[k].iter().zip(&resolved).zip(known) {
+            if let Some(e) = e {
+                assert_eq!(h, e, "{msg} size {k}: a stored item's handle changed");
             }
             assert_eq!(
-                tables[k].read_items(&resolved).unwrap(),
-                flat(&batches[k]),
-                "{msg} size {k}: read_items"
-            );
-            assert_eq!(
-                walk_map(&tables[k].download().unwrap()).len(),
-                *distinct,
-                "{msg} size {k}"
+                *handle_of.entry(item).or_insert(*h),
+                *h,
+                "{msg} size {k}: two handles"
             );
         }
+        assert_eq!(
+            tables[k].read_items(&resolved).unwrap(),
+            flat(&batches[k]),
+            "{msg} size {k}: read_items"
+        );
+        assert_eq!(
+            walk_map(&tables[k].download().unwrap()).len(),
+            *distinct,
+            "{msg} size {k}"
+        );
     }
 }
 

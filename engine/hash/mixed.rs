@@ -30,6 +30,9 @@ const ITEMS_PER_INVOCATION: u32 = 4;
 pub struct MixedPasses {
     claim: ComputePipeline,
     insert: ComputePipeline,
+    /// Both passes in one dispatch of one workgroup (a barrier between them), for batches that
+    /// fit one workgroup: one lavapipe thread-pool hand-off instead of two.
+    claim_insert: ComputePipeline,
     items_per_group: u32,
     max_groups: u32,
 }
@@ -49,6 +52,10 @@ impl MixedPasses {
         Ok(MixedPasses {
             claim: pipeline("hash mixed search and claim", shaders::HASH_CLAIM)?,
             insert: pipeline("hash mixed insert", shaders::HASH_INSERT)?,
+            claim_insert: pipeline(
+                "hash mixed search, claim and insert",
+                shaders::HASH_CLAIM_INSERT,
+            )?,
             items_per_group: table.items_per_group(),
             max_groups: ctx.info().max_compute_workgroup_count[0],
         })
@@ -56,7 +63,8 @@ impl MixedPasses {
 
     /// Records the search-and-claim pass and the claimed insert round of a mixed batch of at
     /// most `bound` items (profiled as "hash search and claim" and "hash insert"), each
-    /// followed by a barrier. `entries` holds [`MIXED_SIZES`] entries
+    /// followed by a barrier; a batch that one workgroup takes gets both in one dispatch
+    /// (profiled as "hash search, claim and insert"). `entries` holds [`MIXED_SIZES`] entries
     /// ([`GpuHashTable::claimed_entry`]; a size without items may hold any entry), `counts` the
     /// sizes' item counts ([`MIXED_SIZES`] `u32`s from byte `counts_offset`). Clear the claim
     /// tables before; check each table's status around the submission after
@@ -93,10 +101,15 @@ impl MixedPasses {
         let groups = bound
             .div_ceil(self.items_per_group * ITEMS_PER_INVOCATION)
             .clamp(1, self.max_groups);
-        for (name, pipeline) in [
-            ("hash search and claim", &self.claim),
-            ("hash insert", &self.insert),
-        ] {
+        let passes: &[(&str, &ComputePipeline)] = if groups == 1 {
+            &[("hash search, claim and insert", &self.claim_insert)]
+        } else {
+            &[
+                ("hash search and claim", &self.claim),
+                ("hash insert", &self.insert),
+            ]
+        };
+        for &(name, pipeline) in passes {
             cmd.begin_pass(&mut profiler, name);
             cmd.dispatch(pipeline, [groups, 1, 1], bytemuck::bytes_of(&push), &[])?;
             cmd.end_pass(&mut profiler);

@@ -91,6 +91,8 @@ fn group_of(pass: &str) -> &'static str {
         p if p.starts_with("dedup") => GROUPS[1],
         // Single lanes: the search also claims (the SVO dedup folded into search and insert).
         "hash search" | "hash search and claim" => GROUPS[2],
+        // Search, claim and insert of a small level in one dispatch: counted as the search.
+        "hash search, claim and insert" => GROUPS[2],
         "hash insert" | "edit mark" => GROUPS[3],
         "edit build items" | "edit resolve" => GROUPS[4],
         _ => GROUPS[5],

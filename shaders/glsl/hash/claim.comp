@@ -16,30 +16,8 @@
 #include "hash/common.glsl"
 #include "hash/slab.glsl"
 #include "hash/claims.glsl"
+#include "hash/claim_pass.glsl"
 
 void main() {
-    // Single lanes only (TEAM == 1): the host makes this pipeline for no other team size.
-    uint batch_count = hash_count();
-    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
-    uint k = team_index();
-    if (k < batch_count) for (;;) {
-        uint i = hash_select(k);
-        HashWords handles = HashWords(push.handles);
-        HashWords reps = HashWords(push.reps);
-        uint item[HASH_MAX_ITEM_WORDS];
-        hash_load_item(push.items, i, item);
-        uint found = HASH_MISS;
-        // Invalid items are left to the insert round, which rejects and counts them.
-        if (hash_item_valid(item)) {
-            uint h = hash_item(item);
-            found = hash_search_chain(item, h);
-            if (found == HASH_MISS) {
-                claim_first_copy(item, h, i, true);
-            }
-        }
-        handles.w[i] = found;
-        reps.w[i] = i;
-        k += team_count();
-        if (k >= batch_count) break;
-    }
+    hash_claim_pass();
 }

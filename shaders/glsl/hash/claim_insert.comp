@@ -1,0 +1,32 @@
+#version 460
+// The search-and-claim pass and the claimed insert round of a mixed batch (engine/hash/mixed.rs)
+// in one dispatch of ONE workgroup, a workgroup barrier between them instead of a second
+// dispatch: the host uses it when the batch fits one workgroup's grid stride. On lavapipe every
+// dispatch costs a hand-off to the driver's worker threads (~13 us of its queue thread plus the
+// workers' wake-ups), more than the work of the small levels at the top of an edit
+// (docs/editing-gpu.md, "Speed, round 13"). Single lanes only, like both passes.
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
+#extension GL_EXT_shader_atomic_int64 : require
+#extension GL_KHR_shader_subgroup_ballot : require
+#extension GL_KHR_shader_subgroup_vote : require
+#extension GL_KHR_shader_subgroup_arithmetic : require
+
+#include "shared/hash_layout.h"
+#include "hash/common.glsl"
+#include "hash/alloc.glsl"
+#include "hash/slab.glsl"
+#include "hash/claims.glsl"
+#include "hash/claim_pass.glsl"
+#include "hash/insert_pass.glsl"
+
+void main() {
+    hash_claim_pass();
+    // Every claim (handles, representatives, claim-table copies) before any insert reads them.
+    memoryBarrierBuffer();
+    barrier();
+    // The insert starts from the push constants again, as its own dispatch would.
+    push = pc.batch;
+    ITEM_WORDS = SPEC_ITEM_WORDS;
+    hash_insert_pass();
+}
