@@ -324,6 +324,47 @@ fn random_edits_match_brute_force_for_every_variant() {
     assert_clean(&ctx);
 }
 
+/// A large sphere: the top levels have few nodes (their search, claim and insert run as one
+/// dispatch of one workgroup, `hash/claim_insert.comp`), the lower levels more than one
+/// workgroup takes (two dispatches); the voxels and the unique nodes per level equal the
+/// brute force's.
+#[test]
+fn large_edit_fuses_the_small_levels_and_dispatches_the_large_ones() {
+    let ctx = common::gpu();
+    let resolution = 256;
+    let voxels = synthetic(resolution, 77);
+    let dag = Svdag::from_voxels(&voxels).unwrap();
+    let mut grid = Grid::from_codes(resolution, &voxels.codes);
+    let config = GpuHashDagConfig::new(HashVariant::Atomic64, 4096);
+    let mut hd = GpuHashDag::load(&ctx, &config, &dag, None).unwrap();
+    for (center, radius, remove) in [
+        ([128.3, 120.0, 131.5], 90.0, false),
+        ([60.0, 200.0, 90.0], 70.0, true),
+    ] {
+        let tool = shaped(Shape::Sphere, center, radius, remove);
+        let report = hd.edit(&tool, None).unwrap();
+        let per_level = &report.temporary_nodes;
+        // Some levels small enough for the fused pass (one workgroup takes 256 items), some
+        // larger.
+        assert!(
+            per_level.iter().any(|&n| n > 1 && n <= 256),
+            "{per_level:?}"
+        );
+        assert!(per_level.iter().any(|&n| n > 256), "{per_level:?}");
+        grid.apply(&tool);
+        let expected = grid.codes();
+        let (codes, counts) = read_back(&hd);
+        assert_eq!(codes, expected, "{tool:?}: voxels");
+        assert_eq!(
+            counts,
+            canonical_level_counts(resolution, &expected),
+            "{tool:?}: unique nodes per level"
+        );
+    }
+    drop(hd);
+    assert_clean(&ctx);
+}
+
 /// The traversal's other submission plans give the same edits: one level per submission with
 /// exact capacities (budget 0, also the fallback after a wrong bound) and levels split over
 /// several submissions by a tiny budget (the last level's count read back between them).
