@@ -89,10 +89,9 @@ fn group_of(pass: &str) -> &'static str {
     match pass {
         "edit traverse" | "edit leaves" => GROUPS[0],
         p if p.starts_with("dedup") => GROUPS[1],
-        // Single lanes: the search also claims (the SVO dedup folded into search and insert).
-        "hash search" | "hash search and claim" => GROUPS[2],
-        // Search, claim and insert of a small level in one dispatch: counted as the search.
-        "hash search, claim and insert" => GROUPS[2],
+        // Single lanes: the search also claims (the SVO dedup folded into search and insert);
+        // a small level's search, claim and insert share one dispatch, counted as the search.
+        "hash search" | "hash search and claim" | "hash search, claim and insert" => GROUPS[2],
         "hash insert" | "edit mark" => GROUPS[3],
         "edit build items" | "edit resolve" => GROUPS[4],
         _ => GROUPS[5],
