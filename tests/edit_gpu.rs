@@ -324,10 +324,9 @@ fn random_edits_match_brute_force_for_every_variant() {
     assert_clean(&ctx);
 }
 
-/// A large sphere: the top levels have few nodes (their search, claim and insert run as one
-/// dispatch of one workgroup, `hash/claim_insert.comp`), the lower levels more than one
-/// workgroup takes (two dispatches); the voxels and the unique nodes per level equal the
-/// brute force's.
+/// A large sphere: the top levels have few nodes (one dispatch of one workgroup merges them
+/// all, `edit/merge_small_levels.comp`), the lower levels more than one workgroup takes (their
+/// own passes); the voxels and the unique nodes per level equal the brute force's.
 #[test]
 fn large_edit_fuses_the_small_levels_and_dispatches_the_large_ones() {
     let ctx = common::gpu();
@@ -337,20 +336,30 @@ fn large_edit_fuses_the_small_levels_and_dispatches_the_large_ones() {
     let mut grid = Grid::from_codes(resolution, &voxels.codes);
     let config = GpuHashDagConfig::new(HashVariant::Atomic64, 4096);
     let mut hd = GpuHashDag::load(&ctx, &config, &dag, None).unwrap();
+    let mut profiler = Profiler::new(&ctx).unwrap();
     for (center, radius, remove) in [
         ([128.3, 120.0, 131.5], 90.0, false),
         ([60.0, 200.0, 90.0], 70.0, true),
     ] {
         let tool = shaped(Shape::Sphere, center, radius, remove);
-        let report = hd.edit(&tool, None).unwrap();
+        profiler.clear();
+        let report = hd.edit(&tool, Some(&mut profiler)).unwrap();
         let per_level = &report.temporary_nodes;
-        // Some levels small enough for the fused pass (one workgroup takes 256 items), some
-        // larger.
+        // Some levels small enough for the chain of small levels (at most 128 nodes:
+        // `MAX_NODES` in engine/edit/gpu/small_levels.rs), some larger.
         assert!(
-            per_level.iter().any(|&n| n > 1 && n <= 256),
+            per_level.iter().any(|&n| n > 1 && n <= 128),
             "{per_level:?}"
         );
-        assert!(per_level.iter().any(|&n| n > 256), "{per_level:?}");
+        assert!(per_level.iter().any(|&n| n > 128), "{per_level:?}");
+        if profiler.is_available() {
+            // The small top levels in one dispatch, the large ones' passes of their own.
+            let calls = |name: &str| profiler.passes().iter().filter(|p| p.name == name).count();
+            let chained = per_level.iter().rposition(|&n| n > 128).unwrap() + 1;
+            let own = per_level[..chained].iter().filter(|&&n| n > 0).count();
+            assert_eq!(calls("edit merge small levels"), 1, "{per_level:?}");
+            assert_eq!(calls("edit build items"), own, "{per_level:?}");
+        }
         grid.apply(&tool);
         let expected = grid.codes();
         let (codes, counts) = read_back(&hd);
@@ -361,6 +370,7 @@ fn large_edit_fuses_the_small_levels_and_dispatches_the_large_ones() {
             "{tool:?}: unique nodes per level"
         );
     }
+    drop(profiler);
     drop(hd);
     assert_clean(&ctx);
 }
@@ -581,15 +591,12 @@ fn profiled_edit_names_its_passes() {
     assert!(report.items.iter().sum::<u32>() > 0);
     if profiler.is_available() {
         let names: Vec<&str> = profiler.passes().iter().map(|p| p.name.as_str()).collect();
-        // Every level of this small scene fits one workgroup: search, claim and insert run as
-        // one dispatch per level.
-        for pass in [
-            "edit traverse",
-            "edit leaves",
-            "edit build items",
-            "hash search, claim and insert",
-        ] {
+        // Every level of this small scene fits one workgroup: one dispatch merges them all.
+        for pass in ["edit traverse", "edit leaves", "edit merge small levels"] {
             assert!(names.contains(&pass), "{pass} missing from {names:?}");
+        }
+        for pass in ["edit build items", "hash search, claim and insert"] {
+            assert!(!names.contains(&pass), "{pass} in {names:?}");
         }
     }
     drop(profiler);

@@ -18,6 +18,7 @@
 
 mod build_items;
 mod load;
+mod small_levels;
 
 use std::sync::{Arc, OnceLock};
 
@@ -45,6 +46,7 @@ use crate::hash::{
 };
 use crate::scene::Voxels;
 use build_items::{BuildItemsPipelines, LevelTexels};
+use small_levels::{SmallLevel, SmallLevelsPass};
 
 /// Child value: empty cube (GLSL `EDIT_EMPTY`).
 const VALUE_EMPTY: u32 = 0xFFFF_FFFF;
@@ -217,6 +219,8 @@ pub struct GpuHashDag {
     dedups: Vec<GpuDedup>,
     /// The claim passes over items of every size (single lanes: `merge_recorded`).
     mixed: Option<MixedPasses>,
+    /// The merge of an edit's small top levels in one dispatch (with `mixed`).
+    small_levels: Option<SmallLevelsPass>,
     /// The tables' super-block table addresses (`u64` each), read by the passes.
     pub(super) table_addresses: Buffer,
     expand: ComputePipeline,
@@ -404,6 +408,10 @@ impl GpuHashDag {
         let mixed = (tables[0].team_size() == 1)
             .then(|| MixedPasses::new(ctx, &tables[0]))
             .transpose()?;
+        let small_levels = mixed
+            .as_ref()
+            .map(|_| SmallLevelsPass::new(ctx, &tables[0], materials))
+            .transpose()?;
         let table_addresses = ctx.create_buffer(
             "hash dag tables",
             8 * TABLE_COUNT as u64,
@@ -421,6 +429,7 @@ impl GpuHashDag {
             tables,
             dedups,
             mixed,
+            small_levels,
             table_addresses,
             expand: pipeline("edit expand", shaders::EDIT_EXPAND)?,
             build_items: BuildItemsPipelines::new(ctx, materials)?,
@@ -1168,11 +1177,13 @@ impl GpuHashDag {
 
     /// The buffers of one level's merge (sized by its node count) and its push constants;
     /// with `below`, its build_items resolves the pending results of that level (whose own
-    /// resolve pass is left out: `merge_recorded`).
+    /// resolve pass is left out: `merge_recorded`). `views`: word views for build_items' own
+    /// dispatch (where the configuration has them).
     fn merge_buffers(
         &self,
         level: &MergeLevel<'_>,
         below: Option<&MergeBuffers>,
+        views: bool,
     ) -> Result<MergeBuffers, GpuDagError> {
         let ctx = Arc::clone(&self.ctx);
         let n = level.count.max(1) as u64;
@@ -1199,7 +1210,7 @@ impl GpuHashDag {
             .map_or([&slots, &reps, &handles], |b| {
                 [&b.slots, &b.reps, &b.handles]
             });
-        let texels = match self.config.word_views {
+        let texels = match self.config.word_views && views {
             false => None,
             true => LevelTexels::new(
                 &ctx,
@@ -1267,6 +1278,18 @@ impl GpuHashDag {
         })
     }
 
+    /// Records what build_items of one level needs before it runs: the level's address
+    /// buffer uploaded, its size counters zeroed.
+    fn record_level_setup<'a>(
+        &'a self,
+        cmd: &mut Commands<'a>,
+        b: &'a MergeBuffers,
+    ) -> Result<(), GpuDagError> {
+        cmd.upload(&b.address_buf, 0, &b.addresses)?;
+        cmd.fill_buffer(&b.counters, 0);
+        Ok(())
+    }
+
     /// Records `build_items` of one level and the readback of its nine size counters.
     fn record_build_items<'a>(
         &'a self,
@@ -1274,8 +1297,7 @@ impl GpuHashDag {
         b: &'a MergeBuffers,
         profiler: &mut Option<&mut Profiler>,
     ) -> Result<Readback<u32>, GpuDagError> {
-        cmd.upload(&b.address_buf, 0, &b.addresses)?;
-        cmd.fill_buffer(&b.counters, 0);
+        self.record_level_setup(cmd, b)?;
         cmd.begin_pass(profiler, "edit build items");
         cmd.dispatch(
             self.build_items.get(&self.ctx, b.texels.is_some())?,
@@ -1337,14 +1359,14 @@ impl GpuHashDag {
                 root: None,
             });
         };
-        let mut current = self.merge_buffers(first, None)?;
+        let mut current = self.merge_buffers(first, None, true)?;
         let mut cmd = self.ctx.begin_commands("edit build items")?;
         let mut counts = self.record_build_items(&mut cmd, &current, &mut profiler)?;
         cmd.submit_async()?;
         for at in 0..levels.len() {
             let level_counts = counts.read()?;
             let next = match levels.get(at + 1) {
-                Some(level) => Some(self.merge_buffers(level, None)?),
+                Some(level) => Some(self.merge_buffers(level, None, true)?),
                 None => None,
             };
             let total: u32 = level_counts.iter().sum();
@@ -1637,16 +1659,25 @@ impl GpuHashDag {
         }
         let tables = &self.tables;
         let mixed = self.mixed.as_ref().expect("merges_recorded checked it");
+        let small = self
+            .small_levels
+            .as_ref()
+            .expect("made with the mixed passes");
+        // The levels from `chained` up (the root's included) are small: one dispatch merges
+        // them all (`small_levels`); the ones below get their own passes.
+        let chained = levels
+            .iter()
+            .rposition(|level| !small.takes(level.count))
+            .map_or(0, |k| k + 1);
         let entry_bytes = std::mem::size_of::<HashPush>() as u64;
         let mut before = Vec::new();
         let mut after = Vec::new();
         let mut counts = Vec::new();
-        let mut root = None;
         // Every level's buffers first (the level above resolves the pending results of the one
         // below through its address buffer), then one recording of all levels.
         let mut prepared: Vec<PreparedLevel> = Vec::with_capacity(levels.len());
         for (k, level) in levels.iter().enumerate() {
-            let b = self.merge_buffers(level, prepared.last().map(|p| &p.buffers))?;
+            let b = self.merge_buffers(level, prepared.last().map(|p| &p.buffers), k < chained)?;
             let claim_tables = sizes[k]
                 .iter()
                 .map(|&s| ClaimTable::new(&ctx, s as u32 + MIN_ITEM_WORDS, level.count))
@@ -1672,6 +1703,10 @@ impl GpuHashDag {
                 entries,
             });
         }
+        let small_records = match chained < levels.len() {
+            true => Some(SmallLevelsPass::records(&ctx, levels.len() - chained)?),
+            false => None,
+        };
         let mut cmd = ctx.begin_commands("edit merge")?;
         for &s in &used {
             before.push(tables[s].record_status(&mut cmd)?);
@@ -1680,6 +1715,10 @@ impl GpuHashDag {
             cmd.upload(&p.entry_buf, 0, &p.entries)?;
             for table in &p.claim_tables {
                 table.record_clear(&mut cmd)?;
+            }
+            if k >= chained {
+                self.record_level_setup(&mut cmd, &p.buffers)?;
+                continue;
             }
             counts.push(self.record_build_items(&mut cmd, &p.buffers, &mut profiler)?);
             let profiler_now = profiler.as_deref_mut();
@@ -1691,14 +1730,32 @@ impl GpuHashDag {
                 level.count,
                 profiler_now,
             )?;
-            if k + 1 == levels.len() {
-                self.record_resolve_after(&mut cmd, &p.buffers, After::Nothing, &mut profiler)?;
-                for &s in &used {
-                    after.push(tables[s].record_status(&mut cmd)?);
+        }
+        let top = prepared.last().expect("levels is not empty");
+        match &small_records {
+            Some(records) => {
+                let chain: Vec<SmallLevel> = levels[chained..]
+                    .iter()
+                    .zip(&prepared[chained..])
+                    .map(|(level, p)| {
+                        let batch =
+                            MixedPasses::batch(&p.entry_buf, &p.buffers.counters, 0, level.count);
+                        (p.buffers.push, batch)
+                    })
+                    .collect();
+                small.record(&mut cmd, records, &chain, &mut profiler)?;
+                for p in &prepared[chained..] {
+                    counts.push(cmd.readback::<u32>(&p.buffers.counters, 0, COUNTERS)?);
                 }
-                root = Some(self.record_root_readback(&mut cmd, last.results)?);
+            }
+            None => {
+                self.record_resolve_after(&mut cmd, &top.buffers, After::Nothing, &mut profiler)?;
             }
         }
+        for &s in &used {
+            after.push(tables[s].record_status(&mut cmd)?);
+        }
+        let root = self.record_root_readback(&mut cmd, last.results)?;
         cmd.submit_async()?;
         // The last submission's readbacks first: one wait covers all levels.
         let after = after
@@ -1725,7 +1782,10 @@ impl GpuHashDag {
             .into_iter()
             .map(|c| Ok((c.read()?.iter().sum(), 0)))
             .collect::<Result<Vec<_>, GpuError>>()?;
-        Ok(Some(Merged { levels, root }))
+        Ok(Some(Merged {
+            levels,
+            root: Some(root),
+        }))
     }
 
     /// Grows the tables of `sizes` for `counts` new items each, where they grow before inserts.

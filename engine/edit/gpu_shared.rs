@@ -45,4 +45,18 @@ gpu_shared! {
         /// Padding to the std430 size (a multiple of the `vec4`'s 16 bytes).
         pub(crate) pad: uint,
     }
+
+    /// Push constants of `edit/merge_small_levels.comp`: the merge of an edit's small top
+    /// levels in one dispatch (`engine/edit/gpu/small_levels.rs`).
+    #[derive(Default)]
+    pub(crate) struct SmallLevelsPush {
+        /// Address of the levels' `EditPush` (build_items' parameters), bottom-up.
+        pub(crate) edit_levels: uint64_t,
+        /// Address of the levels' mixed batches (a `HashPush` each: bound, counts, entries).
+        pub(crate) hash_levels: uint64_t,
+        /// Levels in the chain (the last one is the root's, which the dispatch also resolves).
+        pub(crate) levels: uint,
+        /// Padding to a multiple of 8 bytes.
+        pub(crate) pad: uint,
+    }
 }

@@ -61,6 +61,24 @@ impl MixedPasses {
         })
     }
 
+    /// The largest batch one workgroup takes (its grid stride): such a batch gets the fused
+    /// pass.
+    fn one_group_bound(&self) -> u32 {
+        self.items_per_group * ITEMS_PER_INVOCATION
+    }
+
+    /// The parameters of a mixed batch of at most `bound` items whose entries lie in `entries`
+    /// and sizes' counts at byte `counts_offset` of `counts` (the passes' push constants; a
+    /// shader running several batches reads them from memory).
+    pub fn batch(entries: &Buffer, counts: &Buffer, counts_offset: u64, bound: u32) -> HashPush {
+        HashPush {
+            count: bound,
+            count_at: counts.address() + counts_offset,
+            mixed: entries.address(),
+            ..HashPush::default()
+        }
+    }
+
     /// Records the search-and-claim pass and the claimed insert round of a mixed batch of at
     /// most `bound` items (profiled as "hash search and claim" and "hash insert"), each
     /// followed by a barrier; a batch that one workgroup takes gets both in one dispatch
@@ -92,14 +110,9 @@ impl MixedPasses {
         if bound == 0 {
             return Ok(());
         }
-        let push = HashPush {
-            count: bound,
-            count_at: counts.address() + counts_offset,
-            mixed: entries.address(),
-            ..HashPush::default()
-        };
+        let push = Self::batch(entries, counts, counts_offset, bound);
         let groups = bound
-            .div_ceil(self.items_per_group * ITEMS_PER_INVOCATION)
+            .div_ceil(self.one_group_bound())
             .clamp(1, self.max_groups);
         let passes: &[(&str, &ComputePipeline)] = if groups == 1 {
             &[("hash search, claim and insert", &self.claim_insert)]

@@ -90,8 +90,12 @@ fn group_of(pass: &str) -> &'static str {
         "edit traverse" | "edit leaves" => GROUPS[0],
         p if p.starts_with("dedup") => GROUPS[1],
         // Single lanes: the search also claims (the SVO dedup folded into search and insert);
-        // a small level's search, claim and insert share one dispatch, counted as the search.
-        "hash search" | "hash search and claim" | "hash search, claim and insert" => GROUPS[2],
+        // a small level's search, claim and insert share one dispatch, and the small top
+        // levels' whole merge another (build, search, insert, resolve): counted as the search.
+        "hash search"
+        | "hash search and claim"
+        | "hash search, claim and insert"
+        | "edit merge small levels" => GROUPS[2],
         "hash insert" | "edit mark" => GROUPS[3],
         "edit build items" | "edit resolve" => GROUPS[4],
         _ => GROUPS[5],

@@ -7,7 +7,14 @@
 #include "shared/hash_layout.h"
 #include "gen/edit.glsl"
 
+// The pass's parameters: push constants, or (EDIT_PARAMS_IN_MEMORY, a shader that runs the
+// passes of several levels: edit/merge_small_levels.comp) a variable the includer sets per level.
+struct EditParams { EDIT_PUSH_MEMBERS };
+#ifdef EDIT_PARAMS_IN_MEMORY
+EditParams push;
+#else
 layout(push_constant, std430) uniform Push { EDIT_PUSH_MEMBERS } push;
+#endif
 
 layout(buffer_reference, std430, buffer_reference_align = 4) coherent buffer Words {
     uint w[];
@@ -197,8 +204,13 @@ uint edit_count() {
 // constant 0 (engine/edit/gpu.rs `ToolPipelines`): lavapipe runs every branch of a shader,
 // masked, so a pipeline that knows its tool leaves the other tools' code out. Other passes keep
 // the default and read the tool from the flags.
+// EDIT_SPEC_ID_BASE moves both constants' ids past those of the hash passes where a shader
+// runs both (edit/merge_small_levels.comp).
+#ifndef EDIT_SPEC_ID_BASE
+#define EDIT_SPEC_ID_BASE 0
+#endif
 #define EDIT_TOOL_FROM_FLAGS 7u
-layout(constant_id = 0) const uint EDIT_SPEC_TOOL = EDIT_TOOL_FROM_FLAGS;
+layout(constant_id = EDIT_SPEC_ID_BASE) const uint EDIT_SPEC_TOOL = EDIT_TOOL_FROM_FLAGS;
 
 uint edit_tool() {
     return EDIT_SPEC_TOOL != EDIT_TOOL_FROM_FLAGS ? EDIT_SPEC_TOOL : push.flags >> EDIT_TOOL_SHIFT & 7u;
@@ -208,7 +220,7 @@ uint edit_tool() {
 // fixed for a hash DAG's lifetime and given to every edit pipeline (engine/edit/gpu.rs), so a
 // geometry-only scene's passes leave the material code out (lavapipe would run it, masked, for
 // every voxel: half the leaves pass's time).
-layout(constant_id = 1) const uint EDIT_SPEC_MATERIALS = 0u;
+layout(constant_id = EDIT_SPEC_ID_BASE + 1) const uint EDIT_SPEC_MATERIALS = 0u;
 
 bool edit_materials() {
     return EDIT_SPEC_MATERIALS != 0u;

@@ -21,12 +21,20 @@ layout(constant_id = 4) const uint TEAM = 32;
 
 // Parameters of every hash pass (`HashPush` in engine/hash/gpu_shared.rs).
 struct HashParams { HASH_PUSH_MEMBERS };
+#ifndef HASH_PARAMS_IN_MEMORY
 layout(push_constant, std430) uniform Push { HashParams batch; } pc;
+#endif
 
 // The table and buffers the pass works on: the push constants, or in a mixed batch (the
 // claim passes over items of every size, engine/hash/mixed.rs) the entry of the current
-// item's size, which hash_select sets together with ITEM_WORDS.
+// item's size, which hash_select sets together with ITEM_WORDS. With HASH_PARAMS_IN_MEMORY
+// (a shader that runs the passes of several batches: edit/merge_small_levels.comp) the
+// includer sets it before each pass.
+#ifdef HASH_PARAMS_IN_MEMORY
+HashParams push;
+#else
 HashParams push = pc.batch;
+#endif
 uint ITEM_WORDS = SPEC_ITEM_WORDS;
 
 // Whether the pipeline runs mixed batches.
@@ -53,14 +61,14 @@ uint g_mixed_counts[HASH_MIXED_SIZES];
 HashParams g_mixed_entries[HASH_MIXED_SIZES];
 
 // Items of the batch: push.count, or in a mixed batch the sum of its sizes' counts, which an
-// earlier pass wrote at count_at. Call before hash_select.
+// earlier pass wrote at count_at. Call before hash_select, while `push` is the batch's.
 uint hash_count() {
     if (!hash_mixed()) {
-        return pc.batch.count;
+        return push.count;
     }
-    HashWords counts = HashWords(pc.batch.count_at);
+    HashWords counts = HashWords(push.count_at);
     uint total = 0u;
-    HashEntries entries = HashEntries(pc.batch.mixed);
+    HashEntries entries = HashEntries(push.mixed);
     [[unroll]] for (uint s = 0u; s < HASH_MIXED_SIZES; ++s) {
         g_mixed_counts[s] = counts.w[s];
         g_mixed_entries[s] = entries.entry[s];

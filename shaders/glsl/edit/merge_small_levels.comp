@@ -1,0 +1,94 @@
+#version 460
+// The merge of an edit's small top levels in ONE dispatch of ONE workgroup (engine/edit/gpu/
+// small_levels.rs): per level bottom-up, build_items, the mixed batch's search and claim, and
+// its claimed insert round, a workgroup barrier after each; then the root level's resolve.
+// Each pass's body is the one its own dispatch runs (edit/build_items_pass.glsl,
+// hash/claim_pass.glsl, hash/insert_pass.glsl, edit/resolve_pass.glsl), reading its
+// parameters from the chain's records instead of push constants. On lavapipe every dispatch
+// costs a hand-off to the driver's worker threads (~13 us of its queue thread and the workers'
+// wake-ups), more than the work of the few dozen nodes of an edit's top levels, which took two
+// dispatches each (docs/editing-gpu.md, "Speed, round 15"). Single lanes only, like the claim
+// passes; build_items reads through addresses (the levels' word views differ).
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
+#extension GL_EXT_shader_atomic_int64 : require
+#extension GL_KHR_shader_subgroup_ballot : require
+#extension GL_KHR_shader_subgroup_vote : require
+#extension GL_KHR_shader_subgroup_arithmetic : require
+
+// The edit passes' parameters are `push` in their sources, as are the hash passes': here both
+// are variables set per level, the edit side's renamed while its sources are read. The edit
+// specialization constants follow the hash passes' five (engine/edit/gpu/small_levels.rs).
+#define EDIT_PARAMS_IN_MEMORY
+#define EDIT_SPEC_ID_BASE 5
+#define push edit_level
+#include "edit/common.glsl"
+
+// build_items' reads, through addresses.
+uint input_word(uint i) {
+    return Words(push.src).w[i];
+}
+
+uvec2 input_pair(uint k) {
+    return uvec2(input_word(2u * k), input_word(2u * k + 1u));
+}
+
+uint below_result(uint j) {
+    return Words(push.src2).w[j];
+}
+
+uint below_resolve(EditLevelHandles level, Words slots, uint j, uint r) {
+    return edit_resolve_slot(level, slots.w[j], r);
+}
+
+#include "edit/build_items_pass.glsl"
+#include "edit/resolve_pass.glsl"
+#undef push
+
+#define HASH_PARAMS_IN_MEMORY
+#include "shared/hash_layout.h"
+#include "hash/common.glsl"
+#include "hash/alloc.glsl"
+#include "hash/slab.glsl"
+#include "hash/claims.glsl"
+#include "hash/claim_pass.glsl"
+#include "hash/insert_pass.glsl"
+
+layout(push_constant, std430) uniform Push { SMALL_LEVELS_PUSH_MEMBERS } chain;
+
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer EditLevels {
+    EditParams level[];
+};
+
+// Every write of a pass (items, counters, handles, representatives, results) before the next
+// pass of the workgroup reads them.
+void pass_done() {
+    memoryBarrierBuffer();
+    barrier();
+}
+
+void main() {
+    uint lane = gl_LocalInvocationID.x;
+    uint lanes = gl_WorkGroupSize.x;
+    HashEntries batches = HashEntries(chain.hash_levels);
+    // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe"); the host records at
+    // least one level.
+    uint l = 0u;
+    for (;;) {
+        edit_level = EditLevels(chain.edit_levels).level[l];
+        edit_build_items_pass(lane, lanes);
+        pass_done();
+        push = batches.entry[l];
+        hash_claim_pass();
+        pass_done();
+        // The insert starts from the batch's parameters again, as its own dispatch would.
+        push = batches.entry[l];
+        ITEM_WORDS = SPEC_ITEM_WORDS;
+        hash_insert_pass();
+        pass_done();
+        l += 1u;
+        if (l >= chain.levels) break;
+    }
+    // The root level's pending result (edit_level is still the last level's).
+    edit_resolve_pass(lane, lanes);
+}
