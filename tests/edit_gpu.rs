@@ -324,9 +324,11 @@ fn random_edits_match_brute_force_for_every_variant() {
     assert_clean(&ctx);
 }
 
-/// A large sphere: the top levels have few nodes (one dispatch of one workgroup merges them
-/// all, `edit/merge_small_levels.comp`), the lower levels more than one workgroup takes (their
-/// own passes); the voxels and the unique nodes per level equal the brute force's.
+/// A large sphere: the top levels have few nodes (one dispatch of one SIMD group traverses
+/// them, `edit/traverse_small_levels.comp`, and one merges them, `edit/merge_small_levels.comp`),
+/// the lower levels more (their own passes); the voxels and the unique nodes per level equal
+/// the brute force's, and the temporary nodes per level those of a traversal one level per
+/// submission (no level traversed twice: by the chain and by its own dispatch).
 #[test]
 fn large_edit_fuses_the_small_levels_and_dispatches_the_large_ones() {
     let ctx = common::gpu();
@@ -336,6 +338,11 @@ fn large_edit_fuses_the_small_levels_and_dispatches_the_large_ones() {
     let mut grid = Grid::from_codes(resolution, &voxels.codes);
     let config = GpuHashDagConfig::new(HashVariant::Atomic64, 4096);
     let mut hd = GpuHashDag::load(&ctx, &config, &dag, None).unwrap();
+    let per_submission = GpuHashDagConfig {
+        traversal_budget: 0,
+        ..config.clone()
+    };
+    let mut level_by_level = GpuHashDag::load(&ctx, &per_submission, &dag, None).unwrap();
     let mut profiler = Profiler::new(&ctx).unwrap();
     for (center, radius, remove) in [
         ([128.3, 120.0, 131.5], 90.0, false),
@@ -345,6 +352,8 @@ fn large_edit_fuses_the_small_levels_and_dispatches_the_large_ones() {
         profiler.clear();
         let report = hd.edit(&tool, Some(&mut profiler)).unwrap();
         let per_level = &report.temporary_nodes;
+        let expected = level_by_level.edit(&tool, None).unwrap().temporary_nodes;
+        assert_eq!(per_level, &expected, "temporary nodes per level");
         // Some levels small enough for the chain of small levels (at most 128 nodes:
         // `MAX_NODES` in engine/edit/gpu/small_levels.rs), some larger.
         assert!(
@@ -358,6 +367,10 @@ fn large_edit_fuses_the_small_levels_and_dispatches_the_large_ones() {
             let chained = per_level.iter().rposition(|&n| n > 128).unwrap() + 1;
             let own = per_level[..chained].iter().filter(|&&n| n > 0).count();
             assert_eq!(calls("edit merge small levels"), 1, "{per_level:?}");
+            // The traversal's first level only in the dispatch of its small levels.
+            let inner = per_level.iter().skip(1).filter(|&&n| n > 0).count();
+            assert_eq!(calls("edit traverse small levels"), 1, "{per_level:?}");
+            assert_eq!(calls("edit traverse"), inner - 1, "{per_level:?}");
             assert_eq!(calls("edit build items"), own, "{per_level:?}");
         }
         grid.apply(&tool);
@@ -372,6 +385,7 @@ fn large_edit_fuses_the_small_levels_and_dispatches_the_large_ones() {
     }
     drop(profiler);
     drop(hd);
+    drop(level_by_level);
     assert_clean(&ctx);
 }
 
@@ -591,8 +605,14 @@ fn profiled_edit_names_its_passes() {
     assert!(report.items.iter().sum::<u32>() > 0);
     if profiler.is_available() {
         let names: Vec<&str> = profiler.passes().iter().map(|p| p.name.as_str()).collect();
-        // Every level of this small scene fits one workgroup: one dispatch merges them all.
-        for pass in ["edit traverse", "edit leaves", "edit merge small levels"] {
+        // Every level of this small scene is small: one dispatch traverses the inner levels
+        // (their own dispatches recorded with zero workgroups), one merges them all.
+        for pass in [
+            "edit traverse small levels",
+            "edit traverse",
+            "edit leaves",
+            "edit merge small levels",
+        ] {
             assert!(names.contains(&pass), "{pass} missing from {names:?}");
         }
         for pass in ["edit build items", "hash search, claim and insert"] {

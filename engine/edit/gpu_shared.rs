@@ -59,4 +59,17 @@ gpu_shared! {
         /// Padding to a multiple of 8 bytes.
         pub(crate) pad: uint,
     }
+
+    /// Push constants of `edit/traverse_small_levels.comp`: the traversal's small top levels
+    /// in one dispatch (`GpuHashDag::traverse`).
+    #[derive(Default)]
+    pub(crate) struct TraverseChainPush {
+        /// Address of the levels' `EditPush` (each as its own traverse dispatch would have it),
+        /// top-down.
+        pub(crate) levels_at: uint64_t,
+        /// Levels recorded there (the first is always traversed).
+        pub(crate) levels: uint,
+        /// A later level is traversed here only with at most this many entries.
+        pub(crate) max_entries: uint,
+    }
 }

@@ -87,7 +87,7 @@ const GROUPS: [&str; 6] = [
 /// The Figure 4.8 group of a profiled pass.
 fn group_of(pass: &str) -> &'static str {
     match pass {
-        "edit traverse" | "edit leaves" => GROUPS[0],
+        "edit traverse" | "edit traverse small levels" | "edit leaves" => GROUPS[0],
         p if p.starts_with("dedup") => GROUPS[1],
         // Single lanes: the search also claims (the SVO dedup folded into search and insert);
         // a small level's search, claim and insert share one dispatch, and the small top
