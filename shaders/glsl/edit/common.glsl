@@ -22,7 +22,9 @@ layout(buffer_reference, std430, buffer_reference_align = 4) coherent buffer Wor
 layout(buffer_reference, std430, buffer_reference_align = 8) buffer Addresses {
     uint64_t a[];
 };
-layout(buffer_reference, std430, buffer_reference_align = 16) buffer Entries {
+// Coherent: edit/traverse_small_levels.comp reads a level's entries that other invocations of
+// its workgroup appended before its barrier.
+layout(buffer_reference, std430, buffer_reference_align = 16) coherent buffer Entries {
     uvec4 e[];
 };
 
