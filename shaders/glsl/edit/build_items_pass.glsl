@@ -8,8 +8,8 @@ uint leaf_byte(uint lo, uint hi, uint g) {
     return ((g < 4u ? lo : hi) >> (8u * (g & 3u))) & 0xffu;
 }
 
-// Builds the items of nodes first, first + stride, ... of the level (`push`).
-void edit_build_items_pass(uint first, uint stride) {
+// Builds the items of nodes start, start + stride, ... of the level (`push`).
+void edit_build_items_pass(uint start, uint stride) {
     Words results = Words(push.dst);
     Addresses tables = Addresses(push.tables);
     Words counters = Words(push.counters);
@@ -26,7 +26,7 @@ void edit_build_items_pass(uint first, uint stride) {
     Words slots = Words(tables.a[EDIT_LEVEL_SLOTS]);
     uint missing = 0u;
     // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
-    uint i = first;
+    uint i = start;
     if (i < push.count) for (;;) {
         uint c[8];
         uint lo = 0u;

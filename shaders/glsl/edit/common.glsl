@@ -8,10 +8,14 @@
 #include "gen/edit.glsl"
 
 // The pass's parameters: push constants, or (EDIT_PARAMS_IN_MEMORY, a shader that runs the
-// passes of several levels: edit/merge_small_levels.comp) a variable the includer sets per level.
+// passes of several levels: edit/merge_small_levels.comp, edit/traverse_small_levels.comp) a
+// variable the includer sets per level from the levels' records (EditLevels).
 struct EditParams { EDIT_PUSH_MEMBERS };
 #ifdef EDIT_PARAMS_IN_MEMORY
 EditParams push;
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer EditLevels {
+    EditParams level[];
+};
 #else
 layout(push_constant, std430) uniform Push { EDIT_PUSH_MEMBERS } push;
 #endif

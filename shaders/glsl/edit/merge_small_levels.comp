@@ -56,10 +56,6 @@ uint below_resolve(EditLevelHandles level, Words slots, uint j, uint r) {
 
 layout(push_constant, std430) uniform Push { SMALL_LEVELS_PUSH_MEMBERS } chain;
 
-layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer EditLevels {
-    EditParams level[];
-};
-
 // Every write of a pass (items, counters, handles, representatives, results) before the next
 // pass of the workgroup reads them.
 void pass_done() {

@@ -6,8 +6,8 @@ uvec3 child_corner(uvec3 corner, uint child_side, uint o) {
     return corner + child_side * uvec3(o & 1u, o >> 1u & 1u, o >> 2u);
 }
 
-// Traverses entries first, first + stride, ... of the `count` of the level (`push`).
-void edit_traverse_level(uint first, uint stride, uint count) {
+// Traverses entries start, start + stride, ... of the `count` of the level (`push`).
+void edit_traverse_level(uint start, uint stride, uint count) {
     Entries entries = Entries(push.src);
     Words nodes = Words(push.dst);
     Entries next = Entries(push.dst2);
@@ -16,7 +16,7 @@ void edit_traverse_level(uint first, uint stride, uint count) {
     uint full = EDIT_FULL | push.material;
     uint child_side = 2u << push.level;
     // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
-    uint i = first;
+    uint i = start;
     if (i < count) for (;;) {
         uvec4 e = entries.e[i];
         uint children[8];

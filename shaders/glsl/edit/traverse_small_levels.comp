@@ -20,10 +20,6 @@ layout(local_size_x_id = 2) in;
 
 layout(push_constant, std430) uniform Push { TRAVERSE_CHAIN_PUSH_MEMBERS } chain;
 
-layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer EditLevels {
-    EditParams level[];
-};
-
 void main() {
     uint lane = gl_LocalInvocationID.x;
     uint lanes = gl_WorkGroupSize.x;
