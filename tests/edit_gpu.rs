@@ -16,6 +16,7 @@ use voxdag::edit::cpu::{CpuEditor, HashDag};
 use voxdag::edit::gpu::{GpuDagError, GpuHashDag, GpuHashDagConfig};
 use voxdag::edit::item::Root;
 use voxdag::edit::tool::{self, CopyParams, Shape, Tool, VoxelMap};
+use voxdag::edit::walk;
 use voxdag::gpu::{GpuContext, Profiler};
 use voxdag::hash::{HashError, HashVariant, TeamMode};
 use voxdag::scene::{morton, Voxels};
@@ -506,6 +507,62 @@ fn edit_on_empty_and_full_roots_and_outside_the_grid() {
     let bad = shaped(Shape::Cube, [16.0, 16.0, 16.0], f32::NAN, false);
     assert!(matches!(hd.edit(&bad, None), Err(GpuDagError::Invalid(_))));
     assert_eq!(hd.roots().len(), tools.len() + 1);
+    drop(hd);
+    assert_clean(&ctx);
+}
+
+/// Saving and counting walk the DAG item by item, never voxel by voxel: at 65536^3 the grid
+/// filled with material 3 and then a small sphere removed (2^48 voxels less a few hundred:
+/// petabytes as a voxel list) converts to the CPU editor's svdag32 DAG, with its unique items
+/// per level and its voxels per material.
+#[test]
+fn a_filled_grid_converts_and_counts_by_items_not_voxels() {
+    let ctx = common::gpu();
+    let root_level = 14;
+    let center = [1000.5, 2000.0, 3000.25];
+    let tools = [
+        Tool::Add {
+            shape: Shape::Cube,
+            center: [32768.0; 3],
+            radius: 40000.0,
+            material: 3,
+        },
+        Tool::Remove {
+            shape: Shape::Sphere,
+            center,
+            radius: 6.0,
+        },
+    ];
+    let config = GpuHashDagConfig::new(HashVariant::Atomic64, 1024);
+    let mut hd = GpuHashDag::new(&ctx, &config, root_level, true).unwrap();
+    let mut cpu = CpuEditor::new(HashDag::new(4 << root_level, true).unwrap(), Root::Empty, 4);
+    for tool in &tools {
+        hd.edit(tool, None).unwrap();
+        cpu.edit(tool).unwrap();
+    }
+    let image = hd.download().unwrap();
+    let root = hd.root();
+    assert!(matches!(root, Root::Node(_)));
+    assert_eq!(
+        image.to_svdag(root).unwrap(),
+        cpu.dag().to_svdag(cpu.root()).unwrap()
+    );
+    assert_eq!(
+        image.level_counts(root).unwrap(),
+        cpu.unique_nodes_per_level().unwrap()
+    );
+    let mut removed = 0u64;
+    for z in 2990..3010 {
+        for y in 1990..2010 {
+            for x in 990..1010 {
+                removed += tool::in_sphere(center, 6.0, [x, y, z]) as u64;
+            }
+        }
+    }
+    let mut expected = [0u64; 16];
+    expected[3] = (1u64 << 48) - removed;
+    let per_material = walk::voxels_per_material(&image, root, &mut FxHashMap::default());
+    assert_eq!(per_material.unwrap(), expected);
     drop(hd);
     assert_clean(&ctx);
 }

@@ -14,8 +14,10 @@ use voxdag::dag::{Svdag, VdagFile};
 use voxdag::edit::cpu::{CpuEditor, HashDag};
 use voxdag::edit::gpu::{buckets_for, GpuHashDag, GpuHashDagConfig};
 use voxdag::edit::gpu_gc::GcStats;
+use voxdag::edit::item::Root;
 use voxdag::edit::replay::{Replay, Step};
 use voxdag::edit::tool::Tool;
+use voxdag::edit::walk::{self, StoredDag};
 use voxdag::gpu::{GpuContext, GpuOptions, Profiler};
 use voxdag::hash::HashVariant;
 use voxdag::render::gpu::GpuRenderer;
@@ -270,18 +272,23 @@ fn save_edited(
     path: &std::path::Path,
     dag: Svdag,
     palette: Option<&[u32]>,
-    ids: impl FnOnce() -> Result<Vec<u8>>,
+    edited: (&impl StoredDag, Root),
 ) -> Result<()> {
     match palette {
         None => dag.save(path)?,
-        Some(palette) => VdagFile {
-            encoded: EncodedDag::Svdag32(dag),
-            colors: Vec::new(),
-            digest: None,
-            stored_colors: None,
-            materials: Some(Materials::new(palette.to_vec(), ids()?)?),
+        Some(palette) => {
+            // One id per voxel is the file format's; streamed, never (code, id) pairs.
+            let mut ids = Vec::new();
+            walk::for_each_voxel(edited.0, edited.1, |_, id| ids.push(id))?;
+            VdagFile {
+                encoded: EncodedDag::Svdag32(dag),
+                colors: Vec::new(),
+                digest: None,
+                stored_colors: None,
+                materials: Some(Materials::new(palette.to_vec(), ids)?),
+            }
+            .save(path)?
         }
-        .save(path)?,
     }
     Ok(())
 }
@@ -336,10 +343,7 @@ fn edit_cpu(
         &args.output,
         out.clone(),
         materials.as_ref().map(|m| m.palette.as_slice()),
-        || {
-            let voxels = editor.dag().voxels(editor.root())?;
-            Ok(voxels.into_iter().map(|(_, id)| id).collect())
-        },
+        (editor.dag(), editor.root()),
     )?;
     if let Some(png) = &args.render_after {
         let ctx = GpuContext::new(&GpuOptions::default())?;
@@ -434,10 +438,7 @@ fn edit_gpu(
         &args.output,
         out.clone(),
         materials.as_ref().map(|m| m.palette.as_slice()),
-        || {
-            let voxels = image.voxels(hd.root())?;
-            Ok(voxels.into_iter().map(|(_, id)| id).collect())
-        },
+        (&image, hd.root()),
     )?;
     if let Some(png) = &args.render_after {
         let renderer = GpuRenderer::new(&ctx)?;

@@ -14,10 +14,11 @@ use rustc_hash::FxHashMap;
 use serde::Serialize;
 use voxdag::attr::Materials;
 use voxdag::dag::{Svdag, VdagFile};
-use voxdag::edit::gpu::{buckets_for, GpuHashDag, GpuHashDagConfig, HashDagImage};
-use voxdag::edit::item::{Child, InnerNode, Leaf, NodePtr, Root, MATERIAL_COUNT};
+use voxdag::edit::gpu::{buckets_for, GpuHashDag, GpuHashDagConfig};
+use voxdag::edit::item::{NodePtr, Root};
 use voxdag::edit::replay::{Action, Replay};
 use voxdag::edit::tool::Tool;
+use voxdag::edit::walk::{self, MaterialCounts};
 use voxdag::gpu::{
     Buffer, GpuContext, Image, MemLocation, OverlayFrame, PassTiming, PresenterOptions, Profiler,
 };
@@ -481,11 +482,10 @@ struct Document {
     /// immutable).
     counts: FxHashMap<Root, RootCounts>,
     /// Voxels per material counted under each node (shared between roots).
-    node_voxels: FxHashMap<NodePtr, MaterialCounts>,
+    node_voxels: FxHashMap<(NodePtr, u32), MaterialCounts>,
+    /// The hash DAG's GC count when the counts above were made (`GpuHashDag::collections`).
+    counted_collections: u64,
 }
-
-/// Solid voxels per material id.
-type MaterialCounts = [u64; MATERIAL_COUNT as usize];
 
 /// Voxels and unique nodes per level under a root.
 #[derive(Clone, Debug)]
@@ -537,6 +537,7 @@ impl Document {
             unsaved: 0,
             counts: FxHashMap::default(),
             node_voxels: FxHashMap::default(),
+            counted_collections: 0,
         })
     }
 
@@ -552,16 +553,17 @@ impl Document {
     /// root is seen).
     fn counts(&mut self) -> Result<RootCounts> {
         let root = self.dag.root();
+        if self.counted_collections != self.dag.collections() {
+            // A GC may have freed items the memos name and reused their handles.
+            self.counts.clear();
+            self.node_voxels.clear();
+            self.counted_collections = self.dag.collections();
+        }
         if let Some(c) = self.counts.get(&root) {
             return Ok(c.clone());
         }
         let image = self.dag.download()?;
-        let child = match root {
-            Root::Empty => Child::Empty,
-            Root::Full(m) => Child::Full(m),
-            Root::Node(p) => Child::Node(p),
-        };
-        let materials = count_voxels(&image, child, image.root_level, &mut self.node_voxels)?;
+        let materials = walk::voxels_per_material(&image, root, &mut self.node_voxels)?;
         let counts = RootCounts {
             voxels: materials.iter().sum(),
             materials,
@@ -574,14 +576,14 @@ impl Document {
     /// The current root as an svdag32 file at `path` (atomic write), with its materials and
     /// palette when the loaded file had them or an edit used a material other than 0.
     fn save(&mut self, path: &Path) -> Result<()> {
+        let used = self
+            .counts()?
+            .materials
+            .iter()
+            .rposition(|&n| n > 0)
+            .map_or(0, |m| m + 1);
         let image = self.dag.download()?;
         let root = self.dag.root();
-        let used = image
-            .voxels(root)?
-            .iter()
-            .map(|&(_, m)| m as usize + 1)
-            .max()
-            .unwrap_or(0);
         if self.file_palette == 0 && used <= 1 {
             image.to_svdag(root)?.save(path)?;
         } else {
@@ -606,47 +608,6 @@ fn next_binding() -> u64 {
 /// The RGBA8 word (opaque) of an sRGB colour.
 fn pack_colour(c: [u8; 3]) -> u32 {
     c[0] as u32 | (c[1] as u32) << 8 | (c[2] as u32) << 16 | 0xff00_0000
-}
-
-/// Solid voxels per material under `child` at `level`, memoised per stored node.
-fn count_voxels(
-    image: &HashDagImage,
-    child: Child,
-    level: u32,
-    memo: &mut FxHashMap<NodePtr, MaterialCounts>,
-) -> Result<MaterialCounts> {
-    let mut counts = [0; MATERIAL_COUNT as usize];
-    match child {
-        Child::Empty => {}
-        Child::Full(m) => {
-            *counts
-                .get_mut(m as usize)
-                .ok_or_else(|| anyhow!("full node of material {m}"))? = 64u64 << (3 * level)
-        }
-        Child::Node(ptr) => {
-            if let Some(n) = memo.get(&ptr) {
-                return Ok(*n);
-            }
-            let words = image.item(ptr)?;
-            if level == 0 {
-                let leaf = Leaf::decode(&words, image.with_materials)?;
-                for v in 0..64 {
-                    if leaf.mask >> v & 1 == 1 {
-                        counts[leaf.materials[v] as usize] += 1;
-                    }
-                }
-            } else {
-                for c in InnerNode::decode(&words)?.children {
-                    let below = count_voxels(image, c, level - 1, memo)?;
-                    for (sum, n) in counts.iter_mut().zip(below) {
-                        *sum += n;
-                    }
-                }
-            }
-            memo.insert(ptr, counts);
-        }
-    }
-    Ok(counts)
 }
 
 /// Per frame-in-flight resources. `target` and `first_hits` follow the window size.

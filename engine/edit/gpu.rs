@@ -20,17 +20,16 @@ mod build_items;
 mod load;
 mod small_levels;
 
+use std::borrow::Cow;
 use std::sync::{Arc, OnceLock};
-
-use rustc_hash::FxHashSet;
 
 use super::gpu_gc;
 use super::gpu_shared::{EditPush, TraverseChainPush};
 use super::item::{
-    Child, InnerNode, ItemError, Leaf, NodePtr, Root, MAX_ITEM_WORDS, MAX_TABLE_SLABS,
-    MIN_ITEM_WORDS, TABLE_COUNT,
+    Child, ItemError, NodePtr, Root, MAX_ITEM_WORDS, MAX_TABLE_SLABS, MIN_ITEM_WORDS, TABLE_COUNT,
 };
 use super::tool::{self, CopyRegion, Shape, Tool};
+use super::walk::{self, StoredDag};
 use crate::dag::{DagError, Svdag};
 use crate::gpu::{
     shaders, Buffer, BufferSlice, Commands, ComputePipeline, ComputePipelineDesc, GpuContext,
@@ -2045,85 +2044,19 @@ pub struct HashDagImage {
 impl HashDagImage {
     /// The item a pointer names.
     pub fn item(&self, ptr: NodePtr) -> Result<Vec<u32>, GpuDagError> {
-        let table = self
-            .tables
-            .get(ptr.table())
-            .ok_or_else(|| GpuDagError::Corrupt(format!("pointer {:#010x}", ptr.0)))?;
-        table
-            .read(Handle(ptr.handle()))
-            .ok_or_else(|| GpuDagError::Corrupt(format!("no item at pointer {:#010x}", ptr.0)))
+        Ok(self.item_words(ptr)?.into_owned())
     }
 
-    /// Every solid voxel under `root` as (Morton code, material), ascending by code.
+    /// Every solid voxel under `root` as (Morton code, material), ascending by code (16 bytes
+    /// per voxel: tests and small scenes; [`walk::for_each_voxel`] streams them).
     pub fn voxels(&self, root: Root) -> Result<Vec<(u64, u8)>, GpuDagError> {
-        let mut out = Vec::new();
-        let child = match root {
-            Root::Empty => Child::Empty,
-            Root::Full(m) => Child::Full(m),
-            Root::Node(p) => Child::Node(p),
-        };
-        self.collect(child, self.root_level, 0, &mut out)?;
-        Ok(out)
-    }
-
-    fn collect(
-        &self,
-        child: Child,
-        level: u32,
-        base: u64,
-        out: &mut Vec<(u64, u8)>,
-    ) -> Result<(), GpuDagError> {
-        // A level-l cube holds 64 * 8^l voxels, contiguous in Morton order from `base`.
-        let span = 64u64 << (3 * level);
-        match child {
-            Child::Empty => {}
-            Child::Full(m) => out.extend((base..base + span).map(|c| (c, m))),
-            Child::Node(ptr) => {
-                let words = self.item(ptr)?;
-                if level == 0 {
-                    let leaf = Leaf::decode(&words, self.with_materials)?;
-                    for v in 0..64u64 {
-                        if leaf.mask >> v & 1 == 1 {
-                            out.push((base + v, leaf.materials[v as usize]));
-                        }
-                    }
-                } else {
-                    let node = InnerNode::decode(&words)?;
-                    let child_span = span / 8;
-                    for (o, c) in node.children.iter().enumerate() {
-                        self.collect(*c, level - 1, base + o as u64 * child_span, out)?;
-                    }
-                }
-            }
-        }
-        Ok(())
+        Ok(walk::voxels(self, root)?)
     }
 
     /// Unique stored nodes reachable from `root`, per level (index = level; uniform children
     /// are not nodes).
     pub fn level_counts(&self, root: Root) -> Result<Vec<u64>, GpuDagError> {
-        let mut seen: Vec<FxHashSet<NodePtr>> = (0..=self.root_level)
-            .map(|_| FxHashSet::default())
-            .collect();
-        if let Root::Node(p) = root {
-            let mut stack = vec![(p, self.root_level)];
-            seen[self.root_level as usize].insert(p);
-            while let Some((ptr, level)) = stack.pop() {
-                if level == 0 {
-                    Leaf::decode(&self.item(ptr)?, self.with_materials)?;
-                    continue;
-                }
-                let node = InnerNode::decode(&self.item(ptr)?)?;
-                for c in node.children {
-                    if let Child::Node(q) = c {
-                        if seen[level as usize - 1].insert(q) {
-                            stack.push((q, level - 1));
-                        }
-                    }
-                }
-            }
-        }
-        Ok(seen.iter().map(|s| s.len() as u64).collect())
+        Ok(walk::unique_nodes_per_level(self, root)?)
     }
 
     /// The voxels under `root` as a voxel set (materials dropped; no colours).
@@ -2135,8 +2068,28 @@ impl HashDagImage {
         })
     }
 
-    /// `root` converted back to a compact `svdag32` DAG (save it with `VdagFile`'s writer).
+    /// `root` converted back to a compact `svdag32` DAG node by node (save it with
+    /// `VdagFile`'s writer).
     pub fn to_svdag(&self, root: Root) -> Result<Svdag, GpuDagError> {
-        Ok(Svdag::from_voxels(&self.to_voxels(root)?)?)
+        walk::to_svdag(self, root)
+    }
+}
+
+impl StoredDag for HashDagImage {
+    fn item_words(&self, ptr: NodePtr) -> Result<Cow<'_, [u32]>, ItemError> {
+        let table = self
+            .tables
+            .get(ptr.table())
+            .ok_or(ItemError::Missing(ptr.0))?;
+        let words = table.read(Handle(ptr.handle()));
+        Ok(Cow::Owned(words.ok_or(ItemError::Missing(ptr.0))?))
+    }
+
+    fn root_level(&self) -> u32 {
+        self.root_level
+    }
+
+    fn has_materials(&self) -> bool {
+        self.with_materials
     }
 }

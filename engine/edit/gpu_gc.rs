@@ -90,6 +90,8 @@ pub struct GcState {
     /// at least the current use (only inserts allocate, and every path that inserts outside a
     /// finished edit or load clears it), so the check before an edit needs no readback.
     pub(super) pool_use: Option<Vec<u64>>,
+    /// Collections started (manual and automatic).
+    collections: u64,
 }
 
 impl GpuHashDag {
@@ -122,6 +124,12 @@ impl GpuHashDag {
         let excess = self.current.saturating_sub(self.config.undo_depth);
         self.roots.drain(..excess);
         self.current -= excess;
+    }
+
+    /// Collections started so far, manual and automatic: a pointer read before one may name
+    /// another item after it (freed handles are reused), so caches keyed by pointers compare it.
+    pub fn collections(&self) -> u64 {
+        self.gc_state.collections
     }
 
     /// Statistics of the automatic collections run since the last call, oldest first.
@@ -190,6 +198,8 @@ impl GpuHashDag {
     /// on the GPU and frees every other item of the nine tables (see the module docs).
     pub fn gc(&mut self, mut profiler: Option<&mut Profiler>) -> Result<GcStats, GpuDagError> {
         let start = Instant::now();
+        // Counted first: even a failed collection may have freed items.
+        self.gc_state.collections += 1;
         let ctx = Arc::clone(&self.ctx);
         if self.gc_state.trace.is_none() {
             self.gc_state.trace = Some(ctx.create_compute_pipeline(&ComputePipelineDesc {

@@ -74,6 +74,9 @@ pub enum ItemError {
     /// Leaf with an empty mask, non-zero unused material nibbles, or full with one material.
     #[error("invalid leaf: {0}")]
     Leaf(&'static str),
+    /// A pointer names no stored item.
+    #[error("no item at pointer {0:#010x}")]
+    Missing(u32),
 }
 
 /// A child pointer: the table (item size) and the handle in it.

@@ -8,3 +8,4 @@ mod gpu_shared;
 pub mod item;
 pub mod replay;
 pub mod tool;
+pub mod walk;

@@ -8,9 +8,10 @@
 
 mod editor;
 
+use std::borrow::Cow;
 use std::sync::Mutex;
 
-use rustc_hash::{FxHashMap, FxHashSet};
+use rustc_hash::FxHashMap;
 use thiserror::Error;
 
 pub use editor::CpuEditor;
@@ -20,7 +21,8 @@ use super::item::{
     POINTER_HANDLE_BITS, TABLE_COUNT,
 };
 use super::tool::{ToolError, Voxel, VoxelSource};
-use crate::dag::build::LevelNodes;
+pub use super::walk::child_of;
+use super::walk::{self, StoredDag};
 use crate::dag::{DagError, Svdag, MAX_RESOLUTION};
 use crate::scene::morton;
 
@@ -186,21 +188,33 @@ impl<'a> Inserter<'a> {
     }
 }
 
+impl StoredDag for HashDag {
+    fn item_words(&self, ptr: NodePtr) -> Result<Cow<'_, [u32]>, ItemError> {
+        let table = self
+            .tables
+            .get(ptr.table())
+            .ok_or(ItemError::Missing(ptr.0))?;
+        match table.used.get(ptr.handle() as usize) {
+            Some(true) => Ok(Cow::Borrowed(table.item(ptr.handle()))),
+            _ => Err(ItemError::Missing(ptr.0)),
+        }
+    }
+
+    fn root_level(&self) -> u32 {
+        HashDag::root_level(self)
+    }
+
+    fn has_materials(&self) -> bool {
+        self.materials
+    }
+}
+
 /// The root for what a parent would store for the whole scene.
 pub fn root_of(child: Child) -> Root {
     match child {
         Child::Empty => Root::Empty,
         Child::Full(m) => Root::Full(m),
         Child::Node(p) => Root::Node(p),
-    }
-}
-
-/// The child slot equivalent of a root.
-pub fn child_of(root: Root) -> Child {
-    match root {
-        Root::Empty => Child::Empty,
-        Root::Full(m) => Child::Full(m),
-        Root::Node(p) => Child::Node(p),
     }
 }
 
@@ -211,32 +225,6 @@ fn octant_offset(corner: Voxel, octant: usize, half: u32) -> Voxel {
         corner[1] + (octant as u32 >> 1 & 1) * half,
         corner[2] + (octant as u32 >> 2) * half,
     ]
-}
-
-/// Per-level node lists of an `Svdag` under construction (child ids, deduplicated).
-#[derive(Default)]
-struct SvdagLevel {
-    nodes: LevelNodes,
-    ids: FxHashMap<Vec<u32>, u32>,
-}
-
-impl SvdagLevel {
-    fn push(&mut self, node: Vec<u32>) -> Result<u32, DagError> {
-        if let Some(&id) = self.ids.get(&node) {
-            return Ok(id);
-        }
-        let nodes = &mut self.nodes;
-        let id = nodes.offsets.len() as u32;
-        if nodes.words.len() + node.len() > u32::MAX as usize {
-            return Err(DagError::TooLarge {
-                words: (nodes.words.len() + node.len()) as u64,
-            });
-        }
-        nodes.offsets.push(nodes.words.len() as u32);
-        nodes.words.extend_from_slice(&node);
-        self.ids.insert(node, id);
-        Ok(id)
-    }
 }
 
 impl HashDag {
@@ -417,124 +405,18 @@ impl HashDag {
     /// `(Morton code, material)` of every solid voxel under `root`, ascending (materials 0
     /// without materials). Meant for tests and small scenes: full subtrees are expanded.
     pub fn voxels(&self, root: Root) -> Result<Vec<(u64, u8)>, EditError> {
-        let mut out = Vec::new();
-        self.collect(child_of(root), self.root_level(), 0, &mut out)?;
-        Ok(out)
-    }
-
-    fn collect(
-        &self,
-        child: Child,
-        level: u32,
-        base: u64,
-        out: &mut Vec<(u64, u8)>,
-    ) -> Result<(), EditError> {
-        match child {
-            Child::Empty => {}
-            Child::Full(m) => {
-                let count = 1u64 << (3 * (level + 2));
-                out.extend((base..base + count).map(|code| (code, m)));
-            }
-            Child::Node(ptr) if level == 0 => {
-                let leaf = self.leaf(ptr)?;
-                for bit in 0..64 {
-                    if leaf.mask >> bit & 1 == 1 {
-                        out.push((base + bit, leaf.materials[bit as usize]));
-                    }
-                }
-            }
-            Child::Node(ptr) => {
-                let node = self.node(ptr)?;
-                let step = 1u64 << (3 * (level + 1));
-                for (o, c) in node.children.iter().enumerate() {
-                    self.collect(*c, level - 1, base + o as u64 * step, out)?;
-                }
-            }
-        }
-        Ok(())
+        Ok(walk::voxels(self, root)?)
     }
 
     /// Converts the scene under `root` to a compact `Svdag` (geometry; no colours), with the
     /// same node order as `Svdag::from_voxels` of the same voxels.
     pub fn to_svdag(&self, root: Root) -> Result<Svdag, EditError> {
-        let root_level = self.root_level();
-        let mut levels: Vec<SvdagLevel> = (0..=root_level).map(|_| SvdagLevel::default()).collect();
-        let mut memo: FxHashMap<(Child, u32), u32> = FxHashMap::default();
-        match child_of(root) {
-            Child::Empty => {
-                levels[root_level as usize].push(vec![0])?;
-            }
-            child => {
-                self.convert(child, root_level, &mut levels, &mut memo)?;
-            }
-        }
-        let levels = levels.into_iter().map(|level| level.nodes).collect();
-        Ok(Svdag::lay_out(self.resolution, levels, Vec::new())?)
-    }
-
-    /// Id in `levels[level]` of the svdag node of a non-empty child.
-    fn convert(
-        &self,
-        child: Child,
-        level: u32,
-        levels: &mut [SvdagLevel],
-        memo: &mut FxHashMap<(Child, u32), u32>,
-    ) -> Result<u32, EditError> {
-        let key = match child {
-            // Materials do not matter to geometry: one full node per level.
-            Child::Full(_) => (Child::Full(0), level),
-            c => (c, level),
-        };
-        if let Some(&id) = memo.get(&key) {
-            return Ok(id);
-        }
-        let words = match child {
-            Child::Empty => unreachable!("empty children are not converted"),
-            Child::Full(_) if level == 0 => vec![u32::MAX, u32::MAX],
-            Child::Node(ptr) if level == 0 => self.item(ptr)[..2].to_vec(),
-            Child::Full(_) => {
-                let below = self.convert(Child::Full(0), level - 1, levels, memo)?;
-                let mut words = vec![0xff];
-                words.extend([below; 8]);
-                words
-            }
-            Child::Node(ptr) => {
-                let node = self.node(ptr)?;
-                let mut words = vec![0];
-                for (o, c) in node.children.iter().enumerate() {
-                    if *c != Child::Empty {
-                        words[0] |= 1 << o;
-                        let id = self.convert(*c, level - 1, levels, memo)?;
-                        words.push(id);
-                    }
-                }
-                words
-            }
-        };
-        let id = levels[level as usize].push(words)?;
-        memo.insert(key, id);
-        Ok(id)
+        walk::to_svdag(self, root)
     }
 
     /// Unique stored items reachable from `root`, per level (index 0 = leaves).
     pub fn unique_nodes_per_level(&self, root: Root) -> Result<Vec<u64>, EditError> {
-        let levels = self.root_level() as usize + 1;
-        let mut seen: Vec<FxHashSet<NodePtr>> = vec![FxHashSet::default(); levels];
-        let mut stack = Vec::new();
-        if let Root::Node(ptr) = root {
-            stack.push((ptr, self.root_level()));
-        }
-        while let Some((ptr, level)) = stack.pop() {
-            if !seen[level as usize].insert(ptr) || level == 0 {
-                continue;
-            }
-            for child in self.node(ptr)?.children {
-                if let Child::Node(p) = child {
-                    stack.push((p, level - 1));
-                }
-            }
-        }
-        Ok(seen.iter().map(|s| s.len() as u64).collect())
+        Ok(walk::unique_nodes_per_level(self, root)?)
     }
 
     /// Mark/sweep GC: keeps every item reachable from `roots`, frees the rest (their handles

@@ -21,11 +21,11 @@ use super::{
     GpuDagError, GpuHashDag, GpuHashDagConfig, HashDagImage, MergeLevel, VALUE_EMPTY, VALUE_TEMP,
 };
 use crate::attr::Materials;
-use crate::dag::encode::{EncodedDag, VoxelDigest};
+use crate::dag::encode::{DigestBuilder, EncodedDag};
 use crate::dag::{Svdag, VdagFile};
 use crate::edit::item::Root;
+use crate::edit::walk;
 use crate::gpu::{Buffer, GpuContext, MemLocation, Profiler};
-use crate::scene::Voxels;
 
 /// Most records per level: record indices travel in the 28 index bits of a child value.
 const MAX_RECORDS: usize = 1 << 28;
@@ -205,11 +205,19 @@ impl HashDagImage {
     /// and with materials the per-voxel ids (depth-first order) and `palette` (required then;
     /// every id must be below its size).
     pub fn to_file(&self, root: Root, palette: Option<&[u32]>) -> Result<VdagFile, GpuDagError> {
-        let voxels = self.voxels(root)?;
-        let codes: Vec<u64> = voxels.iter().map(|&(c, _)| c).collect();
+        // One streamed pass over the voxels for the digest (and the ids): no code list.
+        let mut digest = DigestBuilder::default();
+        let mut ids = Vec::new();
+        let keep_ids = self.with_materials;
+        walk::for_each_voxel(self, root, |code, m| {
+            digest.push(code);
+            if keep_ids {
+                ids.push(m);
+            }
+        })?;
         let materials = match (self.with_materials, palette) {
             (true, Some(palette)) => Some(
-                Materials::new(palette.to_vec(), voxels.iter().map(|&(_, m)| m).collect())
+                Materials::new(palette.to_vec(), ids)
                     .map_err(|e| GpuDagError::Invalid(format!("saving materials: {e}")))?,
             ),
             (true, None) => {
@@ -219,13 +227,8 @@ impl HashDagImage {
             }
             (false, _) => None,
         };
-        drop(voxels);
-        let digest = VoxelDigest::of_codes(&codes);
-        let dag = Svdag::from_voxels(&Voxels {
-            resolution: 4 << self.root_level,
-            codes,
-            colors: Vec::new(),
-        })?;
+        let digest = digest.finish();
+        let dag = self.to_svdag(root)?;
         Ok(VdagFile {
             encoded: EncodedDag::Svdag32(dag),
             colors: Vec::new(),
