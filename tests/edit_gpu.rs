@@ -644,6 +644,57 @@ fn pool_exhaustion_grows_or_fails_with_the_previous_root_intact() {
     assert_clean(&ctx);
 }
 
+/// A recorded merge reserves each table for its share of the level's items. On a scene of
+/// scattered voxels (nodes of one child) a solid sphere makes far more 8-child nodes than the
+/// tables' shares say: it runs a pool out and merges once more on pools grown for the items
+/// it built (two merge chains in one edit, none level by level), with the CPU editor's
+/// result; the next sphere fits at once.
+#[test]
+fn a_merge_that_runs_a_pool_out_reserves_again_for_what_it_built() {
+    let ctx = common::gpu();
+    let mut codes: Vec<u64> = (1..5_000u64)
+        .map(|i| i.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 31)
+        .collect();
+    codes.sort_unstable();
+    codes.dedup();
+    let scene = Voxels {
+        resolution: 2048,
+        codes,
+        colors: Vec::new(),
+    };
+    let svdag = Svdag::from_voxels(&scene).unwrap();
+    // Buckets enough for every new item to open a chain of its own.
+    let config = GpuHashDagConfig::new(HashVariant::Atomic64, 1 << 20);
+    let mut hd = GpuHashDag::load(&ctx, &config, &svdag, None).unwrap();
+    let mut dag = HashDag::new(2048, false).unwrap();
+    let root = dag.insert_svdag(&svdag, None).unwrap();
+    let mut cpu = CpuEditor::new(dag, root, 4);
+    let mut profiler = Profiler::new(&ctx).unwrap();
+    let mut chains = Vec::new();
+    for center in [[900.3, 1020.0, 1010.5], [1150.0, 1040.5, 1030.0]] {
+        let tool = shaped(Shape::Sphere, center, 700.0, false);
+        let from = profiler.passes().len();
+        hd.edit(&tool, Some(&mut profiler)).unwrap();
+        cpu.edit(&tool).unwrap();
+        let image = hd.download().unwrap();
+        let expected = cpu.dag().to_svdag(cpu.root()).unwrap();
+        assert_eq!(image.to_svdag(hd.root()).unwrap(), expected, "{tool:?}");
+        let passes = &profiler.passes()[from..];
+        chains.push(
+            passes
+                .iter()
+                .filter(|p| p.name == "edit merge small levels")
+                .count(),
+        );
+    }
+    if profiler.is_available() {
+        assert_eq!(chains, [2, 1], "merge chains per edit");
+    }
+    drop(profiler);
+    drop(hd);
+    assert_clean(&ctx);
+}
+
 #[test]
 fn profiled_edit_names_its_passes() {
     let ctx = common::gpu();

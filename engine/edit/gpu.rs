@@ -220,6 +220,9 @@ pub struct GpuHashDag {
     mixed: Option<MixedPasses>,
     /// The merge of an edit's small top levels in one dispatch (with `mixed`).
     small_levels: Option<SmallLevelsPass>,
+    /// Per level from the leaves up, each item size's share of the items of the last recorded
+    /// merges (`observe_size_shares`): a floor for the next merge's pool reservations.
+    size_shares: Vec<[f64; COUNTERS]>,
     /// The tables' super-block table addresses (`u64` each), read by the passes.
     pub(super) table_addresses: Buffer,
     expand: ComputePipeline,
@@ -350,6 +353,14 @@ struct Merged {
     root: Option<RootReadback>,
 }
 
+/// What [`GpuHashDag::merge_recorded`] did.
+enum RecordedMerge {
+    /// Every item found its slot.
+    Merged(Box<Merged>),
+    /// Some found no slab: the items it built per size (index = words - 2).
+    LeftOut(Vec<u64>),
+}
+
 /// The readbacks that end an edit: the new root's value, the missing handles, the pools.
 struct RootReadback {
     root: Readback<u32>,
@@ -431,6 +442,7 @@ impl GpuHashDag {
             dedups,
             mixed,
             small_levels,
+            size_shares: Vec::new(),
             table_addresses,
             expand: pipeline("edit expand", shaders::EDIT_EXPAND)?,
             build_items: BuildItemsPipelines::new(ctx, materials)?,
@@ -789,10 +801,19 @@ impl GpuHashDag {
             });
         }
         let first = levels - merge_levels.len();
-        let recorded = match self.merges_recorded() {
-            true => self.merge_recorded(&merge_levels, profiler.as_deref_mut())?,
-            false => None,
-        };
+        // A recorded merge that ran a pool out runs once more on pools grown for the items it
+        // built (it finds the ones it inserted); level by level, reserving for the worst case,
+        // only after that.
+        let mut recorded = None;
+        let mut built = None;
+        while self.merges_recorded() && recorded.is_none() {
+            let retry = built.is_some();
+            match self.merge_recorded(&merge_levels, built.as_deref(), profiler.as_deref_mut())? {
+                RecordedMerge::Merged(merged) => recorded = Some(*merged),
+                RecordedMerge::LeftOut(_) if retry => break,
+                RecordedMerge::LeftOut(sizes) => built = Some(sizes),
+            }
+        }
         let merged = match recorded {
             Some(merged) => merged,
             None => self.merge(&merge_levels, true, profiler.as_deref_mut())?,
@@ -1654,20 +1675,22 @@ impl GpuHashDag {
     /// on claim tables sized for the level's node count (a bound of every size's items); only
     /// the last level runs resolve, for the root. One wait in all, for the tables' status and
     /// the root. The pools are grown for the expected case only
-    /// ([`GpuHashTable::reserve_expected`] of each size's share of the nodes): where one runs
-    /// out all the same, this returns None, having changed no root (the new items are
-    /// garbage), and the caller merges level by level, reserving for the worst case.
+    /// ([`GpuHashTable::reserve_expected`] of each size's share of the nodes, at least
+    /// `built[size]` items where given): where one runs out all the same, this returns the
+    /// items it built per size, having changed no root (the new items are garbage until the
+    /// caller merges again and finds them).
     fn merge_recorded(
         &mut self,
         levels: &[MergeLevel<'_>],
+        built: Option<&[u64]>,
         mut profiler: Option<&mut Profiler>,
-    ) -> Result<Option<Merged>, GpuDagError> {
+    ) -> Result<RecordedMerge, GpuDagError> {
         let ctx = Arc::clone(&self.ctx);
         let Some(last) = levels.last() else {
-            return Ok(Some(Merged {
+            return Ok(RecordedMerge::Merged(Box::new(Merged {
                 levels: Vec::new(),
                 root: None,
-            }));
+            })));
         };
         if levels.iter().any(|level| level.result_index.is_some()) {
             // build_items reads a pending child's slot at its result's index.
@@ -1686,11 +1709,21 @@ impl GpuHashDag {
             .iter()
             .map(|t| t.allocated_slabs() as f64 + 1.0)
             .collect();
+        // At least the shares the sizes had at the same level in the last merges: a scene of
+        // thin surfaces holds few 8-child nodes, solid edits make many.
+        let leaves_up = levels[0].leaves;
         let mut expected = [0f64; TABLE_COUNT as usize];
-        for (level, sizes) in levels.iter().zip(&sizes) {
+        for (k, (level, sizes)) in levels.iter().zip(&sizes).enumerate() {
             let total: f64 = sizes.iter().map(|&s| slabs[s]).sum();
+            let seen = self.size_shares.get(k).filter(|_| leaves_up);
             for &s in sizes {
-                expected[s] += level.count as f64 * slabs[s] / total;
+                let share = (slabs[s] / total).max(seen.map_or(0.0, |seen| seen[s]));
+                expected[s] += level.count as f64 * share;
+            }
+        }
+        if let Some(built) = built {
+            for (e, &b) in expected.iter_mut().zip(built) {
+                *e = e.max(b as f64);
             }
         }
         let used: Vec<usize> = (0..expected.len()).filter(|&s| expected[s] > 0.0).collect();
@@ -1814,18 +1847,44 @@ impl GpuHashDag {
             }
             left_out += check.left_out;
         }
-        if left_out > 0 {
-            log::debug!("recorded merge: {left_out} items found no slab; merging level by level");
-            return Ok(None);
-        }
-        let levels = counts
+        let counts = counts
             .into_iter()
-            .map(|c| Ok((c.read()?.iter().sum(), 0)))
+            .map(|c| c.read())
             .collect::<Result<Vec<_>, GpuError>>()?;
-        Ok(Some(Merged {
-            levels,
+        if leaves_up {
+            self.observe_size_shares(&counts);
+        }
+        if left_out > 0 {
+            log::debug!("recorded merge: {left_out} items found no slab");
+            let mut built = vec![0u64; COUNTERS];
+            for level in &counts {
+                for (b, &n) in built.iter_mut().zip(level) {
+                    *b += n as u64;
+                }
+            }
+            return Ok(RecordedMerge::LeftOut(built));
+        }
+        Ok(RecordedMerge::Merged(Box::new(Merged {
+            levels: counts.iter().map(|c| (c.iter().sum(), 0)).collect(),
             root: Some(root),
-        }))
+        })))
+    }
+
+    /// Folds the items per size of each level (leaves first) of a merge into `size_shares`:
+    /// a share rises at once and halves per merge that does not renew it.
+    fn observe_size_shares(&mut self, counts: &[Vec<u32>]) {
+        if self.size_shares.len() < counts.len() {
+            self.size_shares.resize(counts.len(), [0.0; COUNTERS]);
+        }
+        for (shares, level) in self.size_shares.iter_mut().zip(counts) {
+            let total: u32 = level.iter().sum();
+            if total == 0 {
+                continue;
+            }
+            for (share, &n) in shares.iter_mut().zip(level) {
+                *share = (n as f64 / total as f64).max(0.5 * *share);
+            }
+        }
     }
 
     /// Grows the tables of `sizes` for `counts` new items each, where they grow before inserts.

@@ -817,14 +817,16 @@ impl GpuHashTable {
 
     /// Grows the pool for `new_items` more items in the expected case rather than the worst
     /// ([`GpuHashTable::reserve`]): an item needs a slab of its own where its bucket is empty
-    /// (at least 1 - allocated slabs / buckets of them) and 1/32 of one elsewhere (chain ends
-    /// fill up); twice that, the pool kept at most 7/8 full. Inserts report what did not fit.
+    /// (at least 1 - allocated slabs / buckets of them; each empty bucket once) and 1/32 of one
+    /// elsewhere (chain ends fill up); twice that, the pool kept at most 7/8 full. Inserts
+    /// report what did not fit.
     pub fn reserve_expected(&mut self, new_items: u32) -> Result<(), HashError> {
         let allocated = self.status.allocated_slabs as f64;
         let buckets = self.config.buckets as f64;
-        let empty = 1.0 - allocated.min(buckets) / buckets;
-        let per_item = empty + (1.0 - empty) / SLAB_SLOTS as f64;
-        let new_slabs = (2.0 * per_item * new_items as f64).ceil() as u64 + 1;
+        let empty_buckets = buckets - allocated.min(buckets);
+        let items = new_items as f64;
+        let heads = (items * empty_buckets / buckets).min(empty_buckets);
+        let new_slabs = (2.0 * (heads + items / SLAB_SLOTS as f64)).ceil() as u64 + 1;
         self.grow_for(self.status.allocated_slabs as u64 + new_slabs, false)
     }
 
