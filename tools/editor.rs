@@ -14,7 +14,7 @@ use rustc_hash::FxHashMap;
 use serde::Serialize;
 use voxdag::attr::Materials;
 use voxdag::dag::{Svdag, VdagFile};
-use voxdag::edit::gpu::{buckets_for, GpuHashDag, GpuHashDagConfig};
+use voxdag::edit::gpu::{buckets_for, GpuHashDag, GpuHashDagConfig, HashDagImage};
 use voxdag::edit::item::{NodePtr, Root};
 use voxdag::edit::replay::{Action, Replay};
 use voxdag::edit::tool::Tool;
@@ -552,6 +552,11 @@ impl Document {
     /// Voxels and nodes per level of the current root (downloads the tables the first time a
     /// root is seen).
     fn counts(&mut self) -> Result<RootCounts> {
+        self.counts_with(None)
+    }
+
+    /// [`Document::counts`], reading `image` (the tables downloaded already) where given.
+    fn counts_with(&mut self, image: Option<&HashDagImage>) -> Result<RootCounts> {
         let root = self.dag.root();
         if self.counted_collections != self.dag.collections() {
             // A GC may have freed items the memos name and reused their handles.
@@ -562,8 +567,15 @@ impl Document {
         if let Some(c) = self.counts.get(&root) {
             return Ok(c.clone());
         }
-        let image = self.dag.download()?;
-        let materials = walk::voxels_per_material(&image, root, &mut self.node_voxels)?;
+        let downloaded;
+        let image = match image {
+            Some(image) => image,
+            None => {
+                downloaded = self.dag.download()?;
+                &downloaded
+            }
+        };
+        let materials = walk::voxels_per_material(image, root, &mut self.node_voxels)?;
         let counts = RootCounts {
             voxels: materials.iter().sum(),
             materials,
@@ -576,14 +588,14 @@ impl Document {
     /// The current root as an svdag32 file at `path` (atomic write), with its materials and
     /// palette when the loaded file had them or an edit used a material other than 0.
     fn save(&mut self, path: &Path) -> Result<()> {
+        let image = self.dag.download()?;
+        let root = self.dag.root();
         let used = self
-            .counts()?
+            .counts_with(Some(&image))?
             .materials
             .iter()
             .rposition(|&n| n > 0)
             .map_or(0, |m| m + 1);
-        let image = self.dag.download()?;
-        let root = self.dag.root();
         if self.file_palette == 0 && used <= 1 {
             image.to_svdag(root)?.save(path)?;
         } else {

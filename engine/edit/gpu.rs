@@ -804,16 +804,19 @@ impl GpuHashDag {
         // A recorded merge that ran a pool out runs once more on pools grown for the items it
         // built (it finds the ones it inserted); level by level, reserving for the worst case,
         // only after that.
-        let mut recorded = None;
-        let mut built = None;
-        while self.merges_recorded() && recorded.is_none() {
-            let retry = built.is_some();
-            match self.merge_recorded(&merge_levels, built.as_deref(), profiler.as_deref_mut())? {
-                RecordedMerge::Merged(merged) => recorded = Some(*merged),
-                RecordedMerge::LeftOut(_) if retry => break,
-                RecordedMerge::LeftOut(sizes) => built = Some(sizes),
-            }
-        }
+        let recorded = match self.merges_recorded() {
+            false => None,
+            true => match self.merge_recorded(&merge_levels, None, profiler.as_deref_mut())? {
+                RecordedMerge::Merged(merged) => Some(*merged),
+                RecordedMerge::LeftOut(built) => {
+                    let again = Some(built.as_slice());
+                    match self.merge_recorded(&merge_levels, again, profiler.as_deref_mut())? {
+                        RecordedMerge::Merged(merged) => Some(*merged),
+                        RecordedMerge::LeftOut(_) => None,
+                    }
+                }
+            },
+        };
         let merged = match recorded {
             Some(merged) => merged,
             None => self.merge(&merge_levels, true, profiler.as_deref_mut())?,

@@ -129,6 +129,24 @@ pub enum Child {
     Node(NodePtr),
 }
 
+/// The child slot equivalent of a root.
+pub fn child_of(root: Root) -> Child {
+    match root {
+        Root::Empty => Child::Empty,
+        Root::Full(m) => Child::Full(m),
+        Root::Node(p) => Child::Node(p),
+    }
+}
+
+/// The root for what a parent would store for the whole scene.
+pub fn root_of(child: Child) -> Root {
+    match child {
+        Child::Empty => Root::Empty,
+        Child::Full(m) => Root::Full(m),
+        Child::Node(p) => Root::Node(p),
+    }
+}
+
 /// A decoded inner node.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct InnerNode {

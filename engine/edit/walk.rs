@@ -10,7 +10,7 @@ use std::borrow::Cow;
 
 use rustc_hash::{FxHashMap, FxHashSet};
 
-use super::item::{Child, InnerNode, ItemError, Leaf, NodePtr, Root, MATERIAL_COUNT};
+use super::item::{child_of, Child, InnerNode, ItemError, Leaf, NodePtr, Root, MATERIAL_COUNT};
 use crate::dag::build::LevelNodes;
 use crate::dag::{DagError, Svdag};
 
@@ -22,15 +22,6 @@ pub trait StoredDag {
     fn root_level(&self) -> u32;
     /// True when leaves carry 4-bit materials.
     fn has_materials(&self) -> bool;
-}
-
-/// The child slot equivalent of a root.
-pub fn child_of(root: Root) -> Child {
-    match root {
-        Root::Empty => Child::Empty,
-        Root::Full(m) => Child::Full(m),
-        Root::Node(p) => Child::Node(p),
-    }
 }
 
 fn node(dag: &impl StoredDag, ptr: NodePtr) -> Result<InnerNode, ItemError> {

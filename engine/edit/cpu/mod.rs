@@ -16,12 +16,12 @@ use thiserror::Error;
 
 pub use editor::CpuEditor;
 
+pub use super::item::{child_of, root_of};
 use super::item::{
     Child, InnerNode, ItemError, Leaf, NodePtr, Root, MAX_ITEM_WORDS, MIN_ITEM_WORDS,
     POINTER_HANDLE_BITS, TABLE_COUNT,
 };
 use super::tool::{ToolError, Voxel, VoxelSource};
-pub use super::walk::child_of;
 use super::walk::{self, StoredDag};
 use crate::dag::{DagError, Svdag, MAX_RESOLUTION};
 use crate::scene::morton;
@@ -206,15 +206,6 @@ impl StoredDag for HashDag {
 
     fn has_materials(&self) -> bool {
         self.materials
-    }
-}
-
-/// The root for what a parent would store for the whole scene.
-pub fn root_of(child: Child) -> Root {
-    match child {
-        Child::Empty => Root::Empty,
-        Child::Full(m) => Root::Full(m),
-        Child::Node(p) => Root::Node(p),
     }
 }
 

@@ -35,7 +35,7 @@ uint hash_alloc_slab(uint64_t super_blocks, uint64_t status, uint blocks, uint r
     // The counter never exceeds the slabs claimed, and only GC frees one: once it says every
     // slab is taken the pool stays full for the pass, so an item fails at once instead of
     // sweeping every block's bitmask (an exhausted insert of 58 K items took 300 ms that way).
-    if (HashStatus(status).allocated_slabs >= blocks * HASH_SLABS_PER_BLOCK) {
+    if (hash_allocated_slabs(status, false) >= blocks * HASH_SLABS_PER_BLOCK) {
         return HASH_NO_SLAB;
     }
     uint slab = HASH_NO_SLAB;
