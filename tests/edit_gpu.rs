@@ -13,7 +13,7 @@ use proptest::test_runner::{Config, TestRunner};
 use rustc_hash::FxHashMap;
 use voxdag::dag::Svdag;
 use voxdag::edit::cpu::{CpuEditor, HashDag};
-use voxdag::edit::gpu::{GpuDagError, GpuHashDag, GpuHashDagConfig};
+use voxdag::edit::gpu::{table_buckets, GpuDagError, GpuHashDag, GpuHashDagConfig};
 use voxdag::edit::item::Root;
 use voxdag::edit::tool::{self, CopyParams, Shape, Tool, VoxelMap};
 use voxdag::edit::walk;
@@ -322,6 +322,52 @@ fn random_edits_match_brute_force_for_every_variant() {
     }
     random_edits(&ctx, HashVariant::AccelHash8, 128, 4);
     random_edits(&ctx, HashVariant::TicketBoard, 256, 2);
+    assert_clean(&ctx);
+}
+
+/// Tables sized by the load (`Buckets::FromLoad`): each table's buckets follow the items the
+/// scene's nodes make in it (an inner node of c children has 1 + c words, a leaf 2), the load
+/// holds the scene in fewer slab bytes than the largest of those counts in every table, and
+/// edits on them stay exact.
+#[test]
+fn tables_sized_by_the_load_follow_their_items_and_edit_exactly() {
+    let ctx = common::gpu();
+    let dag = Svdag::from_voxels(&synthetic(256, 5)).unwrap();
+    let mut loaded = [0u64; 9];
+    loaded[0] = dag.level_range(0).len() as u64 / 2;
+    for level in 1..=dag.root_level() {
+        let mut at = dag.level_range(level).start;
+        while at < dag.level_range(level).end {
+            let children = dag.words[at].count_ones() as usize;
+            loaded[children - 1] += 1;
+            at += 1 + children;
+        }
+    }
+    let buckets = table_buckets(&loaded);
+    assert!(buckets.iter().any(|&b| b != buckets[0]), "{buckets:?}");
+    let sized = GpuHashDagConfig::sized_by_load(HashVariant::TicketBoard);
+    let mut hd = GpuHashDag::load(&ctx, &sized, &dag, None).unwrap();
+    assert_eq!(hd.buckets(), buckets);
+    let most = *buckets.iter().max().unwrap();
+    let mut uniform = GpuHashDag::load(
+        &ctx,
+        &GpuHashDagConfig::new(HashVariant::TicketBoard, most),
+        &dag,
+        None,
+    )
+    .unwrap();
+    let (a, b) = (hd.gc(None).unwrap(), uniform.gc(None).unwrap());
+    assert_eq!(a.live_per_table, b.live_per_table);
+    assert!(
+        a.slab_bytes_after < b.slab_bytes_after,
+        "{} >= {} slab bytes",
+        a.slab_bytes_after,
+        b.slab_bytes_after
+    );
+    drop((hd, uniform));
+    for variant in HashVariant::ALL {
+        random_edits_with(&ctx, GpuHashDagConfig::sized_by_load(variant), 64, 4);
+    }
     assert_clean(&ctx);
 }
 

@@ -276,15 +276,15 @@ fn synthetic(resolution: u32, seed: u64) -> (Svdag, Materials) {
 
 fn check_gpu_load(
     ctx: &Arc<GpuContext>,
-    variant: HashVariant,
+    config: &GpuHashDagConfig,
     name: &str,
     dag: &Svdag,
     m: &Materials,
 ) {
+    let variant = config.variant;
     let mut cpu = HashDag::new(dag.resolution, true).unwrap();
     let cpu_root = cpu.insert_svdag(dag, Some(&m.ids)).unwrap();
-    let config = GpuHashDagConfig::new(variant, 1024);
-    let gpu = GpuHashDag::load_materials(ctx, &config, dag, m, None).unwrap();
+    let gpu = GpuHashDag::load_materials(ctx, config, dag, m, None).unwrap();
     assert!(gpu.with_materials());
     assert_eq!(gpu.palette(), Some(m.palette16()), "{name} {variant:?}");
     let image = gpu.download().unwrap();
@@ -339,9 +339,14 @@ fn gpu_load_of_material_scenes_matches_the_cpu_hash_dag() {
         let m = Materials::quantize(&dag.colors, k).unwrap();
         scenes.push((name.into(), dag, m));
     }
-    for variant in HashVariant::ALL {
+    // Every layout with 1024 buckets per table, and tables sized by what the load puts in them.
+    let configs = HashVariant::ALL
+        .map(|variant| GpuHashDagConfig::new(variant, 1024))
+        .into_iter()
+        .chain([GpuHashDagConfig::sized_by_load(HashVariant::AccelHash8)]);
+    for config in configs {
         for (name, dag, m) in &scenes {
-            check_gpu_load(&ctx, variant, name, dag, m);
+            check_gpu_load(&ctx, &config, name, dag, m);
         }
     }
     // Materials that do not fit the voxels are an error, not a panic.

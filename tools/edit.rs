@@ -12,7 +12,7 @@ use voxdag::attr::Materials;
 use voxdag::dag::encode::EncodedDag;
 use voxdag::dag::{Svdag, VdagFile};
 use voxdag::edit::cpu::{CpuEditor, HashDag};
-use voxdag::edit::gpu::{buckets_for, GpuHashDag, GpuHashDagConfig};
+use voxdag::edit::gpu::{GpuHashDag, GpuHashDagConfig};
 use voxdag::edit::gpu_gc::GcStats;
 use voxdag::edit::item::Root;
 use voxdag::edit::replay::{Replay, Step};
@@ -387,8 +387,8 @@ fn edit_gpu(
     } else {
         None
     };
-    let config = GpuHashDagConfig::new(args.table.variant(), buckets_for(svdag.words.len()))
-        .with_undo_depth(args.undo_depth);
+    let config =
+        GpuHashDagConfig::sized_by_load(args.table.variant()).with_undo_depth(args.undo_depth);
     let start = Instant::now();
     let mut hd = match &materials {
         Some(m) => GpuHashDag::load_materials(&ctx, &config, &svdag, m, profiler.as_mut())?,

@@ -14,7 +14,7 @@ use rustc_hash::FxHashMap;
 use serde::Serialize;
 use voxdag::attr::Materials;
 use voxdag::dag::{Svdag, VdagFile};
-use voxdag::edit::gpu::{buckets_for, GpuHashDag, GpuHashDagConfig, HashDagImage};
+use voxdag::edit::gpu::{GpuHashDag, GpuHashDagConfig, HashDagImage};
 use voxdag::edit::item::{NodePtr, Root};
 use voxdag::edit::replay::{Action, Replay};
 use voxdag::edit::tool::Tool;
@@ -520,8 +520,7 @@ impl Document {
         for (entry, &c) in palette.iter_mut().zip(&materials.palette) {
             *entry = [c as u8, (c >> 8) as u8, (c >> 16) as u8];
         }
-        let config = GpuHashDagConfig::new(variant, buckets_for(svdag.words.len()))
-            .with_undo_depth(undo_depth);
+        let config = GpuHashDagConfig::sized_by_load(variant).with_undo_depth(undo_depth);
         let dag = GpuHashDag::load_materials(ctx, &config, svdag, &materials, None)
             .with_context(|| format!("loading {} into the GPU hash DAG", path.display()))?;
         let scene = renderer.bind_hash_dag(&dag, Some(&palette))?;

@@ -130,8 +130,8 @@ impl From<ItemError> for GpuDagError {
 pub struct GpuHashDagConfig {
     /// Slab layout of every table (chosen at run time).
     pub variant: HashVariant,
-    /// Buckets per table.
-    pub buckets: u32,
+    /// Buckets of each table (fixed for its life: a handle names its slab).
+    pub buckets: Buckets,
     /// Super blocks per table at creation.
     pub initial_super_blocks: u32,
     /// Most super blocks per table (at most [`max_super_blocks`], which keeps handles in 28 bits).
@@ -162,14 +162,37 @@ pub struct GpuHashDagConfig {
     pub word_views: bool,
 }
 
-/// Buckets per table for a scene of `svdag_words` svdag32 words: one per 64 words, a power of
-/// two in 1024..=2^22. Slabs are allocated per non-empty bucket, so more buckets mean sparser
-/// slabs: one per 16 words held twice the slab memory for the same edit time, one per 256 made
-/// large edits 5-15 % slower (docs/editing-gpu.md, "Buckets per table").
-pub fn buckets_for(svdag_words: usize) -> u32 {
-    ((svdag_words / 64) as u32)
-        .next_power_of_two()
-        .clamp(1024, 1 << 22)
+/// How many buckets each of the nine tables gets. Slabs (32 slots) are allocated per non-empty
+/// bucket, so buckets set how full the slabs are: too many leave slabs nearly empty (memory,
+/// zero-fills, GC sweeps), too few make long chains for the claims and inserts to walk.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Buckets {
+    /// This many in every table.
+    Fixed(u32),
+    /// Each table sized by the items the load puts in it ([`table_buckets`]); an empty scene's
+    /// tables get the minimum.
+    FromLoad,
+}
+
+/// Items per bucket a table is sized for at load ([`Buckets::FromLoad`]).
+pub const LOAD_ITEMS_PER_BUCKET: u64 = 8;
+/// Every table gets at least the buckets of this share of the loaded items, room for the item
+/// sizes a scene has few of at load but edits make many of (solid edits: 8-child nodes).
+pub const LOAD_GROWTH_SHARE: u64 = 16;
+/// Fewest and most buckets of a table sized at load.
+pub const LOAD_BUCKETS: std::ops::RangeInclusive<u32> = 1024..=1 << 22;
+
+/// Buckets per table for `loaded` items per table (index = item words - 2): one per
+/// [`LOAD_ITEMS_PER_BUCKET`] of the table's items or of `1 / LOAD_GROWTH_SHARE` of all items,
+/// whichever is more, a power of two in [`LOAD_BUCKETS`] (docs/editing-gpu.md, "Buckets per
+/// table").
+pub fn table_buckets(loaded: &[u64; TABLE_COUNT as usize]) -> [u32; TABLE_COUNT as usize] {
+    let total: u64 = loaded.iter().sum();
+    loaded.map(|items| {
+        let items = items.max(total / LOAD_GROWTH_SHARE);
+        let buckets = items.div_ceil(LOAD_ITEMS_PER_BUCKET).next_power_of_two();
+        buckets.clamp(*LOAD_BUCKETS.start() as u64, *LOAD_BUCKETS.end() as u64) as u32
+    })
 }
 
 /// Super blocks that keep every handle below 2^28 ([`MAX_TABLE_SLABS`] slabs).
@@ -181,6 +204,15 @@ impl GpuHashDagConfig {
     /// Tables of `variant` with `buckets` buckets each, one initial super block, growth before
     /// inserts, 8 insert rounds, the default undo depth and auto-GC threshold (`edit::gpu_gc`).
     pub fn new(variant: HashVariant, buckets: u32) -> GpuHashDagConfig {
+        GpuHashDagConfig::with_buckets(variant, Buckets::Fixed(buckets))
+    }
+
+    /// As [`GpuHashDagConfig::new`], each table's buckets sized by what the load puts in it.
+    pub fn sized_by_load(variant: HashVariant) -> GpuHashDagConfig {
+        GpuHashDagConfig::with_buckets(variant, Buckets::FromLoad)
+    }
+
+    fn with_buckets(variant: HashVariant, buckets: Buckets) -> GpuHashDagConfig {
         GpuHashDagConfig {
             variant,
             buckets,
@@ -377,6 +409,24 @@ impl GpuHashDag {
         root_level: u32,
         with_materials: bool,
     ) -> Result<GpuHashDag, GpuDagError> {
+        GpuHashDag::for_items(
+            ctx,
+            config,
+            root_level,
+            with_materials,
+            &[0; TABLE_COUNT as usize],
+        )
+    }
+
+    /// Empty tables for a load of `loaded` items per table (index = item words - 2), which
+    /// [`Buckets::FromLoad`] sizes them by.
+    fn for_items(
+        ctx: &Arc<GpuContext>,
+        config: &GpuHashDagConfig,
+        root_level: u32,
+        with_materials: bool,
+        loaded: &[u64; TABLE_COUNT as usize],
+    ) -> Result<GpuHashDag, GpuDagError> {
         if config.max_super_blocks > max_super_blocks() {
             return Err(GpuDagError::Invalid(format!(
                 "at most {} super blocks per table keep handles below 2^28",
@@ -388,16 +438,20 @@ impl GpuHashDag {
                 "root level {root_level} (grids of 8..=2^21 voxels have root levels 1..=19)"
             )));
         }
+        let buckets = match config.buckets {
+            Buckets::Fixed(n) => [n; TABLE_COUNT as usize],
+            Buckets::FromLoad => table_buckets(loaded),
+        };
         let mut tables = Vec::new();
         let mut dedups = Vec::new();
-        for words in MIN_ITEM_WORDS..=MAX_ITEM_WORDS {
+        for (words, buckets) in (MIN_ITEM_WORDS..=MAX_ITEM_WORDS).zip(buckets) {
             let table_config = HashTableConfig {
                 initial_super_blocks: config.initial_super_blocks,
                 grow_before_insert: config.grow_before_insert,
                 max_insert_rounds: config.max_insert_rounds,
                 max_super_blocks: config.max_super_blocks,
                 team: config.team,
-                ..HashTableConfig::new(config.variant, words, config.buckets)
+                ..HashTableConfig::new(config.variant, words, buckets)
             };
             tables.push(GpuHashTable::new(ctx, &table_config)?);
             // Single lanes fold the dedup into the table passes (`hash::claim`).
@@ -479,30 +533,46 @@ impl GpuHashDag {
                 dag.words.len()
             )));
         }
-        let mut hd = GpuHashDag::new(ctx, config, dag.root_level(), false)?;
+        // Each level's nodes (their first words), then the items per table they make: an inner
+        // node of c children has 1 + c words, a leaf 2.
+        let level_offsets: Vec<Vec<u32>> = (0..=dag.root_level())
+            .map(|level| {
+                let range = dag.level_range(level);
+                let mut offsets = Vec::new();
+                let mut at = range.start;
+                while at < range.end {
+                    offsets.push(at as u32);
+                    at += if level == 0 {
+                        2
+                    } else {
+                        1 + dag.words[at].count_ones() as usize
+                    };
+                }
+                offsets
+            })
+            .collect();
+        let mut loaded = [0u64; TABLE_COUNT as usize];
+        loaded[0] = level_offsets[0].len() as u64;
+        for &at in level_offsets[1..].iter().flatten() {
+            // An empty scene's root has no child (and is no item).
+            if let Some(table) = (dag.words[at as usize].count_ones() as usize).checked_sub(1) {
+                loaded[table] += 1;
+            }
+        }
+        let mut hd = GpuHashDag::for_items(ctx, config, dag.root_level(), false, &loaded)?;
         let words = ctx.upload("hash dag load words", &dag.words)?;
         let results = ctx.create_buffer(
             "hash dag load results",
             4 * dag.words.len() as u64,
             MemLocation::GpuOnly,
         )?;
-        for level in 0..=dag.root_level() {
+        for (level, offsets) in (0..).zip(&level_offsets) {
             let range = dag.level_range(level);
-            let mut offsets = Vec::new();
-            let mut at = range.start;
-            while at < range.end {
-                offsets.push(at as u32);
-                at += if level == 0 {
-                    2
-                } else {
-                    1 + dag.words[at].count_ones() as usize
-                };
-            }
             let count = offsets.len() as u32;
             if count == 0 {
                 continue;
             }
-            let offset_buf = ctx.upload("hash dag load offsets", &offsets)?;
+            let offset_buf = ctx.upload("hash dag load offsets", offsets)?;
             let input = if level == 0 {
                 None
             } else {
@@ -549,6 +619,11 @@ impl GpuHashDag {
             p.resolve()?;
         }
         Ok(hd)
+    }
+
+    /// Buckets of each table (index = item words - 2).
+    pub fn buckets(&self) -> Vec<u32> {
+        self.tables.iter().map(|t| t.config().buckets).collect()
     }
 
     /// The current root.
@@ -2153,5 +2228,27 @@ impl StoredDag for HashDagImage {
 
     fn has_materials(&self) -> bool {
         self.with_materials
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tables_get_buckets_for_their_items_and_a_share_of_the_scene() {
+        let mut loaded = [0u64; TABLE_COUNT as usize];
+        loaded[0] = 100_000; // 12 500 buckets' worth
+        loaded[3] = 1_000_000; // 125 000
+        loaded[7] = 300; // a sparse size: the scene's share, 1 100 300 / 16 / 8 = 8 597
+        let expected = [
+            16384, 16384, 16384, 131072, 16384, 16384, 16384, 16384, 16384,
+        ];
+        assert_eq!(table_buckets(&loaded), expected);
+        assert_eq!(table_buckets(&[0; TABLE_COUNT as usize]), [1024; 9]);
+        assert_eq!(
+            table_buckets(&[1 << 40; TABLE_COUNT as usize]),
+            [1 << 22; 9]
+        );
     }
 }

@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use super::gpu::{GpuRenderer, GpuScene};
 use crate::dag::Svdag;
-use crate::edit::gpu::{buckets_for, GpuDagError, GpuHashDag, GpuHashDagConfig};
+use crate::edit::gpu::{GpuDagError, GpuHashDag, GpuHashDagConfig};
 use crate::gpu::{GpuContext, Profiler};
 use crate::hash::HashVariant;
 
@@ -29,7 +29,7 @@ impl HashDagScene {
         variant: HashVariant,
         profiler: Option<&mut Profiler>,
     ) -> Result<HashDagScene, GpuDagError> {
-        let config = GpuHashDagConfig::new(variant, buckets_for(dag.words.len()));
+        let config = GpuHashDagConfig::sized_by_load(variant);
         let hash = GpuHashDag::load(ctx, &config, dag, profiler)?;
         let scene = renderer.bind_hash_dag(&hash, None)?;
         Ok(HashDagScene { scene, dag: hash })

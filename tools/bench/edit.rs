@@ -15,7 +15,7 @@ use serde::Serialize;
 use voxdag::attr::materials::Materials;
 use voxdag::dag::Svdag;
 use voxdag::edit::cpu::{CpuEditor, HashDag};
-use voxdag::edit::gpu::{buckets_for, GpuDagError, GpuHashDag, GpuHashDagConfig};
+use voxdag::edit::gpu::{GpuDagError, GpuHashDag, GpuHashDagConfig};
 use voxdag::edit::tool::{CopyParams, Shape, Tool};
 use voxdag::gpu::{GpuContext, GpuOptions, Profiler};
 use voxdag::scene::{self, morton, ImportOptions};
@@ -358,7 +358,7 @@ fn replay_gpu(
     replay: &Replay,
     mut profiler: Option<&mut Profiler>,
 ) -> Result<ReplayRow> {
-    let config = GpuHashDagConfig::new(table.variant(), buckets_for(svdag.words.len()));
+    let config = GpuHashDagConfig::sized_by_load(table.variant());
     let mut hd = match materials {
         Some(m) => GpuHashDag::load_materials(ctx, &config, svdag, m, None)?,
         None => GpuHashDag::load(ctx, &config, svdag, None)?,
@@ -433,8 +433,8 @@ fn bytes_target(
     table: TableArg,
     args: &BenchEditArgs,
 ) -> Result<BytesRow> {
-    let config = GpuHashDagConfig::new(table.variant(), buckets_for(svdag.words.len()))
-        .with_undo_depth(args.random_undo_depth);
+    let config =
+        GpuHashDagConfig::sized_by_load(table.variant()).with_undo_depth(args.random_undo_depth);
     let mut hd = GpuHashDag::load(ctx, &config, svdag, None)?;
     let points = surface_points(codes, args.random_edits.max(1));
     let scale = svdag.resolution as f32 / 8192.0;

@@ -10,7 +10,7 @@ use std::sync::Arc;
 
 use anyhow::{anyhow, Result};
 use clap::ValueEnum;
-use voxdag::edit::gpu::{buckets_for, GpuHashDag, GpuHashDagConfig};
+use voxdag::edit::gpu::{GpuHashDag, GpuHashDagConfig};
 use voxdag::gpu::{GpuContext, Profiler};
 use voxdag::hash::HashVariant;
 use voxdag::render::gpu::GpuRenderer;
@@ -106,8 +106,8 @@ impl Document {
             .take()
             .ok_or_else(|| anyhow!("the editor's hash DAG has no materials"))?;
         let svdag = file.into_svdag(&self.path)?;
-        let config = GpuHashDagConfig::new(variant, buckets_for(svdag.words.len()))
-            .with_undo_depth(self.dag.undo_depth());
+        let config =
+            GpuHashDagConfig::sized_by_load(variant).with_undo_depth(self.dag.undo_depth());
         let dag = GpuHashDag::load_materials(ctx, &config, &svdag, &materials, None)?;
         let scene = renderer.bind_hash_dag(&dag, Some(&self.palette))?;
         // Frames in flight read the old tables and binding.

@@ -23,7 +23,7 @@ use super::{
 use crate::attr::Materials;
 use crate::dag::encode::{DigestBuilder, EncodedDag};
 use crate::dag::{Svdag, VdagFile};
-use crate::edit::item::Root;
+use crate::edit::item::{Root, TABLE_COUNT};
 use crate::edit::walk;
 use crate::gpu::{Buffer, GpuContext, MemLocation, Profiler};
 
@@ -41,6 +41,24 @@ struct Records {
 }
 
 impl Records {
+    /// Items per table (index = item words - 2) the records make: a leaf has 2 words and one
+    /// material nibble per voxel, an inner node 1 + one per child.
+    fn items_per_table(&self) -> [u64; TABLE_COUNT as usize] {
+        let mut items = [0u64; TABLE_COUNT as usize];
+        for leaf in self.leaves.chunks_exact(10) {
+            let voxels = leaf[0].count_ones() + leaf[1].count_ones();
+            items[voxels.div_ceil(8) as usize] += 1;
+        }
+        for node in self.nodes.iter().flat_map(|level| level.chunks_exact(8)) {
+            // An empty scene's root record names no child (and is no item).
+            let children = node.iter().filter(|&&v| v != VALUE_EMPTY).count();
+            if let Some(table) = children.checked_sub(1) {
+                items[table] += 1;
+            }
+        }
+        items
+    }
+
     fn push_leaf(&mut self, record: [u32; 10]) -> Result<u32, GpuDagError> {
         if let Some(&i) = self.leaf_index.get(&record) {
             return Ok(i);
@@ -139,8 +157,9 @@ impl GpuHashDag {
                 materials.ids.len()
             )));
         }
+        let loaded = records.items_per_table();
         let Records { leaves, nodes, .. } = records;
-        let mut hd = GpuHashDag::new(ctx, config, root_level, true)?;
+        let mut hd = GpuHashDag::for_items(ctx, config, root_level, true, &loaded)?;
         hd.palette = materials.palette.clone();
         let mut below: Option<Buffer> = None;
         let levels = std::iter::once((leaves, 10)).chain(nodes.into_iter().map(|n| (n, 8)));
