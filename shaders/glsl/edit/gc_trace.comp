@@ -15,22 +15,27 @@ layout(local_size_x = 64) in;
 #define EDIT_FLAG_GC_ROOTS 16u
 #define EDIT_FLAG_GC_LAST 32u
 
+// Per workgroup: items newly marked per table, and pointers naming no allocated slab, added to
+// the global counters once at the end. Per item, two threads' atomics on the one counter line
+// made the trace bound by that line's ping-pong (docs/editing-gpu.md, "GC trace counters").
+shared uint group_marked[9];
+shared uint group_bad;
+
 // Sets the GC bit of the item `ptr` names; true when it was clear. A pointer naming no
 // allocated slab of its table is counted and not marked (a bit in a free slab would break the
 // allocator's all-zero invariant).
 bool gc_mark(uint ptr) {
-    Words counters = Words(push.counters);
     uint table = ptr >> 28u;
     uint handle = ptr & EDIT_INDEX_MASK;
     uint slab = handle >> 5u;
     if (table >= 9u || slab >= Words(push.dst2).w[table]) {
-        atomicAdd(counters.w[10], 1u);
+        atomicAdd(group_bad, 1u);
         return false;
     }
     uint64_t base = Addresses(Addresses(push.tables).a[table]).a[slab / HASH_SLABS_PER_SUPER_BLOCK];
     uint local = slab % HASH_SLABS_PER_SUPER_BLOCK;
     if (((Words(base).w[local / 32u] >> (local % 32u)) & 1u) == 0u) {
-        atomicAdd(counters.w[10], 1u);
+        atomicAdd(group_bad, 1u);
         return false;
     }
     uint64_t at = base + uint64_t(HASH_SUPER_BLOCK_BITMASK_WORDS * 4u)
@@ -38,7 +43,7 @@ bool gc_mark(uint ptr) {
     uint bit = 1u << (handle & 31u);
     uint old = atomicOr(Words(at).w[HASH_SLAB_ACTIVE], bit);
     if ((old & bit) != 0u) return false;
-    atomicAdd(counters.w[1u + table], 1u);
+    atomicAdd(group_marked[table], 1u);
     return true;
 }
 
@@ -46,6 +51,9 @@ void main() {
     Words frontier = Words(push.src);
     Words next = Words(push.dst);
     Words counters = Words(push.counters);
+    if (gl_LocalInvocationIndex < 9u) group_marked[gl_LocalInvocationIndex] = 0u;
+    if (gl_LocalInvocationIndex == 0u) group_bad = 0u;
+    barrier();
     uint stride = gl_NumWorkGroups.x * 64u;
     // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
     uint i = gl_GlobalInvocationID.x;
@@ -55,15 +63,30 @@ void main() {
         if ((push.flags & EDIT_FLAG_GC_ROOTS) == 0u || gc_mark(ptr)) {
             uint children[8];
             edit_children(ptr, children);
+            // The children this node marked first join the next frontier, in one append.
+            uint fresh = 0u;
             [[unroll]] for (uint o = 0u; o < 8u; ++o) {
                 uint c = children[o];
-                if (!edit_is_ptr(c) || !gc_mark(c)) continue;
-                if ((push.flags & EDIT_FLAG_GC_LAST) != 0u) continue;
-                uint at = atomicAdd(counters.w[0], 1u);
-                if (at < push.capacity) next.w[at] = c;
+                if (edit_is_ptr(c) && gc_mark(c)) fresh |= 1u << o;
+            }
+            if ((push.flags & EDIT_FLAG_GC_LAST) == 0u && fresh != 0u) {
+                uint at = atomicAdd(counters.w[0], uint(bitCount(fresh)));
+                [[unroll]] for (uint o = 0u; o < 8u; ++o) {
+                    if (((fresh >> o) & 1u) != 0u) {
+                        if (at < push.capacity) next.w[at] = children[o];
+                        at += 1u;
+                    }
+                }
             }
         }
         i += stride;
         if (i >= push.count) break;
+    }
+    barrier();
+    if (gl_LocalInvocationIndex < 9u && group_marked[gl_LocalInvocationIndex] != 0u) {
+        atomicAdd(counters.w[1u + gl_LocalInvocationIndex], group_marked[gl_LocalInvocationIndex]);
+    }
+    if (gl_LocalInvocationIndex == 0u && group_bad != 0u) {
+        atomicAdd(counters.w[10], group_bad);
     }
 }
