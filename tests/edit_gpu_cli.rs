@@ -120,6 +120,8 @@ fn gpu_edit_report_profile_trace_and_render() {
     let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).unwrap()).unwrap();
     assert_eq!(json["editor"], "gpu");
     assert_eq!(json["table"], "accel32");
+    // The replay's tools' pipelines are made after the load, before the first edit.
+    assert!(json["pipelines_ms"].as_f64().unwrap() > 0.0, "{json}");
     let edits = json["edits"].as_array().unwrap();
     assert_eq!(edits.len(), 3);
     assert!(edits[0]["kernels_ms"]
@@ -226,6 +228,8 @@ fn bench_edit_times_unprofiled_and_profiles_a_second_run() {
         let total = r["edit_ms_total"].as_f64().unwrap();
         assert!(total > 0.0, "{r}");
         assert!(r["profiled_ms_total"].as_f64().unwrap() > 0.0, "{r}");
+        // Each fresh load makes its tools' pipelines before the timed edits.
+        assert!(r["pipelines_ms"].as_f64().unwrap() > 0.0, "{r}");
         let kernels: f64 = r["kernels_ms"]
             .as_object()
             .unwrap()

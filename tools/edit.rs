@@ -126,6 +126,10 @@ struct EditReport {
     threads: usize,
     undo_depth: usize,
     load_ms: f64,
+    /// GPU only: making the edit pipelines of the replay's tools, after the load and before
+    /// the first edit (each is otherwise made by the first edit with its tool).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pipelines_ms: Option<f64>,
     edits: Vec<EditTime>,
     undos: usize,
     redos: usize,
@@ -225,6 +229,7 @@ pub fn edit(args: &EditArgs) -> Result<()> {
         threads: rayon::current_num_threads(),
         undo_depth: args.undo_depth,
         load_ms: 0.0,
+        pipelines_ms: None,
         edits: Vec::new(),
         undos: 0,
         redos: 0,
@@ -396,6 +401,11 @@ fn edit_gpu(
     };
     report.load_ms = start.elapsed().as_secs_f64() * 1e3;
     drop(svdag);
+    let tools = steps.iter().filter_map(|(_, step)| match step {
+        Step::Edit(tool) => Some(tool),
+        _ => None,
+    });
+    report.pipelines_ms = Some(hd.prepare_tools(tools)?);
     for (line, step) in steps {
         match step {
             Step::Edit(tool) => {

@@ -523,6 +523,8 @@ impl Document {
         let config = GpuHashDagConfig::sized_by_load(variant).with_undo_depth(undo_depth);
         let dag = GpuHashDag::load_materials(ctx, &config, svdag, &materials, None)
             .with_context(|| format!("loading {} into the GPU hash DAG", path.display()))?;
+        // Every tool's pipelines now, not in its first stroke (lavapipe: ~10-30 ms each).
+        dag.prepare_tools(&brush::one_of_each())?;
         let scene = renderer.bind_hash_dag(&dag, Some(&palette))?;
         Ok(Document {
             scene,

@@ -621,6 +621,24 @@ impl GpuHashDag {
         Ok(hd)
     }
 
+    /// Makes the traversal and leaves pipelines of every tool in `tools` now, which the first
+    /// edit with each tool otherwise makes (`ToolPipelines`): lavapipe compiles one in ~10-30 ms,
+    /// a stall an editor's first stroke or a timed replay should not take. Returns the
+    /// milliseconds it took (0 when every pipeline was made already).
+    pub fn prepare_tools<'a>(
+        &self,
+        tools: impl IntoIterator<Item = &'a Tool>,
+    ) -> Result<f64, GpuDagError> {
+        let start = std::time::Instant::now();
+        for tool in tools {
+            let flags = (ToolKind::of(tool) as u32) << TOOL_SHIFT;
+            for pipelines in [&self.traverse, &self.traverse_chain, &self.leaves] {
+                pipelines.get(&self.ctx, flags)?;
+            }
+        }
+        Ok(start.elapsed().as_secs_f64() * 1e3)
+    }
+
     /// Buckets of each table (index = item words - 2).
     pub fn buckets(&self) -> Vec<u32> {
         self.tables.iter().map(|t| t.config().buckets).collect()
@@ -2031,6 +2049,19 @@ enum ToolKind {
     Paint = 2,
     Fill = 3,
     Copy = 4,
+}
+
+impl ToolKind {
+    /// The kind of `tool`'s edit passes.
+    fn of(tool: &Tool) -> ToolKind {
+        match tool {
+            Tool::Add { .. } => ToolKind::Add,
+            Tool::Remove { .. } => ToolKind::Remove,
+            Tool::Paint { .. } => ToolKind::Paint,
+            Tool::Fill { .. } => ToolKind::Fill,
+            Tool::Copy(_) => ToolKind::Copy,
+        }
+    }
 }
 
 /// Most entries of a level that `traverse_small_levels` takes (the first level's count is

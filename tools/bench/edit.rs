@@ -116,6 +116,10 @@ struct ReplayRow {
     /// Whole-edit wall time, summed and largest, timed without the profiler.
     edit_ms_total: f64,
     edit_ms_max: f64,
+    /// GPU: making the edit pipelines of the replay's tools, before the timed edits (lavapipe
+    /// compiles one in ~10-30 ms; each would otherwise be made by the first edit with its tool).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pipelines_ms: Option<f64>,
     /// The same replay's wall time with every pass profiled (the run that gives `kernels_ms`):
     /// on lavapipe the timestamps around ~100 passes per edit cost about an edit; None for the
     /// CPU.
@@ -305,6 +309,7 @@ fn run_cpu(
         status: "ok".into(),
         edit_ms_total: times.iter().sum(),
         edit_ms_max: times.iter().cloned().fold(0.0, f64::max),
+        pipelines_ms: None,
         profiled_ms_total: None,
         kernels_ms: BTreeMap::new(),
         temp_svo_bytes_max: 0,
@@ -364,6 +369,7 @@ fn replay_gpu(
         None => GpuHashDag::load(ctx, &config, svdag, None)?,
     };
     let before = live_bytes(&hd.gc(None)?.live_per_table);
+    let pipelines_ms = hd.prepare_tools(&replay.tools)?;
     let mut row = ReplayRow {
         scene: scene.into(),
         resolution: svdag.resolution,
@@ -373,6 +379,7 @@ fn replay_gpu(
         status: "ok".into(),
         edit_ms_total: 0.0,
         edit_ms_max: 0.0,
+        pipelines_ms: Some(pipelines_ms),
         profiled_ms_total: None,
         kernels_ms: GROUPS.iter().map(|g| (*g, 0.0)).collect(),
         temp_svo_bytes_max: 0,

@@ -143,6 +143,19 @@ pub fn tool(
     })
 }
 
+/// One edit of every kind the brush makes (parameters arbitrary): what
+/// `GpuHashDag::prepare_tools` needs to make every edit pipeline the editor can use.
+pub fn one_of_each() -> Vec<Tool> {
+    let copy = CopyState {
+        source: Some([0.0; 3]),
+        quarter_turns: 0,
+    };
+    ToolKind::ALL
+        .iter()
+        .filter_map(|&kind| tool(kind, [0.0; 3], 1.0, 0, &copy))
+        .collect()
+}
+
 /// How much of the shaded colour the preview tint replaces.
 const PREVIEW_STRENGTH: f32 = 0.45;
 

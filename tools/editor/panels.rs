@@ -109,6 +109,7 @@ impl Document {
         let config =
             GpuHashDagConfig::sized_by_load(variant).with_undo_depth(self.dag.undo_depth());
         let dag = GpuHashDag::load_materials(ctx, &config, &svdag, &materials, None)?;
+        dag.prepare_tools(&super::brush::one_of_each())?;
         let scene = renderer.bind_hash_dag(&dag, Some(&self.palette))?;
         // Frames in flight read the old tables and binding.
         ctx.wait_idle()?;
