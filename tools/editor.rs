@@ -496,6 +496,21 @@ struct RootCounts {
     levels: Vec<u64>,
 }
 
+/// `svdag` with `materials` in new tables of `variant` sized by the load, every tool's
+/// pipelines made now rather than in its first stroke (lavapipe: ~20 ms each).
+fn editor_tables(
+    ctx: &Arc<GpuContext>,
+    svdag: &Svdag,
+    materials: &Materials,
+    undo_depth: usize,
+    variant: HashVariant,
+) -> Result<GpuHashDag> {
+    let config = GpuHashDagConfig::sized_by_load(variant).with_undo_depth(undo_depth);
+    let dag = GpuHashDag::load_materials(ctx, &config, svdag, materials, None)?;
+    dag.prepare_tools(&brush::one_of_each())?;
+    Ok(dag)
+}
+
 impl Document {
     /// Loads `svdag` with its `materials` (all 0 without) into a new hash DAG and binds it for
     /// `renderer` with the palette.
@@ -520,11 +535,8 @@ impl Document {
         for (entry, &c) in palette.iter_mut().zip(&materials.palette) {
             *entry = [c as u8, (c >> 8) as u8, (c >> 16) as u8];
         }
-        let config = GpuHashDagConfig::sized_by_load(variant).with_undo_depth(undo_depth);
-        let dag = GpuHashDag::load_materials(ctx, &config, svdag, &materials, None)
+        let dag = editor_tables(ctx, svdag, &materials, undo_depth, variant)
             .with_context(|| format!("loading {} into the GPU hash DAG", path.display()))?;
-        // Every tool's pipelines now, not in its first stroke (lavapipe: ~10-30 ms each).
-        dag.prepare_tools(&brush::one_of_each())?;
         let scene = renderer.bind_hash_dag(&dag, Some(&palette))?;
         Ok(Document {
             scene,

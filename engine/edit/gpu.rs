@@ -533,30 +533,15 @@ impl GpuHashDag {
                 dag.words.len()
             )));
         }
-        // Each level's nodes (their first words), then the items per table they make: an inner
-        // node of c children has 1 + c words, a leaf 2.
-        let level_offsets: Vec<Vec<u32>> = (0..=dag.root_level())
-            .map(|level| {
-                let range = dag.level_range(level);
-                let mut offsets = Vec::new();
-                let mut at = range.start;
-                while at < range.end {
-                    offsets.push(at as u32);
-                    at += if level == 0 {
-                        2
-                    } else {
-                        1 + dag.words[at].count_ones() as usize
-                    };
-                }
-                offsets
-            })
-            .collect();
+        // Items per table: an inner node of c children has 1 + c words, a leaf 2.
         let mut loaded = [0u64; TABLE_COUNT as usize];
-        loaded[0] = level_offsets[0].len() as u64;
-        for &at in level_offsets[1..].iter().flatten() {
-            // An empty scene's root has no child (and is no item).
-            if let Some(table) = (dag.words[at as usize].count_ones() as usize).checked_sub(1) {
-                loaded[table] += 1;
+        loaded[0] = dag.level_range(0).len() as u64 / 2;
+        for level in 1..=dag.root_level() {
+            for at in node_starts(dag, level) {
+                // An empty scene's root has no child (and is no item).
+                if let Some(table) = (dag.words[at].count_ones() as usize).checked_sub(1) {
+                    loaded[table] += 1;
+                }
             }
         }
         let mut hd = GpuHashDag::for_items(ctx, config, dag.root_level(), false, &loaded)?;
@@ -566,13 +551,14 @@ impl GpuHashDag {
             4 * dag.words.len() as u64,
             MemLocation::GpuOnly,
         )?;
-        for (level, offsets) in (0..).zip(&level_offsets) {
+        for level in 0..=dag.root_level() {
             let range = dag.level_range(level);
+            let offsets: Vec<u32> = node_starts(dag, level).map(|at| at as u32).collect();
             let count = offsets.len() as u32;
             if count == 0 {
                 continue;
             }
-            let offset_buf = ctx.upload("hash dag load offsets", offsets)?;
+            let offset_buf = ctx.upload("hash dag load offsets", &offsets)?;
             let input = if level == 0 {
                 None
             } else {
@@ -2134,6 +2120,22 @@ impl ToolPipelines {
         })?;
         Ok(cell.get_or_init(|| pipeline))
     }
+}
+
+/// First word of every node of `level` of `dag` (a leaf has 2 words, an inner node 1 + one per
+/// child).
+fn node_starts(dag: &Svdag, level: u32) -> impl Iterator<Item = usize> + '_ {
+    let range = dag.level_range(level);
+    let mut at = range.start;
+    std::iter::from_fn(move || {
+        let node = (at < range.end).then_some(at)?;
+        at += if level == 0 {
+            2
+        } else {
+            1 + dag.words[at].count_ones() as usize
+        };
+        Some(node)
+    })
 }
 
 /// Workgroups for one invocation per record (grid-stride beyond 65 535 groups).

@@ -10,12 +10,11 @@ use std::sync::Arc;
 
 use anyhow::{anyhow, Result};
 use clap::ValueEnum;
-use voxdag::edit::gpu::{GpuHashDag, GpuHashDagConfig};
 use voxdag::gpu::{GpuContext, Profiler};
 use voxdag::hash::HashVariant;
 use voxdag::render::gpu::GpuRenderer;
 
-use super::{pack_colour, Document, RenderMode, Running};
+use super::{editor_tables, pack_colour, Document, RenderMode, Running};
 use crate::edit::TableArg;
 use crate::view::MOTION_TARGET_MS;
 use crate::window::{MAX_FLY_SPEED, MIN_FLY_SPEED, MIN_SCALE};
@@ -106,10 +105,7 @@ impl Document {
             .take()
             .ok_or_else(|| anyhow!("the editor's hash DAG has no materials"))?;
         let svdag = file.into_svdag(&self.path)?;
-        let config =
-            GpuHashDagConfig::sized_by_load(variant).with_undo_depth(self.dag.undo_depth());
-        let dag = GpuHashDag::load_materials(ctx, &config, &svdag, &materials, None)?;
-        dag.prepare_tools(&super::brush::one_of_each())?;
+        let dag = editor_tables(ctx, &svdag, &materials, self.dag.undo_depth(), variant)?;
         let scene = renderer.bind_hash_dag(&dag, Some(&self.palette))?;
         // Frames in flight read the old tables and binding.
         ctx.wait_idle()?;
