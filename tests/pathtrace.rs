@@ -110,13 +110,37 @@ fn mean_abs_diff(a: &PtImage, b: &PtImage) -> f64 {
         / la.len() as f64
 }
 
-/// Pixels whose first hits (hit, t bits, voxel, normal, colour index) differ.
+/// Pixels whose first hits (hit, t bits, voxel, normal, colour index) differ: for images of
+/// one device.
 fn first_hit_mismatches(a: &PtImage, b: &PtImage) -> usize {
     a.first_hits
         .iter()
         .zip(&b.first_hits)
         .filter(|(x, y)| x != y)
         .count()
+}
+
+/// Pixels whose first hits differ between a GPU and the CPU reference beyond rounding: the hit,
+/// voxel, face or colour differ, or `t` by more than 1e-5 of itself. Vulkan lets a GPU fuse
+/// `a * b + c` and divide within 2.5 ulp, so `t` is bit-exact on lavapipe only (an H200 gave
+/// 62 of 2304 sphere pixels whose `t` differed in its last bits).
+fn first_hits_beyond_rounding(gpu: &PtImage, cpu: &PtImage) -> Vec<String> {
+    let t = |bits: u32| f32::from_bits(bits);
+    gpu.first_hits
+        .iter()
+        .zip(&cpu.first_hits)
+        .enumerate()
+        .filter(|(_, (g, c))| {
+            (g.hit, g.voxel, g.normal, g.color_index) != (c.hit, c.voxel, c.normal, c.color_index)
+                || (t(g.t_bits) - t(c.t_bits)).abs() > 1e-5 * t(c.t_bits).abs()
+        })
+        .map(|(pixel, (g, c))| {
+            format!(
+                "pixel {pixel}: gpu hit {} t {} voxel {:?} normal {:?}, cpu hit {} t {} voxel {:?} normal {:?}",
+                g.hit, t(g.t_bits), g.voxel, g.normal, c.hit, t(c.t_bits), c.voxel, c.normal
+            )
+        })
+        .collect()
 }
 
 /// White furnace: albedo 1 in an environment of 1, no Russian roulette, 64 bounces: every path
@@ -238,10 +262,12 @@ fn tracers_agree() {
             0,
             "{name}: megakernel vs wavefront first hits"
         );
-        let cpu_mismatch = first_hit_mismatches(&r.mega, &r.cpu);
+        let cpu_mismatch = first_hits_beyond_rounding(&r.mega, &r.cpu);
         assert!(
-            cpu_mismatch <= 48 * 48 / 1000,
-            "{name}: {cpu_mismatch} first hits differ GPU vs CPU"
+            cpu_mismatch.len() <= 48 * 48 / 1000,
+            "{name}: {} first hits differ GPU vs CPU, the first: {:#?}",
+            cpu_mismatch.len(),
+            &cpu_mismatch[..cpu_mismatch.len().min(4)]
         );
         let (mw, mc) = (
             mean_abs_diff(&r.mega, &r.wave),
