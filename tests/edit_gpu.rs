@@ -450,8 +450,8 @@ fn random_edits_match_brute_force_with_every_traversal_budget() {
     assert_clean(&ctx);
 }
 
-/// The route of real GPUs (subgroup teams: the dedup table and `mark`) and the single-lane
-/// route (the tables' claim passes) both on lavapipe, whose `Auto` picks single lanes.
+/// The dissertation's route (subgroup teams: the dedup table and `mark`) and the default
+/// single-lane route (the tables' claim passes) give the same scenes.
 #[test]
 fn random_edits_match_brute_force_with_either_team_mode() {
     let ctx = common::gpu();

@@ -57,8 +57,13 @@ fn gpu_edit_saves_the_same_bytes_as_the_cpu_editor_on_the_hashdag_replays() {
         } else {
             vec!["accel8"]
         };
-        for table in tables {
-            let gpu = dir.path().join(format!("{name}.{table}.vdag"));
+        let mut engines: Vec<[&str; 2]> = tables.iter().map(|t| [*t, "single-lane"]).collect();
+        if i == 0 {
+            // The dissertation's subgroup teams give the file of the default single lanes.
+            engines.push(["accel32", "subgroup"]);
+        }
+        for [table, team] in engines {
+            let gpu = dir.path().join(format!("{name}.{table}.{team}.vdag"));
             run(&[
                 "edit",
                 path(&scene),
@@ -70,12 +75,14 @@ fn gpu_edit_saves_the_same_bytes_as_the_cpu_editor_on_the_hashdag_replays() {
                 path(&gpu),
                 "--table",
                 table,
+                "--team",
+                team,
                 "--undo-depth",
                 "2",
             ]);
             assert!(
                 std::fs::read(&gpu).unwrap() == std::fs::read(&cpu).unwrap(),
-                "{name} on {table}: the GPU's file differs from the CPU editor's"
+                "{name} on {table} ({team}): the GPU's file differs from the CPU editor's"
             );
         }
     }
@@ -199,7 +206,14 @@ fn bench_edit(scene: &str, extra: &[&str]) -> (serde_json::Value, String) {
 fn bench_edit_times_unprofiled_and_profiles_a_second_run() {
     let (report, md) = bench_edit(
         "tests/data/teapot.obj",
-        &["--tables", "accel32", "--long-replay", "20"],
+        &[
+            "--tables",
+            "accel32",
+            "--teams",
+            "single-lane,subgroup",
+            "--long-replay",
+            "20",
+        ],
     );
     let rows = report["replays"].as_array().unwrap();
     let cpu_total = |replay: &serde_json::Value| {
@@ -215,13 +229,14 @@ fn bench_edit_times_unprofiled_and_profiles_a_second_run() {
         .iter()
         .filter(|r| r["engine"] != "cpu" && r["status"] == "ok")
         .collect();
-    assert!(gpu.len() >= 2, "{report}");
-    // The long replay: its 20 edits on both engines.
+    assert!(gpu.len() >= 4, "{report}");
+    // The long replay: its 20 edits on the CPU editor and both team modes.
     let long: Vec<_> = rows
         .iter()
         .filter(|r| r["replay"] == "long spheres")
         .collect();
-    assert_eq!(long.len(), 2, "{report}");
+    let engines: Vec<_> = long.iter().map(|r| r["engine"].as_str().unwrap()).collect();
+    assert_eq!(engines, ["cpu", "accel32", "accel32 subgroup"], "{report}");
     assert!(long.iter().all(|r| r["edits"] == 20), "{report}");
     for r in gpu {
         assert!(r["edits"].as_u64().unwrap() > 0, "{r}");

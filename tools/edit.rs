@@ -19,7 +19,7 @@ use voxdag::edit::replay::{Replay, Step};
 use voxdag::edit::tool::Tool;
 use voxdag::edit::walk::{self, StoredDag};
 use voxdag::gpu::{GpuContext, GpuOptions, Profiler};
-use voxdag::hash::HashVariant;
+use voxdag::hash::{HashVariant, TeamMode};
 use voxdag::render::gpu::GpuRenderer;
 use voxdag::render::{Camera, RenderSettings};
 
@@ -51,6 +51,34 @@ impl TableArg {
     }
 }
 
+/// Lanes per item in the GPU hash DAG's table passes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum TeamArg {
+    /// A subgroup per item: the dedup table and `mark`.
+    Subgroup,
+    /// A lane per item: the claim passes and the merge's chain of small levels.
+    #[value(name = "single-lane")]
+    SingleLane,
+}
+
+impl TeamArg {
+    /// The team mode of the tables.
+    pub fn mode(self) -> TeamMode {
+        match self {
+            TeamArg::Subgroup => TeamMode::Subgroup,
+            TeamArg::SingleLane => TeamMode::SingleLane,
+        }
+    }
+
+    /// Name in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            TeamArg::Subgroup => "subgroup",
+            TeamArg::SingleLane => "single-lane",
+        }
+    }
+}
+
 /// Arguments of `voxdag edit`.
 #[derive(Args)]
 pub struct EditArgs {
@@ -78,6 +106,10 @@ pub struct EditArgs {
     /// Slab layout of the GPU hash DAG's tables.
     #[arg(long, value_enum, default_value_t = TableArg::Accel32)]
     table: TableArg,
+    /// Lanes per item in the table passes (single lanes: the faster merge on lavapipe and on
+    /// an H200 alike; subgroup teams: the dissertation's).
+    #[arg(long, value_enum, default_value_t = TeamArg::SingleLane)]
+    team: TeamArg,
     /// Print the GPU profile (per-pass times) at the end; the report gets per-edit kernel times.
     #[arg(long)]
     profile: bool,
@@ -123,6 +155,9 @@ struct EditReport {
     /// GPU table layout (GPU only).
     #[serde(skip_serializing_if = "Option::is_none")]
     table: Option<&'static str>,
+    /// Lanes per item of the table passes, as asked (GPU only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    team: Option<&'static str>,
     threads: usize,
     undo_depth: usize,
     load_ms: f64,
@@ -226,6 +261,7 @@ pub fn edit(args: &EditArgs) -> Result<()> {
         replay_depth,
         editor: if args.cpu { "cpu" } else { "gpu" },
         table: (!args.cpu).then(|| args.table.variant().name()),
+        team: (!args.cpu).then(|| args.team.name()),
         threads: rayon::current_num_threads(),
         undo_depth: args.undo_depth,
         load_ms: 0.0,
@@ -392,8 +428,10 @@ fn edit_gpu(
     } else {
         None
     };
-    let config =
-        GpuHashDagConfig::sized_by_load(args.table.variant()).with_undo_depth(args.undo_depth);
+    let config = GpuHashDagConfig {
+        team: args.team.mode(),
+        ..GpuHashDagConfig::sized_by_load(args.table.variant()).with_undo_depth(args.undo_depth)
+    };
     let start = Instant::now();
     let mut hd = match &materials {
         Some(m) => GpuHashDag::load_materials(&ctx, &config, &svdag, m, profiler.as_mut())?,

@@ -151,9 +151,11 @@ pub struct GpuHashDagConfig {
     /// (`GpuHashDag::traverse`); beyond, the count of the last level is read back first.
     /// 0: one level per submission with exact capacities (the path a wrong bound falls back to).
     pub traversal_budget: u64,
-    /// Lanes per item of the table passes: `Auto` picks single lanes on CPU devices (whose
-    /// merge uses the tables' claim passes) and subgroups elsewhere (the dedup table and
-    /// `mark`); tests force either.
+    /// Lanes per item of the table passes. The default is single lanes on every device: their
+    /// merge (the tables' claim passes, the small levels chained in one dispatch) took 3 submits
+    /// and 25 passes per edit on bunny 8192^3 against 18 and 250 for subgroup teams (the dedup
+    /// table and `mark`), and edited 3-4x faster on an H200 as on lavapipe (docs/editing-gpu.md,
+    /// "Single lanes on GPUs too"). `Auto` keeps the tables' own choice (subgroups on GPUs).
     pub team: TeamMode,
     /// `build_items` reads the level below and its input through word views (texel fetches,
     /// which lavapipe gathers for all SIMD lanes) where every buffer fits in one
@@ -223,7 +225,7 @@ impl GpuHashDagConfig {
             undo_depth: gpu_gc::DEFAULT_UNDO_DEPTH,
             auto_gc_threshold: Some(gpu_gc::DEFAULT_AUTO_GC_THRESHOLD),
             traversal_budget: TRAVERSAL_BUDGET,
-            team: TeamMode::Auto,
+            team: TeamMode::SingleLane,
             word_views: true,
         }
     }

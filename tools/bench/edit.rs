@@ -22,7 +22,7 @@ use voxdag::scene::{self, morton, ImportOptions};
 
 use super::{scene_path, write_outputs};
 use crate::commands::quantize_materials;
-use crate::edit::{tool_name, TableArg};
+use crate::edit::{tool_name, TableArg, TeamArg};
 
 /// Arguments of `voxdag bench edit`.
 #[derive(Args)]
@@ -41,6 +41,10 @@ pub struct BenchEditArgs {
         default_value = "atomic64,ticket_board,accel32,accel8"
     )]
     tables: Vec<TableArg>,
+    /// Lanes per item in the table passes, each a row per table layout (the default single
+    /// lanes; `subgroup,single-lane` compares both in one run).
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "single-lane")]
+    teams: Vec<TeamArg>,
     /// Edits of the long sphere replay (radius 128..512 at 8192, scaled with the resolution,
     /// at spread surface points, added and removed in turn): the rate once every pipeline is
     /// made, which the short replays' first edits hide; 0 skips it.
@@ -327,10 +331,10 @@ fn run_gpu(
     scene: &str,
     svdag: &Svdag,
     materials: Option<&Materials>,
-    table: TableArg,
+    engine: GpuEngine,
     replay: &Replay,
 ) -> Result<ReplayRow> {
-    let mut row = replay_gpu(ctx, scene, svdag, materials, table, replay, None)?;
+    let mut row = replay_gpu(ctx, scene, svdag, materials, engine, replay, None)?;
     if row.status != "ok" {
         return Ok(row);
     }
@@ -340,7 +344,7 @@ fn run_gpu(
         scene,
         svdag,
         materials,
-        table,
+        engine,
         replay,
         Some(&mut profiler),
     )?;
@@ -352,6 +356,24 @@ fn run_gpu(
     Ok(row)
 }
 
+/// A GPU row's configuration: the table layout and the lanes per item.
+#[derive(Clone, Copy)]
+struct GpuEngine {
+    table: TableArg,
+    team: TeamArg,
+}
+
+impl GpuEngine {
+    /// The row's engine column: the layout, and subgroup teams where they replace the
+    /// default single lanes.
+    fn name(self) -> String {
+        match self.team {
+            TeamArg::SingleLane => self.table.variant().name().into(),
+            TeamArg::Subgroup => format!("{} subgroup", self.table.variant().name()),
+        }
+    }
+}
+
 /// One run of `replay` on a fresh GPU hash DAG, profiled when `profiler` is given (else the
 /// kernel groups stay 0 and the pass count is 0).
 fn replay_gpu(
@@ -359,11 +381,14 @@ fn replay_gpu(
     scene: &str,
     svdag: &Svdag,
     materials: Option<&Materials>,
-    table: TableArg,
+    engine: GpuEngine,
     replay: &Replay,
     mut profiler: Option<&mut Profiler>,
 ) -> Result<ReplayRow> {
-    let config = GpuHashDagConfig::sized_by_load(table.variant());
+    let config = GpuHashDagConfig {
+        team: engine.team.mode(),
+        ..GpuHashDagConfig::sized_by_load(engine.table.variant())
+    };
     let mut hd = match materials {
         Some(m) => GpuHashDag::load_materials(ctx, &config, svdag, m, None)?,
         None => GpuHashDag::load(ctx, &config, svdag, None)?,
@@ -374,7 +399,7 @@ fn replay_gpu(
         scene: scene.into(),
         resolution: svdag.resolution,
         replay: replay.name.into(),
-        engine: table.variant().name().into(),
+        engine: engine.name(),
         edits: 0,
         status: "ok".into(),
         edit_ms_total: 0.0,
@@ -533,9 +558,14 @@ pub fn bench_edit(args: &BenchEditArgs) -> Result<()> {
             let cpu = run_cpu(name, &svdag, materials.as_ref(), &replay)?;
             let cpu_ms = cpu.edit_ms_total;
             report.replays.push(cpu);
-            for &table in &args.tables {
-                eprintln!("  {} on {}", replay.name, table.variant().name());
-                let mut row = run_gpu(&ctx, name, &svdag, materials.as_ref(), table, &replay)?;
+            let engines = args.teams.iter().flat_map(|&team| {
+                args.tables
+                    .iter()
+                    .map(move |&table| GpuEngine { table, team })
+            });
+            for engine in engines {
+                eprintln!("  {} on {}", replay.name, engine.name());
+                let mut row = run_gpu(&ctx, name, &svdag, materials.as_ref(), engine, &replay)?;
                 if row.status == "ok" {
                     row.vs_cpu = Some(row.edit_ms_total / cpu_ms.max(1e-9));
                 }
