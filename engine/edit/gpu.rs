@@ -154,8 +154,9 @@ pub struct GpuHashDagConfig {
     /// Lanes per item of the table passes. The default is single lanes on every device: their
     /// merge (the tables' claim passes, the small levels chained in one dispatch) took 3 submits
     /// and 25 passes per edit on bunny 8192^3 against 18 and 250 for subgroup teams (the dedup
-    /// table and `mark`), and edited 3-4x faster on an H200 as on lavapipe (docs/editing-gpu.md,
-    /// "Single lanes on GPUs too"). `Auto` keeps the tables' own choice (subgroups on GPUs).
+    /// table and `mark`), and edited 1.7-4.5x faster on an H200, as it already did on lavapipe
+    /// (docs/editing-gpu.md, "Single lanes on GPUs too"). `Auto` keeps the tables' own choice
+    /// (subgroups on GPUs).
     pub team: TeamMode,
     /// `build_items` reads the level below and its input through word views (texel fetches,
     /// which lavapipe gathers for all SIMD lanes) where every buffer fits in one

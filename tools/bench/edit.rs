@@ -187,6 +187,20 @@ fn surface_points(codes: &[u64], count: usize) -> Vec<[f32; 3]> {
         .collect()
 }
 
+/// The dabs of a paint stroke dragged over the surface: every `step`-th voxel in Morton order
+/// from a third into the scene. Each dab is centred on a voxel of the surface and Morton order
+/// keeps most of the next dabs a few voxels on, so every dab paints voxels (a straight line
+/// between two surface points crosses empty space: session 50).
+fn stroke_points(codes: &[u64], count: usize, step: usize) -> Vec<[f32; 3]> {
+    let start = codes.len() / 3;
+    (0..count)
+        .map(|k| {
+            let c = codes[(start + k * step) % codes.len()];
+            morton::decode(c).map(|v| v as f32 + 0.5)
+        })
+        .collect()
+}
+
 /// A sphere of material 0 added (`add`) or removed.
 fn sphere(center: [f32; 3], radius: f32, add: bool) -> Tool {
     if add {
@@ -250,18 +264,18 @@ fn replays(codes: &[u64], resolution: u32, long: usize, palette: Option<u32>) ->
         },
     ];
     if let Some(palette) = palette {
-        let paint = (0..16)
-            .map(|k| {
-                let t = k as f32 / 15.0;
-                Tool::Paint {
-                    center: [0, 1, 2].map(|a| p[30][a] + t * (p[31][a] - p[30][a])),
-                    radius: (32.0 * scale).max(2.0),
-                    material: if palette > 1 {
-                        1 + (k as u32 % (palette - 1)) as u8
-                    } else {
-                        0
-                    },
-                }
+        let radius = (32.0 * scale).max(2.0);
+        // Dabs about half a radius apart: a patch of surface that wide holds ~(r / 2)^2 voxels.
+        let step = ((radius / 2.0) as usize).pow(2).max(1);
+        let paint = stroke_points(codes, 16, step)
+            .into_iter()
+            .enumerate()
+            .map(|(k, center)| Tool::Paint {
+                center,
+                radius,
+                // Every material in turn: each dab repaints what the one before it painted
+                // (with one material to paint, a stroke over voxels of it changes nothing).
+                material: (k as u32 % palette) as u8,
             })
             .collect();
         out.push(Replay {
