@@ -414,10 +414,26 @@ fn large_edit_fuses_the_small_levels_and_dispatches_the_large_ones() {
             let chained = per_level.iter().rposition(|&n| n > 128).unwrap() + 1;
             let own = per_level[..chained].iter().filter(|&&n| n > 0).count();
             assert_eq!(calls("edit merge small levels"), 1, "{per_level:?}");
-            // The traversal's first level only in the dispatch of its small levels.
+            // The traversal's first level only in the dispatch of its small levels, and the
+            // inner levels below it there too while the tool's bounds (at most 8x the level
+            // above) keep them within the chain's 128 entries: no dispatch of their own.
             let inner = per_level.iter().skip(1).filter(|&&n| n > 0).count();
+            let bounds = voxdag::edit::gpu::traversal_bounds(center, radius, hd.root_level());
+            let top = per_level.len() - 1;
+            let mut cap = 1;
+            let surely_chained = (1..top)
+                .rev()
+                .take_while(|&l| {
+                    cap = bounds[l].min(8 * cap);
+                    cap <= 128
+                })
+                .count();
             assert_eq!(calls("edit traverse small levels"), 1, "{per_level:?}");
-            assert_eq!(calls("edit traverse"), inner - 1, "{per_level:?}");
+            assert_eq!(
+                calls("edit traverse"),
+                inner - 1 - surely_chained,
+                "{per_level:?} {bounds:?}"
+            );
             assert_eq!(calls("edit build items"), own, "{per_level:?}");
         }
         grid.apply(&tool);
@@ -759,17 +775,21 @@ fn profiled_edit_names_its_passes() {
     assert!(report.items.iter().sum::<u32>() > 0);
     if profiler.is_available() {
         let names: Vec<&str> = profiler.passes().iter().map(|p| p.name.as_str()).collect();
-        // Every level of this small scene is small: one dispatch traverses the inner levels
-        // (their own dispatches recorded with zero workgroups), one merges them all.
+        // Every level of this small scene is small, and the tool's bounds say so before the
+        // edit: one dispatch traverses the inner levels (no dispatch of their own), one merges
+        // them all.
         for pass in [
             "edit traverse small levels",
-            "edit traverse",
             "edit leaves",
             "edit merge small levels",
         ] {
             assert!(names.contains(&pass), "{pass} missing from {names:?}");
         }
-        for pass in ["edit build items", "hash search, claim and insert"] {
+        for pass in [
+            "edit traverse",
+            "edit build items",
+            "hash search, claim and insert",
+        ] {
             assert!(!names.contains(&pass), "{pass} in {names:?}");
         }
     }

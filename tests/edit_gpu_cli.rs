@@ -134,7 +134,7 @@ fn gpu_edit_report_profile_trace_and_render() {
     assert!(edits[0]["kernels_ms"]
         .as_object()
         .unwrap()
-        .contains_key("edit traverse"));
+        .contains_key("edit traverse small levels"));
     // Per edit the temporary SVO's entries and items per level (5 levels at 64^3), no more
     // items than entries; the first sphere builds leaves.
     for edit in edits {

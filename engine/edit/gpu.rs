@@ -1063,8 +1063,19 @@ impl GpuHashDag {
                 cmd.end_pass(profiler);
                 cmd.barrier();
             }
+            // The chain surely takes the inner levels whose capacity (the tool's bound) is
+            // within its limit, up to the first that is not: their own dispatches, which would
+            // find zero workgroups, are left out (on lavapipe each still costs its barrier).
+            let surely_chained = match chained {
+                true => segment
+                    .iter()
+                    .skip(1)
+                    .take_while(|&&(l, cap)| l > 0 && cap <= TRAVERSE_CHAIN_ENTRIES as u64)
+                    .count(),
+                false => 0,
+            };
             for (k, (&(l, _), push)) in segment.iter().zip(&pushes).enumerate() {
-                if chained && k == 0 {
+                if chained && k <= surely_chained {
                     continue;
                 }
                 let (pipeline, name) = match l {
