@@ -757,6 +757,48 @@ fn a_merge_that_runs_a_pool_out_reserves_again_for_what_it_built() {
     assert_clean(&ctx);
 }
 
+/// Pipelines made after the load (`prepare_tools` for the tools, `prepare_gc` for the
+/// collection) leave none to make in the edits and the collection that follow: no first stroke
+/// or first automatic GC stalls on compiles (lavapipe: ~20 ms each).
+#[test]
+fn prepared_pipelines_leave_none_to_the_edits_and_the_gc() {
+    let ctx = common::gpu();
+    let dag = Svdag::from_voxels(&synthetic(64, 5)).unwrap();
+    let config = GpuHashDagConfig::new(HashVariant::TicketBoard, 1024);
+    let mut hd = GpuHashDag::load(&ctx, &config, &dag, None).unwrap();
+    let tools = [
+        shaped(Shape::Sphere, [30.0, 30.0, 30.0], 12.0, false),
+        shaped(Shape::Cube, [20.0, 40.0, 30.0], 6.0, true),
+        Tool::Fill {
+            center: [32.0, 32.0, 32.0],
+            radius: 10.0,
+            material: 0,
+        },
+        Tool::Copy(CopyParams {
+            source: [16.0, 16.0, 16.0],
+            dest: [44.0, 40.0, 20.0],
+            center: [16.0, 16.0, 16.0],
+            radius: 8.0,
+            transform: None,
+        }),
+    ];
+    hd.prepare_tools(&tools).unwrap();
+    hd.prepare_gc().unwrap();
+    let made = ctx.pipelines_created();
+    assert!(made > 0);
+    for tool in &tools {
+        hd.edit(tool, None).unwrap();
+    }
+    hd.gc(None).unwrap();
+    assert_eq!(
+        ctx.pipelines_created(),
+        made,
+        "pipelines made by the edits or the GC"
+    );
+    drop(hd);
+    assert_clean(&ctx);
+}
+
 #[test]
 fn profiled_edit_names_its_passes() {
     let ctx = common::gpu();

@@ -161,8 +161,9 @@ struct EditReport {
     threads: usize,
     undo_depth: usize,
     load_ms: f64,
-    /// GPU only: making the edit pipelines of the replay's tools, after the load and before
-    /// the first edit (each is otherwise made by the first edit with its tool).
+    /// GPU only: making the edit pipelines of the replay's tools and the collection's, after
+    /// the load and before the first edit (each is otherwise made by the first edit with its
+    /// tool, and the collection's by the first GC).
     #[serde(skip_serializing_if = "Option::is_none")]
     pipelines_ms: Option<f64>,
     edits: Vec<EditTime>,
@@ -443,7 +444,7 @@ fn edit_gpu(
         Step::Edit(tool) => Some(tool),
         _ => None,
     });
-    report.pipelines_ms = Some(hd.prepare_tools(tools)?);
+    report.pipelines_ms = Some(hd.prepare_tools(tools)? + hd.prepare_gc()?);
     for (line, step) in steps {
         match step {
             Step::Edit(tool) => {

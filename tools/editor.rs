@@ -497,7 +497,8 @@ struct RootCounts {
 }
 
 /// `svdag` with `materials` in new tables of `variant` sized by the load, every tool's
-/// pipelines made now rather than in its first stroke (lavapipe: ~20 ms each).
+/// pipelines made now rather than in its first stroke (lavapipe: ~20 ms each), and the
+/// collection's rather than in the first automatic GC.
 fn editor_tables(
     ctx: &Arc<GpuContext>,
     svdag: &Svdag,
@@ -506,8 +507,9 @@ fn editor_tables(
     variant: HashVariant,
 ) -> Result<GpuHashDag> {
     let config = GpuHashDagConfig::sized_by_load(variant).with_undo_depth(undo_depth);
-    let dag = GpuHashDag::load_materials(ctx, &config, svdag, materials, None)?;
+    let mut dag = GpuHashDag::load_materials(ctx, &config, svdag, materials, None)?;
     dag.prepare_tools(&brush::one_of_each())?;
+    dag.prepare_gc()?;
     Ok(dag)
 }
 

@@ -286,6 +286,7 @@ pub struct GpuContext {
     readback_ring: Mutex<Ring>,
     submissions: AtomicU64,
     host_waits: AtomicU64,
+    pipelines_created: AtomicU64,
     /// Highest value the host has waited for (host waits count values beyond it).
     waited: AtomicU64,
 }
@@ -723,6 +724,7 @@ impl GpuContext {
             readback_ring: Mutex::new(readback_ring),
             submissions: AtomicU64::new(0),
             host_waits: AtomicU64::new(0),
+            pipelines_created: AtomicU64::new(0),
             waited: AtomicU64::new(0),
             presentation,
             physical,
@@ -899,6 +901,17 @@ impl GpuContext {
             submissions: self.submissions.load(Ordering::Relaxed),
             host_waits: self.host_waits.load(Ordering::Relaxed),
         }
+    }
+
+    /// Compute pipelines created so far: what work made at its first use instead of before
+    /// shows up here (lavapipe compiles each for ~20 ms).
+    pub fn pipelines_created(&self) -> u64 {
+        self.pipelines_created.load(Ordering::Relaxed)
+    }
+
+    /// Counts a created compute pipeline.
+    pub(crate) fn count_pipeline(&self) {
+        self.pipelines_created.fetch_add(1, Ordering::Relaxed);
     }
 
     /// The timeline semaphore submissions signal.

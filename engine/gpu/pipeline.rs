@@ -207,6 +207,7 @@ impl GpuContext {
                     return Err(vk_err("vkCreateComputePipelines")(e));
                 }
             };
+            self.count_pipeline();
             self.set_name(raw, name);
             self.set_name(layout, &format!("{name} (layout)"));
             if let Some(s) = set_layout {
