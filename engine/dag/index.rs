@@ -21,21 +21,14 @@ impl VoxelIndex {
         for p in (leaf_start..dag.words.len()).step_by(2) {
             node_voxels[p] = (dag.words[p].count_ones() + dag.words[p + 1].count_ones()) as u64;
         }
-        // Inner levels, bottom-up; level l occupies [level_starts[l], level_starts[l - 1]).
-        for l in 1..dag.level_starts.len() {
-            let (start, end) = (
-                dag.level_starts[l] as usize,
-                dag.level_starts[l - 1] as usize,
-            );
-            let mut p = start;
-            while p < end {
+        // Inner levels, bottom-up.
+        for l in 1..dag.level_starts.len() as u32 {
+            for p in dag.node_starts(l) {
                 let children = dag.words[p].count_ones() as usize;
-                let sum = dag.words[p + 1..p + 1 + children]
+                node_voxels[p] = dag.words[p + 1..p + 1 + children]
                     .iter()
                     .map(|&c| node_voxels[c as usize])
                     .sum();
-                node_voxels[p] = sum;
-                p += 1 + children;
             }
         }
         VoxelIndex { node_voxels }

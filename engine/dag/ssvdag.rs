@@ -244,11 +244,9 @@ impl Ssvdag {
             let range = dag.level_range(l);
             let mut index = vec![0u32; range.len()];
             let mut offsets: Vec<usize> = Vec::new();
-            let mut p = range.start;
-            while p < range.end {
+            for p in dag.node_starts(l) {
                 index[p - range.start] = offsets.len() as u32;
                 offsets.push(p);
-                p += 1 + dag.words[p].count_ones() as usize;
             }
             let below = levels.last().expect("level 0 exists");
             let node_children = |i: usize| {

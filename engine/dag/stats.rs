@@ -76,6 +76,22 @@ impl Svdag {
         start..end
     }
 
+    /// First word of every node of level `level`, in order (a leaf has 2 words, an inner node
+    /// its child mask and one word per child).
+    pub fn node_starts(&self, level: u32) -> impl Iterator<Item = usize> + '_ {
+        let range = self.level_range(level);
+        let mut at = range.start;
+        std::iter::from_fn(move || {
+            let node = (at < range.end).then_some(at)?;
+            at += if level == 0 {
+                2
+            } else {
+                1 + self.words[at].count_ones() as usize
+            };
+            Some(node)
+        })
+    }
+
     /// Propagates path counts from the root down and accumulates per-level figures.
     fn path_counts(&self) -> PathCounts {
         let root_level = self.root_level();

@@ -540,7 +540,7 @@ impl GpuHashDag {
         let mut loaded = [0u64; TABLE_COUNT as usize];
         loaded[0] = dag.level_range(0).len() as u64 / 2;
         for level in 1..=dag.root_level() {
-            for at in node_starts(dag, level) {
+            for at in dag.node_starts(level) {
                 // An empty scene's root has no child (and is no item).
                 if let Some(table) = (dag.words[at].count_ones() as usize).checked_sub(1) {
                     loaded[table] += 1;
@@ -556,7 +556,7 @@ impl GpuHashDag {
         )?;
         for level in 0..=dag.root_level() {
             let range = dag.level_range(level);
-            let offsets: Vec<u32> = node_starts(dag, level).map(|at| at as u32).collect();
+            let offsets: Vec<u32> = dag.node_starts(level).map(|at| at as u32).collect();
             let count = offsets.len() as u32;
             if count == 0 {
                 continue;
@@ -2134,22 +2134,6 @@ impl ToolPipelines {
         })?;
         Ok(cell.get_or_init(|| pipeline))
     }
-}
-
-/// First word of every node of `level` of `dag` (a leaf has 2 words, an inner node 1 + one per
-/// child).
-fn node_starts(dag: &Svdag, level: u32) -> impl Iterator<Item = usize> + '_ {
-    let range = dag.level_range(level);
-    let mut at = range.start;
-    std::iter::from_fn(move || {
-        let node = (at < range.end).then_some(at)?;
-        at += if level == 0 {
-            2
-        } else {
-            1 + dag.words[at].count_ones() as usize
-        };
-        Some(node)
-    })
 }
 
 /// Workgroups for one invocation per record (grid-stride beyond 65 535 groups).
