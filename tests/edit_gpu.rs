@@ -786,6 +786,8 @@ fn prepared_pipelines_leave_none_to_the_edits_and_the_gc() {
     hd.prepare_gc().unwrap();
     let made = ctx.pipelines_created();
     assert!(made > 0);
+    // Warmed too: no pipeline's first dispatch (llvmpipe's native compile) is left to them.
+    let first = ctx.first_dispatches();
     for tool in &tools {
         hd.edit(tool, None).unwrap();
     }
@@ -794,6 +796,11 @@ fn prepared_pipelines_leave_none_to_the_edits_and_the_gc() {
         ctx.pipelines_created(),
         made,
         "pipelines made by the edits or the GC"
+    );
+    assert_eq!(
+        ctx.first_dispatches(),
+        first,
+        "pipelines first dispatched by the edits or the GC"
     );
     drop(hd);
     assert_clean(&ctx);

@@ -610,21 +610,50 @@ impl GpuHashDag {
         Ok(hd)
     }
 
-    /// Makes the traversal and leaves pipelines of every tool in `tools` now, which the first
-    /// edit with each tool otherwise makes (`ToolPipelines`): lavapipe compiles one in ~10-30 ms,
-    /// a stall an editor's first stroke or a timed replay should not take. Returns the
-    /// milliseconds it took (0 when every pipeline was made already).
+    /// Makes the pipelines of the edits with every tool in `tools` ready now, which the first
+    /// edit with each tool otherwise does: the traversal and leaves pipelines are made
+    /// (`ToolPipelines`: lavapipe builds one in ~10-30 ms), and every pipeline the recorded
+    /// edit runs is warmed ([`Commands::warm`]: llvmpipe compiles a pipeline's native code at
+    /// its first dispatch, or loads it from Mesa's disk cache in ~0.5-1 ms; without a cache,
+    /// ~1.3 s for a paint edit's). Stalls an editor's first stroke or a timed replay should not
+    /// take. Returns the milliseconds it took.
     pub fn prepare_tools<'a>(
         &self,
         tools: impl IntoIterator<Item = &'a Tool>,
     ) -> Result<f64, GpuDagError> {
         let start = std::time::Instant::now();
+        let ctx = &self.ctx;
+        let mut kinds = Vec::new();
         for tool in tools {
             let flags = (ToolKind::of(tool) as u32) << TOOL_SHIFT;
             for pipelines in [&self.traverse, &self.traverse_chain, &self.leaves] {
-                pipelines.get(&self.ctx, flags)?;
+                pipelines.get(ctx, flags)?;
+            }
+            if !kinds.contains(&flags) {
+                kinds.push(flags);
             }
         }
+        let mut cmd = ctx.begin_commands("edit warm pipelines")?;
+        for &flags in &kinds {
+            for pipelines in [&self.traverse, &self.traverse_chain, &self.leaves] {
+                cmd.warm(pipelines.get(ctx, flags)?, &[])?;
+            }
+            if flags == (ToolKind::Fill as u32) << TOOL_SHIFT {
+                cmd.warm(&self.fill_init, &[])?;
+                cmd.warm(&self.fill_flood, &[])?;
+            }
+        }
+        if !kinds.is_empty() {
+            self.build_items.warm(&mut cmd)?;
+            cmd.warm(&self.resolve, &[])?;
+            for pipeline in self.mixed.iter().flat_map(|m| m.pipelines()) {
+                cmd.warm(pipeline, &[])?;
+            }
+            if let Some(small) = &self.small_levels {
+                cmd.warm(small.pipeline(), &[])?;
+            }
+        }
+        cmd.submit()?;
         Ok(start.elapsed().as_secs_f64() * 1e3)
     }
 

@@ -194,9 +194,10 @@ impl GpuHashDag {
         Ok(freed)
     }
 
-    /// Makes the collection's pipelines (the trace, each table's mark and sweep) unless made:
-    /// the first [`GpuHashDag::gc`] does it otherwise, a stall in the middle of editing (~65 ms
-    /// on lavapipe for nine tables). Returns the milliseconds it took.
+    /// Makes the collection's pipelines (the trace, each table's mark and sweep) unless made,
+    /// and warms them ([`crate::gpu::Commands::warm`]): the first [`GpuHashDag::gc`] does it
+    /// otherwise, a stall in the middle of editing (~65 ms on lavapipe for nine tables, plus
+    /// their native compiles at the first dispatch). Returns the milliseconds it took.
     pub fn prepare_gc(&mut self) -> Result<f64, GpuDagError> {
         let start = Instant::now();
         let ctx = Arc::clone(&self.ctx);
@@ -216,6 +217,15 @@ impl GpuHashDag {
                 .map(|t| GpuGarbageCollector::new(&ctx, t))
                 .collect::<Result<_, _>>()?;
         }
+        // Compiled now rather than at their first dispatch (llvmpipe; `Commands::warm`).
+        let mut cmd = ctx.begin_commands("edit gc warm pipelines")?;
+        cmd.warm(self.gc_state.trace.as_ref().expect("made above"), &[])?;
+        for collector in &self.gc_state.collectors {
+            for pipeline in collector.pipelines() {
+                cmd.warm(pipeline, &[])?;
+            }
+        }
+        cmd.submit()?;
         Ok(start.elapsed().as_secs_f64() * 1e3)
     }
 

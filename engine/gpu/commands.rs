@@ -338,19 +338,57 @@ impl<'a> Commands<'a> {
         push_constants: &[u8],
         bound: &[Bound<'_>],
     ) -> Result<(), GpuError> {
+        let max = self.ctx.info().max_compute_workgroup_count;
+        if groups.iter().zip(max).any(|(&g, m)| g > m) {
+            return Err(GpuError::InvalidArgument(format!(
+                "pipeline '{}': {groups:?} workgroups exceed the device limit {max:?}",
+                pipeline.name()
+            )));
+        }
+        self.bind(pipeline, push_constants, bound)?;
+        if groups.iter().all(|&g| g > 0) {
+            self.ctx.note_dispatch(pipeline);
+            // SAFETY: recording into our command buffer; the pipeline is bound.
+            unsafe {
+                (self.ctx.device).cmd_dispatch(self.raw, groups[0], groups[1], groups[2]);
+            }
+        }
+        Ok(())
+    }
+
+    /// Records a dispatch of zero workgroups of `pipeline` (push constants zero, `bound` as
+    /// [`Commands::dispatch`] takes it): it runs nothing, but a driver that compiles a
+    /// pipeline's native code at its first dispatch rather than at its creation (lavapipe's
+    /// llvmpipe) compiles it here, so that work whose first pass must not stall can make its
+    /// pipelines ready ahead (`GpuHashDag::prepare_tools`, [`GpuContext::first_dispatches`]).
+    pub fn warm(
+        &mut self,
+        pipeline: &'a ComputePipeline,
+        bound: &[Bound<'_>],
+    ) -> Result<(), GpuError> {
+        let zeros = vec![0u8; pipeline.push_constant_size as usize];
+        self.bind(pipeline, &zeros, bound)?;
+        self.ctx.note_dispatch(pipeline);
+        // SAFETY: recording into our command buffer; the pipeline is bound. Zero workgroups
+        // are a valid dispatch that runs no invocation.
+        unsafe { (self.ctx.device).cmd_dispatch(self.raw, 0, 0, 0) };
+        Ok(())
+    }
+
+    /// Binds `pipeline`, its descriptor set (`bound`) and push constants (all checked) for the
+    /// dispatch that follows.
+    fn bind(
+        &mut self,
+        pipeline: &'a ComputePipeline,
+        push_constants: &[u8],
+        bound: &[Bound<'_>],
+    ) -> Result<(), GpuError> {
         if push_constants.len() as u32 != pipeline.push_constant_size {
             return Err(GpuError::InvalidArgument(format!(
                 "pipeline '{}' expects {} push-constant bytes, got {}",
                 pipeline.name(),
                 pipeline.push_constant_size,
                 push_constants.len()
-            )));
-        }
-        let max = self.ctx.info().max_compute_workgroup_count;
-        if groups.iter().zip(max).any(|(&g, m)| g > m) {
-            return Err(GpuError::InvalidArgument(format!(
-                "pipeline '{}': {groups:?} workgroups exceed the device limit {max:?}",
-                pipeline.name()
             )));
         }
         if !bound
@@ -393,9 +431,6 @@ impl<'a> Commands<'a> {
                     push_constants,
                 );
             }
-            if groups.iter().all(|&g| g > 0) {
-                device.cmd_dispatch(self.raw, groups[0], groups[1], groups[2]);
-            }
         }
         Ok(())
     }
@@ -423,9 +458,8 @@ impl<'a> Commands<'a> {
                 args.size()
             )));
         }
-        // Zero workgroups: binds the pipeline, descriptor set and push constants (all checked)
-        // without dispatching.
-        self.dispatch(pipeline, [0, 0, 0], push_constants, bound)?;
+        self.bind(pipeline, push_constants, bound)?;
+        self.ctx.note_dispatch(pipeline);
         let barrier = vk::MemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::SHADER_WRITE | vk::AccessFlags::TRANSFER_WRITE)
             .dst_access_mask(vk::AccessFlags::INDIRECT_COMMAND_READ);

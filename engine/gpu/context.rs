@@ -13,7 +13,7 @@ use gpu_allocator::{AllocationSizes, AllocatorDebugSettings, MemoryLocation};
 
 use super::release::{FreeBuffers, Garbage, KeptBuffer, Recorder};
 use super::ring::{Ring, RingAlloc, RingKind};
-use super::{vk_err, GpuError, MemLocation};
+use super::{vk_err, ComputePipeline, GpuError, MemLocation};
 
 /// Bytes of each staging ring (upload and readback).
 const RING_BYTES: u64 = 4 << 20;
@@ -287,6 +287,7 @@ pub struct GpuContext {
     submissions: AtomicU64,
     host_waits: AtomicU64,
     pipelines_created: AtomicU64,
+    first_dispatches: AtomicU64,
     /// Highest value the host has waited for (host waits count values beyond it).
     waited: AtomicU64,
 }
@@ -725,6 +726,7 @@ impl GpuContext {
             submissions: AtomicU64::new(0),
             host_waits: AtomicU64::new(0),
             pipelines_created: AtomicU64::new(0),
+            first_dispatches: AtomicU64::new(0),
             waited: AtomicU64::new(0),
             presentation,
             physical,
@@ -912,6 +914,23 @@ impl GpuContext {
     /// Counts a created compute pipeline.
     pub(crate) fn count_pipeline(&self) {
         self.pipelines_created.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// Recorded dispatches that were their pipeline's first (warm-ups of
+    /// [`crate::gpu::Commands::warm`] included). A driver may compile a pipeline's native code
+    /// there rather than at its creation: lavapipe's llvmpipe does (a pipeline keeps its NIR,
+    /// the first dispatch compiles it, or loads it from Mesa's disk cache in ~0.5-1 ms), so
+    /// what work makes ready before it runs shows up here as well as in
+    /// [`GpuContext::pipelines_created`].
+    pub fn first_dispatches(&self) -> u64 {
+        self.first_dispatches.load(Ordering::Relaxed)
+    }
+
+    /// Counts a dispatch of `pipeline` if it is its first.
+    pub(crate) fn note_dispatch(&self, pipeline: &ComputePipeline) {
+        if pipeline.note_dispatch() {
+            self.first_dispatches.fetch_add(1, Ordering::Relaxed);
+        }
     }
 
     /// The timeline semaphore submissions signal.

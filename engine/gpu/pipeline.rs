@@ -1,5 +1,6 @@
 //! Compute pipelines from embedded SPIR-V, with specialization and push constants.
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use ash::vk;
@@ -55,6 +56,9 @@ pub struct ComputePipeline {
     pub(crate) set_layout: Option<vk::DescriptorSetLayout>,
     pub(crate) push_constant_size: u32,
     pub(crate) bindings: Vec<BindingKind>,
+    /// Whether a dispatch of it was recorded: a driver may compile the native code at the first
+    /// one ([`GpuContext::first_dispatches`]).
+    dispatched: AtomicBool,
     name: String,
     ctx: Arc<GpuContext>,
 }
@@ -76,6 +80,11 @@ impl ComputePipeline {
     /// What the pipeline binds at set 0, by binding.
     pub fn bindings(&self) -> &[BindingKind] {
         &self.bindings
+    }
+
+    /// Notes a recorded dispatch; true for the pipeline's first.
+    pub(crate) fn note_dispatch(&self) -> bool {
+        !self.dispatched.load(Ordering::Relaxed) && !self.dispatched.swap(true, Ordering::Relaxed)
     }
 }
 
@@ -219,6 +228,7 @@ impl GpuContext {
                 set_layout,
                 push_constant_size: desc.push_constant_size,
                 bindings: desc.bindings.to_vec(),
+                dispatched: AtomicBool::new(false),
                 name: name.to_string(),
                 ctx: Arc::clone(self),
             })

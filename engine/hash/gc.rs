@@ -208,6 +208,11 @@ impl GpuGarbageCollector {
         })
     }
 
+    /// The mark and sweep pipelines (to warm ahead: [`crate::gpu::Commands::warm`]).
+    pub fn pipelines(&self) -> [&ComputePipeline; 2] {
+        [&self.mark, &self.sweep]
+    }
+
     /// Lanes sweeping one bucket: the subgroup size, or 1 (the table's team mode).
     pub fn team_size(&self) -> u32 {
         self.team

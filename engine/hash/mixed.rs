@@ -61,6 +61,11 @@ impl MixedPasses {
         })
     }
 
+    /// The three pipelines (to warm ahead: [`crate::gpu::Commands::warm`]).
+    pub fn pipelines(&self) -> [&ComputePipeline; 3] {
+        [&self.claim, &self.insert, &self.claim_insert]
+    }
+
     /// The largest batch one workgroup takes (its grid stride): such a batch gets the fused
     /// pass.
     fn one_group_bound(&self) -> u32 {

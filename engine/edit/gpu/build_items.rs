@@ -13,8 +13,8 @@
 use std::sync::{Arc, OnceLock};
 
 use crate::gpu::{
-    shaders, BindingKind, Bound, Buffer, ComputePipeline, ComputePipelineDesc, GpuContext,
-    GpuError, MemLocation, WordTexels,
+    shaders, BindingKind, Bound, Buffer, Commands, ComputePipeline, ComputePipelineDesc,
+    GpuContext, GpuError, MemLocation, WordTexels,
 };
 
 use super::super::gpu_shared::EditPush;
@@ -81,6 +81,15 @@ impl BuildItemsPipelines {
             stand_in,
             _stand_in_buffer: buffer,
         })
+    }
+
+    /// Records warm-ups ([`crate::gpu::Commands::warm`]) of the pipelines made so far.
+    pub(super) fn warm<'a>(&'a self, cmd: &mut Commands<'a>) -> Result<(), GpuError> {
+        cmd.warm(&self.by_texels, &self.stand_in.bound())?;
+        if let Some(by_address) = self.by_address.get() {
+            cmd.warm(by_address, &self.stand_in.bound())?;
+        }
+        Ok(())
     }
 
     /// The pipeline for a level with views (`texels`) or without.

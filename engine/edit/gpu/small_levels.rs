@@ -67,6 +67,11 @@ impl SmallLevelsPass {
         Ok(SmallLevelsPass { pipeline })
     }
 
+    /// The pass's pipeline (to warm ahead).
+    pub(super) fn pipeline(&self) -> &ComputePipeline {
+        &self.pipeline
+    }
+
     /// Whether a level of `nodes` temporary nodes joins the chain.
     pub(super) fn takes(&self, nodes: u32) -> bool {
         nodes <= MAX_NODES
