@@ -10,7 +10,8 @@
 //!    counter per level (the next frontier's length);
 //! 2. sweep: the tables' own GC sweep ([`GpuGarbageCollector`], one submission for the nine
 //!    tables) frees every occupied slot whose bit is clear, resets the bits and returns empty
-//!    slabs to the allocator. Handles of kept items never change.
+//!    slabs to the allocator; its counts of kept slots are the live items per table. Handles of
+//!    kept items never change.
 //!
 //! An item reached both as a leaf and as an inner node (2-word items can be either) is marked
 //! once; only inner-level items are ever expanded, and an item is expanded as what its first
@@ -41,8 +42,8 @@ use crate::hash::HashStatus;
 const FLAG_GC_ROOTS: u32 = 16;
 /// Pass flag: the children are leaves, marked but not listed (GLSL `EDIT_FLAG_GC_LAST`).
 const FLAG_GC_LAST: u32 = 32;
-/// Counters of a trace pass: next frontier length, newly marked items per table, bad pointers.
-const TRACE_COUNTERS: usize = 2 + TABLE_COUNT as usize;
+/// Counters of a trace pass: next frontier length, pointers naming no allocated slab.
+const TRACE_COUNTERS: usize = 2;
 /// Invocations per workgroup of the trace pass.
 const GROUP: u32 = 64;
 
@@ -273,7 +274,6 @@ impl GpuHashDag {
             frontier = Some(ctx.upload("hash dag gc roots", &roots)?);
         }
         let mut level = self.root_level;
-        let mut marked = vec![0u64; TABLE_COUNT as usize];
         while count > 0 && level > 0 {
             let input = frontier.take().expect("a frontier of `count` nodes");
             let last = level == 1;
@@ -318,15 +318,12 @@ impl GpuHashDag {
             cmd.submit_async()?;
             let c = back.read()?;
             stats.mark_passes += 1;
-            if c[1 + TABLE_COUNT as usize] != 0 {
+            if c[1] != 0 {
                 // Nothing is swept: the marks left set only keep more items at the next GC.
                 return Err(GpuDagError::Corrupt(format!(
                     "{} pointers reachable from the live roots name no allocated slab",
-                    c[1 + TABLE_COUNT as usize]
+                    c[1]
                 )));
-            }
-            for (m, &n) in marked.iter_mut().zip(&c[1..=TABLE_COUNT as usize]) {
-                *m += n as u64;
             }
             count = if last { 0 } else { c[0] };
             if count > capacity {
@@ -350,12 +347,13 @@ impl GpuHashDag {
         for ((p, collector), s) in pending.into_iter().zip(&self.gc_state.collectors).zip(0..) {
             let report = collector.finish_collect(p)?;
             stats.freed_per_table[s] = report.freed_items as u64;
+            // Marked items are exactly the ones the live roots reach: the ones kept.
+            stats.live_per_table[s] = report.kept_items as u64;
             stats.freed_slabs += report.freed_slabs as u64;
         }
         if let Some(p) = profiler {
             p.resolve()?;
         }
-        stats.live_per_table = marked;
         stats.live = stats.live_per_table.iter().sum();
         stats.freed = stats.freed_per_table.iter().sum();
         let after = self.pool_use()?;

@@ -41,6 +41,8 @@ pub struct GcReport {
     pub bad_handles: u32,
     /// Items removed (occupied slots whose handle was not live).
     pub freed_items: u32,
+    /// Items kept (occupied slots whose handle was live): the table's live items after it.
+    pub kept_items: u32,
     /// Slabs unlinked and returned to the allocator.
     pub freed_slabs: u32,
 }
@@ -100,6 +102,7 @@ pub fn collect_cpu(image: &mut TableImage, live: &[Handle]) -> GcReport {
             let kept = occupied & words[SLAB_ACTIVE as usize];
             let garbage = occupied & !kept;
             report.freed_items += garbage.count_ones();
+            report.kept_items += kept.count_ones();
             for slot in (0..SLAB_SLOTS).filter(|s| garbage >> s & 1 == 1) {
                 for w in 0..layout.item_words {
                     words[layout.item_word(slot, w) as usize] = 0;
@@ -410,6 +413,7 @@ impl GpuGarbageCollector {
             bad_handles: c[0].bad_handles,
             freed_items: c[0].freed_items,
             freed_slabs: c[0].freed_slabs,
+            kept_items: c[0].kept_items,
         })
     }
 }

@@ -72,8 +72,8 @@ gpu_shared! {
         pub(crate) freed_items: uint,
         /// Slabs unlinked and returned to the allocator.
         pub(crate) freed_slabs: uint,
-        /// Padding to 16 bytes.
-        pub(crate) pad: uint,
+        /// Occupied slots the sweep kept (marked).
+        pub(crate) kept_items: uint,
     }
 
     /// Push constants of the duplicate-detection passes.

@@ -41,6 +41,7 @@ void sweep_bucket(uint bucket) {
     uint prev = HASH_NO_SLAB; // previous slab kept in the chain (none: the bucket head links)
     uint freed_items = 0u;
     uint freed_slabs = 0u;
+    uint kept_items = 0u;
     // Read before this walk frees anything: the chain has at most that many slabs.
     uint max_links = team_from_leader(hash_allocated_slabs(push.status, false));
     for (uint links = 0u; link != 0u; ++links) {
@@ -57,6 +58,7 @@ void sweep_bucket(uint bucket) {
         uint garbage = occupied & ~marked;
         uint kept = occupied & marked;
         freed_items += bitCount(garbage);
+        kept_items += bitCount(kept);
         // Clear the garbage slots' words, each lane its own slots.
         for (uint chunk = 0u; chunk < HASH_SLAB_SLOTS; chunk += TEAM) {
             uint slot = chunk + team_lane();
@@ -110,6 +112,7 @@ void sweep_bucket(uint bucket) {
     if (team_leader()) {
         if (freed_items != 0u) atomicAdd(GcCountersRef(push.items).freed_items, freed_items);
         if (freed_slabs != 0u) atomicAdd(GcCountersRef(push.items).freed_slabs, freed_slabs);
+        if (kept_items != 0u) atomicAdd(GcCountersRef(push.items).kept_items, kept_items);
     }
 }
 
