@@ -623,16 +623,11 @@ impl GpuHashDag {
     ) -> Result<f64, GpuDagError> {
         let start = std::time::Instant::now();
         let ctx = &self.ctx;
-        let mut kinds = Vec::new();
-        for tool in tools {
-            let flags = (ToolKind::of(tool) as u32) << TOOL_SHIFT;
-            for pipelines in [&self.traverse, &self.traverse_chain, &self.leaves] {
-                pipelines.get(ctx, flags)?;
-            }
-            if !kinds.contains(&flags) {
-                kinds.push(flags);
-            }
-        }
+        let mut kinds: Vec<u32> = (tools.into_iter())
+            .map(|tool| (ToolKind::of(tool) as u32) << TOOL_SHIFT)
+            .collect();
+        kinds.sort_unstable();
+        kinds.dedup();
         let mut cmd = ctx.begin_commands("edit warm pipelines")?;
         for &flags in &kinds {
             for pipelines in [&self.traverse, &self.traverse_chain, &self.leaves] {
