@@ -254,6 +254,48 @@ fn fill_shader_spec_and_push_constants_and_subgroup_size() {
     assert_clean(&ctx);
 }
 
+/// `Commands::warm` dispatches zero workgroups: it writes nothing, and it is the pipeline's first
+/// dispatch (where llvmpipe compiles), so the real dispatch after it is not; a zero-group
+/// `dispatch` records no dispatch at all and counts nothing.
+#[test]
+fn warm_up_runs_nothing_and_is_the_first_dispatch() {
+    let ctx = context();
+    {
+        let count = 1000u32;
+        let out = ctx
+            .create_buffer("warm out", count as u64 * 4, MemLocation::GpuOnly)
+            .unwrap();
+        let pipeline = fill_pipeline(&ctx, "test fill warm", [64, 7]);
+        let push = fill_push(out.address(), 0, count, 5);
+        let first = ctx.first_dispatches();
+        let mut cmd = ctx.begin_commands("zero groups").unwrap();
+        cmd.fill_buffer(&out, 0);
+        cmd.dispatch(&pipeline, [0, 1, 1], &push, &[]).unwrap();
+        cmd.submit().unwrap();
+        assert_eq!(ctx.first_dispatches(), first, "a zero-group dispatch");
+        let mut cmd = ctx.begin_commands("warm").unwrap();
+        cmd.warm(&pipeline, &[]).unwrap();
+        cmd.warm(&pipeline, &[]).unwrap();
+        cmd.submit().unwrap();
+        assert_eq!(ctx.first_dispatches(), first + 1);
+        assert!(ctx.download::<u32>(&out).unwrap().iter().all(|&w| w == 0));
+        let mut cmd = ctx.begin_commands("fill").unwrap();
+        cmd.dispatch(&pipeline, [4, 1, 1], &push, &[]).unwrap();
+        cmd.submit().unwrap();
+        assert_eq!(ctx.first_dispatches(), first + 1, "warmed already");
+        let want: Vec<u32> = (0..count).map(|i| i * 7 + 5).collect();
+        assert_eq!(ctx.download::<u32>(&out).unwrap(), want);
+        // A pipeline first dispatched for real counts once too.
+        let other = fill_pipeline(&ctx, "test fill cold", [64, 9]);
+        let mut cmd = ctx.begin_commands("cold").unwrap();
+        cmd.dispatch(&other, [4, 1, 1], &push, &[]).unwrap();
+        cmd.dispatch(&other, [4, 1, 1], &push, &[]).unwrap();
+        cmd.submit().unwrap();
+        assert_eq!(ctx.first_dispatches(), first + 2);
+    }
+    assert_clean(&ctx);
+}
+
 /// Transfers in a row that touch different bytes share one barrier; one that reads or writes
 /// bytes another wrote since the last barrier, and any dispatch after transfers, gets a barrier
 /// first (`Commands::before_transfer`). Synchronization validation (on in these tests) reports
