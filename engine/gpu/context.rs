@@ -906,7 +906,8 @@ impl GpuContext {
     }
 
     /// Compute pipelines created so far: what work made at its first use instead of before
-    /// shows up here (lavapipe compiles each for ~20 ms).
+    /// shows up here (lavapipe turns each into NIR here and compiles it at its first dispatch:
+    /// [`GpuContext::first_dispatches`]).
     pub fn pipelines_created(&self) -> u64 {
         self.pipelines_created.load(Ordering::Relaxed)
     }

@@ -9,7 +9,7 @@
 //   per table are the sweep's count: a count per mark here, even in shared memory, took ~10 %
 //   of the trace on lavapipe.)
 //   EDIT_FLAG_GC_ROOTS: the frontier items are marked too (the live roots, distinct).
-//   EDIT_FLAG_GC_LAST: the children are leaves; they are marked and counted, not listed.
+//   EDIT_FLAG_GC_LAST: the children are leaves; they are marked, not listed.
 #include "edit/common.glsl"
 layout(local_size_x = 64) in;
 
