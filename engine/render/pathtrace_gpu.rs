@@ -65,6 +65,8 @@ pub struct PtTarget {
     /// Whether every sample needs colour indices (the albedo reads voxel colours); else only
     /// the first hits of sample 0 do.
     needs_color_index: bool,
+    /// Whether a sun lights the scene (the megakernel then traces shadow rays).
+    sun: bool,
     render_params: Buffer,
     pt_params: Buffer,
     _lut: Buffer,
@@ -96,16 +98,33 @@ impl PtTarget {
 /// The megakernel and wavefront pipelines of one DAG format (every pt shader includes
 /// traverse.glsl, so each has one variant per format).
 struct PtPipelines {
-    mega: ComputePipeline,
     generate: ComputePipeline,
-    extend: ComputePipeline,
     shade: ComputePipeline,
     shadow: ComputePipeline,
     accumulate: ComputePipeline,
-    /// `mega` and `extend` without colour indices (specialization constant 2 false), made on
-    /// first use: for the samples that read none.
-    mega_plain: OnceLock<ComputePipeline>,
-    extend_plain: OnceLock<ComputePipeline>,
+    /// The megakernel per [`TracingVariant::index`] and the extend pass per colour-index
+    /// variant (specialization constants 2 and 4), made on first use.
+    mega: [OnceLock<ComputePipeline>; 4],
+    extend: [OnceLock<ComputePipeline>; 2],
+}
+
+/// Which code a traversing pipeline compiles in. lavapipe runs both sides of an `if` (masked)
+/// and every loop body at least once, so code that no invocation needs still costs: the
+/// colour index after each traversal, and in the megakernel the sun's shadow-ray traversal
+/// after each hit (docs/pathtracing.md, "Code that no path needs").
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct TracingVariant {
+    /// Colour indices computed (specialization constant 2).
+    colors: bool,
+    /// Shadow rays towards the sun traced (megakernel only: specialization constant 4).
+    sun: bool,
+}
+
+impl TracingVariant {
+    /// Slot of the megakernel variant in `PtPipelines::mega`.
+    fn index(self) -> usize {
+        self.colors as usize | (self.sun as usize) << 1
+    }
 }
 
 /// The GPU path tracers' pipelines, created per DAG format on first use.
@@ -143,24 +162,14 @@ impl GpuPathTracer {
             return Ok(p);
         }
         let i = format.index();
-        let make = |pass, spirv, spec: &[u32]| self.make_pipeline(format, pass, spirv, spec);
+        let make = |pass, spirv| self.make_pipeline(format, pass, spirv, &[]);
         let made = PtPipelines {
-            mega: make(
-                "megakernel",
-                shaders::RENDER_PT_MEGA_BY_FORMAT[i],
-                &[WORKGROUP[0], WORKGROUP[1], 1, PT_MEGA_PATHS],
-            )?,
-            generate: make("generate", shaders::RENDER_PT_GENERATE_BY_FORMAT[i], &[])?,
-            extend: make("extend", shaders::RENDER_PT_EXTEND_BY_FORMAT[i], &[])?,
-            shade: make("shade", shaders::RENDER_PT_SHADE_BY_FORMAT[i], &[])?,
-            shadow: make("shadow", shaders::RENDER_PT_SHADOW_BY_FORMAT[i], &[])?,
-            accumulate: make(
-                "accumulate",
-                shaders::RENDER_PT_ACCUMULATE_BY_FORMAT[i],
-                &[],
-            )?,
-            mega_plain: OnceLock::new(),
-            extend_plain: OnceLock::new(),
+            generate: make("generate", shaders::RENDER_PT_GENERATE_BY_FORMAT[i])?,
+            shade: make("shade", shaders::RENDER_PT_SHADE_BY_FORMAT[i])?,
+            shadow: make("shadow", shaders::RENDER_PT_SHADOW_BY_FORMAT[i])?,
+            accumulate: make("accumulate", shaders::RENDER_PT_ACCUMULATE_BY_FORMAT[i])?,
+            mega: Default::default(),
+            extend: Default::default(),
         };
         // Another thread may have won the race: its pipelines are the same.
         Ok(slot.get_or_init(|| made))
@@ -183,41 +192,55 @@ impl GpuPathTracer {
         })
     }
 
-    /// The megakernel (`extend` false) or extend pass of `format` that computes colour indices
-    /// when `colors` says so, else the variant without them (made on first use).
+    /// The megakernel (`extend` false) or extend pass of `format` compiled for `variant` (the
+    /// extend pass ignores `variant.sun`: shadow rays are the shadow pass's), made on first use.
     fn traversing<'a>(
         &'a self,
         pipes: &'a PtPipelines,
         format: TraversalFormat,
         extend: bool,
-        colors: bool,
+        variant: TracingVariant,
     ) -> Result<&'a ComputePipeline, GpuError> {
         let i = format.index();
-        // Constant 2 = PT_COLOR_INDEX; the extend pass has no constants 0, 1 and 3 (ignored).
-        let (full, plain, pass, spirv, spec) = match extend {
+        let (slot, spirv) = match extend {
             false => (
-                &pipes.mega,
-                &pipes.mega_plain,
-                "megakernel, no colour index",
+                &pipes.mega[variant.index()],
                 shaders::RENDER_PT_MEGA_BY_FORMAT[i],
-                [WORKGROUP[0], WORKGROUP[1], 0, PT_MEGA_PATHS],
             ),
             true => (
-                &pipes.extend,
-                &pipes.extend_plain,
-                "extend, no colour index",
+                &pipes.extend[variant.colors as usize],
                 shaders::RENDER_PT_EXTEND_BY_FORMAT[i],
-                [0, 0, 0, 0],
             ),
         };
-        if colors {
-            return Ok(full);
-        }
-        if let Some(p) = plain.get() {
+        if let Some(p) = slot.get() {
             return Ok(p);
         }
-        let made = self.make_pipeline(format, pass, spirv, &spec)?;
-        Ok(plain.get_or_init(|| made))
+        // Constants 0, 1 and 3 are the megakernel's workgroup and paths per invocation (the
+        // extend pass has none of them: ignored).
+        let spec = [
+            WORKGROUP[0],
+            WORKGROUP[1],
+            variant.colors as u32,
+            PT_MEGA_PATHS,
+            variant.sun as u32,
+        ];
+        let name = format!(
+            "{}{}{}",
+            if extend { "extend" } else { "megakernel" },
+            if variant.colors {
+                ""
+            } else {
+                ", no colour index"
+            },
+            if variant.sun || extend {
+                ""
+            } else {
+                ", no sun"
+            },
+        );
+        let made = self.make_pipeline(format, &name, spirv, &spec)?;
+        // Another thread may have won the race: its pipeline is the same.
+        Ok(slot.get_or_init(|| made))
     }
 
     /// Allocates the accumulation of a `settings`-sized render of `scene` for `mode` and writes
@@ -305,6 +328,7 @@ impl GpuPathTracer {
             height: settings.render.height,
             bounces: settings.bounces,
             needs_color_index,
+            sun: pt.sun[3] > 0.0,
             render_params,
             pt_params,
             _lut: lut,
@@ -330,7 +354,10 @@ impl GpuPathTracer {
         let pipes = self.pipelines(format)?;
         // Sample 0 fills the first-hit buffer (colour indices included) on its first bounce;
         // the rest need colour indices only when the albedo reads voxel colours.
-        let colors = |bounce: u32| target.needs_color_index || (sample == 0 && bounce == 0);
+        let variant = |bounce: u32| TracingVariant {
+            colors: target.needs_color_index || (sample == 0 && bounce == 0),
+            sun: target.sun,
+        };
         if sample == 0 {
             cmd.fill_buffer(&target.accum, 0);
         }
@@ -358,7 +385,7 @@ impl GpuPathTracer {
                 1,
             ];
             cmd.begin_pass(&mut profiler, "pt megakernel");
-            let mega = self.traversing(pipes, format, false, colors(0))?;
+            let mega = self.traversing(pipes, format, false, variant(0))?;
             let r = cmd.dispatch(mega, groups, bytemuck::bytes_of(&push), &tables);
             cmd.end_pass(&mut profiler);
             cmd.barrier();
@@ -385,7 +412,7 @@ impl GpuPathTracer {
             cmd.fill_buffer(&w.flags, 0);
             cmd.fill_buffer(&w.shadow_count, 0);
             cmd.begin_pass(&mut profiler, "pt extend");
-            let extend = self.traversing(pipes, format, true, colors(k))?;
+            let extend = self.traversing(pipes, format, true, variant(k))?;
             let r = cmd.dispatch_indirect(extend, &w.ext_count, 4, push_bytes, &tables);
             cmd.end_pass(&mut profiler);
             r?;

@@ -21,6 +21,13 @@ layout(local_size_x_id = 0, local_size_y_id = 1, local_size_z = 1) in;
 // regeneration in the megakernel").
 layout(constant_id = 3) const uint PT_MEGA_PATHS = 4u;
 
+// Specialization constant 4: whether the sun's shadow rays are compiled in. lavapipe runs an
+// `if` whose condition no lane meets (masked) and each loop body at least once, so without the
+// constant every hit of a sunless render paid for one masked pass through the shadow ray's
+// traversal; the host picks the variant by the sun's intensity (docs/pathtracing.md, "Code
+// that no path needs").
+layout(constant_id = 4) const bool PT_SUN = true;
+
 void main() {
     RenderParams p = PtRenderParamsRef(push.params).params;
     PtParams pt = PtParamsRef(push.pt).pt;
@@ -73,7 +80,7 @@ void main() {
         } else {
             vec3 albedo = pt_albedo(p, pt, h.color_index);
             vec3 start = pt_offset_point(origin, dir, h.t, h.normal, p.up.w);
-            if (pt.sun.w > 0.0) {
+            if (PT_SUN && pt.sun.w > 0.0) {
                 float n_dot_l = pt_n_dot_l(h.normal, sun);
                 if (n_dot_l > 0.0) {
                     Hit blocker;
