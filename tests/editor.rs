@@ -530,22 +530,23 @@ fn path_tracing_accumulates_and_restarts_after_an_edit() {
     close(&x, &id, editor);
 }
 
-/// A replay in path-tracing mode: the screenshot, taken once --max-samples samples are in,
-/// matches `voxdag render --pt` of the saved scene with the same camera, samples, bounces
+/// A replay in path-tracing mode with the path tracer's flags `light` (given to the editor
+/// and to `voxdag render --pt` alike): the screenshot, taken once --max-samples samples are
+/// in, matches `voxdag render --pt` of the saved scene with the same camera, samples, bounces
 /// and seed within the golden tolerance (the editor's material 0 is sRGB 203, linear 0.597,
 /// against the headless grey 0.6; 2 bounces: no Russian roulette, so the paths are the same).
-#[test]
-fn path_traced_replay_screenshot_equals_render_pt() {
-    let dir = tempfile::tempdir().unwrap();
-    let vdag = scene(dir.path());
-    let replay = dir.path().join("session.csv");
+/// Returns the screenshot and the scene the editor saved.
+fn path_traced_replay(dir: &Path, light: &[&str]) -> (PathBuf, PathBuf) {
+    let vdag = scene(dir);
+    let replay = dir.join("session.csv");
     std::fs::write(&replay, REPLAY).unwrap();
     let x = Xvfb::start();
-    let (saved, shot) = (dir.path().join("editor.vdag"), dir.path().join("shot.png"));
+    let (saved, shot) = (dir.join("editor.vdag"), dir.join("shot.png"));
     let mut cmd = voxdag(Some(&x.display));
     cmd.arg("editor")
         .arg(&vdag)
         .args(["--size", "200x150", "--render-mode", "pt", "--bounces", "2"])
+        .args(light)
         .args(["--spp", "2", "--max-samples", "4", "--replay"])
         .arg(&replay)
         .arg("--exit-after-replay")
@@ -554,19 +555,27 @@ fn path_traced_replay_screenshot_equals_render_pt() {
         .arg("--screenshot")
         .arg(&shot);
     run(cmd);
-    let headless = dir.path().join("headless.png");
+    let headless = dir.join("headless.png");
     let mut cmd = voxdag(None);
     cmd.arg("render")
         .arg(&saved)
         .args(["--size", "200x150", "--pt", "--spp", "4", "--bounces", "2"])
+        .args(light)
         .args(["--seed", "0", "--out"])
         .arg(&headless);
     run(cmd);
     let (differing, allowed) = golden_diff(&shot, &headless);
     assert!(
         differing <= allowed,
-        "the path-traced screenshot differs from `render --pt` in {differing} pixels (allowed {allowed})"
+        "the path-traced screenshot ({light:?}) differs from `render --pt` in {differing} pixels (allowed {allowed})"
     );
+    (shot, saved)
+}
+
+#[test]
+fn path_traced_replay_screenshot_equals_render_pt() {
+    let dir = tempfile::tempdir().unwrap();
+    let (shot, saved) = path_traced_replay(dir.path(), &[]);
     // Not the raster image: the same scene rendered without --pt differs.
     let raster = dir.path().join("raster.png");
     let mut cmd = voxdag(None);
@@ -577,4 +586,26 @@ fn path_traced_replay_screenshot_equals_render_pt() {
     run(cmd);
     let (differing, allowed) = golden_diff(&shot, &raster);
     assert!(differing > allowed, "the screenshot is the raster image");
+}
+
+/// `--env` and `--sun` light the editor's path tracer as they light `render --pt` (the sun's
+/// shadow rays are a megakernel variant of their own), and they change the image.
+#[test]
+fn path_traced_light_equals_render_pt() {
+    let dir = tempfile::tempdir().unwrap();
+    let light = ["--env", "0.3,0.5,1.1", "--sun", "0.4,1,-0.6,2.5"];
+    let (shot, saved) = path_traced_replay(dir.path(), &light);
+    let white = dir.path().join("white.png");
+    let mut cmd = voxdag(None);
+    cmd.arg("render")
+        .arg(&saved)
+        .args(["--size", "200x150", "--pt", "--spp", "4", "--bounces", "2"])
+        .args(["--seed", "0", "--out"])
+        .arg(&white);
+    run(cmd);
+    let (differing, allowed) = golden_diff(&shot, &white);
+    assert!(
+        differing > allowed,
+        "the screenshot lit by {light:?} is the white environment's image"
+    );
 }

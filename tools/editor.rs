@@ -49,7 +49,7 @@ use brush::CopyState;
 pub use brush::ToolKind;
 use panels::PanelState;
 pub use pt::RenderMode;
-use pt::{PtKey, PtState, MAX_EDITOR_BOUNCES, MAX_FRAME_SPP};
+use pt::{PtKey, PtLighting, PtState, MAX_EDITOR_BOUNCES, MAX_FRAME_SPP};
 
 /// Largest tool radius in voxels (slider and wheel).
 const MAX_RADIUS: f32 = 256.0;
@@ -102,6 +102,13 @@ pub struct EditorArgs {
     /// Path tracing: diffuse bounces per path.
     #[arg(long, default_value_t = DEFAULT_BOUNCES, value_parser = clap::value_parser!(u32).range(0..=MAX_EDITOR_BOUNCES as i64))]
     bounces: u32,
+    /// Path tracing: constant environment radiance "r,g,b" (as `render --pt --env`).
+    #[arg(long, default_value = "1,1,1", value_parser = crate::pathtrace::parse_floats::<3>, allow_hyphen_values = true)]
+    env: [f32; 3],
+    /// Path tracing: a sun "x,y,z,intensity", the direction towards it (as `render --pt
+    /// --sun`; the Settings panel turns it and switches it on and off).
+    #[arg(long, value_parser = crate::pathtrace::parse_floats::<4>, allow_hyphen_values = true)]
+    sun: Option<[f32; 4]>,
     /// Path tracing: samples per pixel added each frame.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=MAX_FRAME_SPP as i64))]
     spp: u32,
@@ -178,6 +185,7 @@ pub fn editor(args: &EditorArgs) -> Result<()> {
     if !(args.radius > 0.0 && args.radius <= MAX_RADIUS) {
         bail!("--radius {} out of range (0, {MAX_RADIUS}]", args.radius);
     }
+    PtLighting::new(args.env, args.sun)?;
     for path in [
         &args.status_file,
         &args.save,
@@ -427,6 +435,8 @@ impl App<'_> {
             bounces: args.bounces,
             spp: args.spp,
             max_samples: args.max_samples,
+            // Checked in `editor` before the window opened.
+            lighting: PtLighting::new(args.env, args.sun)?,
             message: None,
             save_path: args
                 .save
@@ -828,10 +838,11 @@ struct Running {
     render_mode: RenderMode,
     /// The path tracer, made when first used.
     pt: Option<PtState>,
-    /// Path tracing: bounces, samples per frame, samples at which accumulation stops.
+    /// Path tracing: bounces, samples per frame, samples at which accumulation stops, light.
     bounces: u32,
     spp: u32,
     max_samples: u32,
+    lighting: PtLighting,
     /// The last error or notice (shown in the Scene panel and the status file).
     message: Option<String>,
     save_path: String,
@@ -1177,6 +1188,7 @@ impl Running {
             binding: self.doc.binding,
             root: self.doc.dag.root(),
             bounces: self.bounces,
+            lighting: self.lighting,
         };
         let pt = self.pt.as_mut().expect("made above");
         let samples = pt.prepare(&self.ctx, &self.doc.scene, key, self.spp, self.max_samples)?;

@@ -54,7 +54,7 @@ pub struct PtArgs {
 
 /// `N` comma-separated numbers. Non-finite and negative values pass here: the path tracer's
 /// own validation rejects them with a one-line error naming the flag.
-fn parse_floats<const N: usize>(text: &str) -> Result<[f32; N], String> {
+pub fn parse_floats<const N: usize>(text: &str) -> Result<[f32; N], String> {
     let parts: Vec<&str> = text.split(',').collect();
     if parts.len() != N {
         return Err(format!(

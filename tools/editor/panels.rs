@@ -1,5 +1,5 @@
 //! The editor's Settings and Profiler panels: render mode (raster or path tracing, its
-//! bounces and samples), the table variant switched at run time (the hash DAG rebuilt from the
+//! bounces, samples and light), the table variant switched at run time (the hash DAG rebuilt from the
 //! current scene), render scale, vsync; per-pass GPU times of the last
 //! frame, a rolling graph of frame times, the last edit's kernels, and Chrome traces of the next
 //! N frames (`Profiler::write_chrome_trace`, as `--trace` of `voxdag render` / `edit`).
@@ -10,10 +10,12 @@ use std::sync::Arc;
 
 use anyhow::{anyhow, Result};
 use clap::ValueEnum;
+use egui::SliderClamping;
 use voxdag::gpu::{GpuContext, Profiler};
 use voxdag::hash::HashVariant;
 use voxdag::render::gpu::GpuRenderer;
 
+use super::pt::PtLighting;
 use super::{editor_tables, pack_colour, Document, RenderMode, Running};
 use crate::edit::TableArg;
 use crate::view::MOTION_TARGET_MS;
@@ -21,6 +23,9 @@ use crate::window::{MAX_FLY_SPEED, MIN_FLY_SPEED, MIN_SCALE};
 
 /// Frame times kept for the Profiler's graph.
 pub const GRAPH_FRAMES: usize = 240;
+/// Largest environment radiance and sun intensity the Settings panel offers (the flags take
+/// any finite value >= 0).
+const MAX_RADIANCE: f32 = 16.0;
 /// Most frames one trace records (the profiler's timestamp pool holds about 170 frames).
 pub const MAX_TRACE_FRAMES: u32 = 100;
 
@@ -130,14 +135,24 @@ impl Running {
             ui.radio_value(&mut self.render_mode, RenderMode::Raster, "raster");
             ui.radio_value(&mut self.render_mode, RenderMode::Pt, "path tracing");
         });
-        ui.add(egui::Slider::new(&mut self.bounces, 0..=16).text("bounces"));
-        ui.add(egui::Slider::new(&mut self.spp, 1..=16).text("samples per frame"));
+        // The flags allow more than the sliders offer: existing values stay (`Edits`).
+        ui.add(
+            egui::Slider::new(&mut self.bounces, 0..=16)
+                .clamping(SliderClamping::Edits)
+                .text("bounces"),
+        );
+        ui.add(
+            egui::Slider::new(&mut self.spp, 1..=16)
+                .clamping(SliderClamping::Edits)
+                .text("samples per frame"),
+        );
         ui.add(
             egui::DragValue::new(&mut self.max_samples)
                 .range(1..=1 << 16)
                 .prefix("stop at ")
                 .suffix(" samples"),
         );
+        lighting_controls(ui, &mut self.lighting);
         if self.render_mode == RenderMode::Pt {
             ui.label(format!("{} samples accumulated", self.pt_samples()));
         }
@@ -331,5 +346,42 @@ impl Running {
             "frame times, last {} (top {top:.0} ms, line {MOTION_TARGET_MS:.0} ms)",
             times.len()
         ));
+    }
+}
+
+/// Path tracing's light: the environment radiance per channel, the sun's intensity (0: off)
+/// and its direction as azimuth and elevation (degrees above the grid's x-z plane). The
+/// direction is written back only when a slider moves, so an untouched panel never restarts
+/// the accumulation.
+fn lighting_controls(ui: &mut egui::Ui, lighting: &mut PtLighting) {
+    ui.horizontal(|ui| {
+        ui.label("environment");
+        for (v, name) in lighting.env.iter_mut().zip(["r ", "g ", "b "]) {
+            ui.add(
+                egui::DragValue::new(v)
+                    .range(0.0..=MAX_RADIANCE)
+                    .clamp_existing_to_range(false)
+                    .speed(0.01)
+                    .prefix(name),
+            );
+        }
+    });
+    ui.add(
+        egui::Slider::new(&mut lighting.sun_intensity, 0.0..=MAX_RADIANCE)
+            .clamping(SliderClamping::Edits)
+            .text("sun intensity (0: off)"),
+    );
+    let [x, y, z] = lighting.sun_dir;
+    let horizontal = x.hypot(z);
+    let mut azimuth = z.atan2(x).to_degrees();
+    let mut elevation = y.atan2(horizontal).to_degrees();
+    let turned = ui
+        .add(egui::Slider::new(&mut azimuth, -180.0..=180.0).text("sun azimuth"))
+        .changed()
+        | ui.add(egui::Slider::new(&mut elevation, -90.0..=90.0).text("sun elevation"))
+            .changed();
+    if turned {
+        let (a, e) = (azimuth.to_radians(), elevation.to_radians());
+        lighting.sun_dir = [e.cos() * a.cos(), e.sin(), e.cos() * a.sin()];
     }
 }

@@ -1,7 +1,7 @@
 //! The editor's path-tracing mode: the GPU path tracer (megakernel) accumulates samples over
 //! frames into one [`PtTarget`] at the frame's internal resolution and `PtView` shows the mean
 //! with the brush preview; any change of what the accumulation shows (camera, scene root or
-//! binding, internal size, bounces) restarts it.
+//! binding, internal size, bounces, lighting) restarts it.
 
 use std::ops::Range;
 use std::sync::Arc;
@@ -13,7 +13,7 @@ use voxdag::edit::item::Root;
 use voxdag::gpu::{Buffer, Commands, GpuContext, Image, Profiler};
 use voxdag::render::gpu::GpuScene;
 use voxdag::render::params::BrushPreview;
-use voxdag::render::pathtrace::PtSettings;
+use voxdag::render::pathtrace::{PtSettings, Sun};
 use voxdag::render::pathtrace_gpu::{GpuPathTracer, PtMode, PtTarget};
 use voxdag::render::pt_view::PtView;
 use voxdag::render::{Camera, RenderSettings};
@@ -29,8 +29,46 @@ pub const MAX_FRAME_SPP: u32 = 64;
 pub enum RenderMode {
     /// Primary rays, Lambert shading and one shadow ray (the viewer's renderer).
     Raster,
-    /// Progressive path tracing (constant white environment, `voxdag render --pt` defaults).
+    /// Progressive path tracing (`voxdag render --pt`: constant environment, optional sun).
     Pt,
+}
+
+/// The light of the path-traced scene: a constant environment and an optional sun, as
+/// `voxdag render --pt --env R,G,B --sun X,Y,Z,I` (Settings panel, `--env`, `--sun`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PtLighting {
+    /// Environment radiance (linear RGB, >= 0).
+    pub env: [f32; 3],
+    /// Direction towards the sun (any length but zero).
+    pub sun_dir: [f32; 3],
+    /// The sun's irradiance on a surface facing it; 0: no sun (its shadow rays not traced).
+    pub sun_intensity: f32,
+}
+
+impl PtLighting {
+    /// The lighting of `--env` and `--sun` ("x,y,z,intensity"; none: intensity 0, the sun
+    /// straight above), checked like `render --pt` checks them (one-line errors).
+    pub fn new(env: [f32; 3], sun: Option<[f32; 4]>) -> Result<PtLighting> {
+        let [x, y, z, intensity] = sun.unwrap_or([0.0, 1.0, 0.0, 0.0]);
+        let lighting = PtLighting {
+            env,
+            sun_dir: [x, y, z],
+            sun_intensity: intensity,
+        };
+        let mut settings = PtSettings::new(RenderSettings::new(1, 1, Camera::orbit_default(4)));
+        lighting.apply(&mut settings);
+        settings.validate()?;
+        Ok(lighting)
+    }
+
+    /// Sets the environment and sun of `settings`.
+    fn apply(&self, settings: &mut PtSettings) {
+        settings.env = self.env;
+        settings.sun = (self.sun_intensity > 0.0).then_some(Sun {
+            dir: self.sun_dir,
+            intensity: self.sun_intensity,
+        });
+    }
 }
 
 /// What one accumulation shows: a change of any field restarts it.
@@ -46,6 +84,8 @@ pub struct PtKey {
     pub root: Root,
     /// Diffuse bounces.
     pub bounces: u32,
+    /// Environment and sun.
+    pub lighting: PtLighting,
 }
 
 /// The path tracer and the accumulation in progress.
@@ -86,6 +126,7 @@ impl PtState {
                 key.camera,
             ));
             settings.bounces = key.bounces;
+            key.lighting.apply(&mut settings);
             ctx.wait_idle()?;
             self.target = None;
             let target = self
