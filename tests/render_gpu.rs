@@ -205,3 +205,36 @@ fn brush_preview_tints_the_region_only() {
     drop(renderer);
     assert_eq!(context.validation_errors(), 0);
 }
+
+/// First hits carry the voxel's colour index (its depth-first Morton rank, as the CPU ray
+/// cast gives it) on a scene without colours too: the editor's hover reads it, so the
+/// primary-ray variant without the colour index must not serve a render that writes first hits.
+#[test]
+fn first_hits_carry_colour_indices_without_colours() {
+    let mut dag = sphere_scene(64);
+    dag.colors.clear();
+    let settings = RenderSettings::new(64, 64, Camera::frame(&dag));
+    let context = gpu();
+    let renderer = GpuRenderer::new(&context).unwrap();
+    let scene = renderer.upload(&dag).unwrap();
+    let (_, hits) = renderer.render_first_hits(&scene, &settings).unwrap();
+    let index = VoxelIndex::new(&dag);
+    let mut compared = 0;
+    for (i, got) in hits.iter().enumerate() {
+        let pixel = [i as u32 % 64, i as u32 / 64];
+        let ray = settings.camera.primary_ray(pixel, 64, 64);
+        let want = dag.raycast(&index, &ray, voxdag::dag::raycast::T_UNBOUNDED);
+        assert_eq!(got.hit == 1, want.is_some(), "pixel {pixel:?}: hit");
+        if let Some(want) = want {
+            assert_eq!(
+                got.color_index, want.color_index,
+                "pixel {pixel:?}: colour index"
+            );
+            compared += usize::from(want.color_index != 0);
+        }
+    }
+    assert!(
+        compared > 100,
+        "only {compared} hits with a colour index above 0"
+    );
+}

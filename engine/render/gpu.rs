@@ -38,11 +38,38 @@ pub struct RenderFrame {
     params: Buffer,
 }
 
-/// Renders DAGs on the GPU; holds the compiled pipelines (svdag32 at creation, the other
-/// formats' variants when a scene of that format is first uploaded).
+/// Renders DAGs on the GPU; holds the compiled pipelines (svdag32's full variant at creation,
+/// the others when first recorded).
 pub struct GpuRenderer {
     ctx: Arc<GpuContext>,
-    primary: Vec<OnceLock<ComputePipeline>>,
+    /// Per traversal format, the primary-ray pipeline per [`PrimaryVariant::index`].
+    primary: Vec<[OnceLock<ComputePipeline>; 4]>,
+}
+
+/// Which code the primary-ray pipeline compiles in (`primary.comp`'s specialization constants
+/// 2 and 3). lavapipe runs an `if` that no lane takes (masked) and each loop body at least
+/// once, so a geometry-only scene paid for every ray's colour index and a render without
+/// shadows for one masked pass through the shadow ray's traversal (docs/rendering.md, "Code
+/// that no pixel needs").
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct PrimaryVariant {
+    /// The hit's colour index is computed (colours to shade, or first hits to write).
+    colors: bool,
+    /// Shadow rays are traced (`FLAG_SHADOWS`).
+    shadows: bool,
+}
+
+impl PrimaryVariant {
+    /// The variant that renders everything.
+    const FULL: PrimaryVariant = PrimaryVariant {
+        colors: true,
+        shadows: true,
+    };
+
+    /// Slot of the variant in `GpuRenderer::primary`.
+    fn index(self) -> usize {
+        self.colors as usize | (self.shadows as usize) << 1
+    }
 }
 
 /// An SVDAG uploaded to the GPU: its words, per-node voxel counts and colour chunks (encoded
@@ -189,34 +216,53 @@ impl GpuScene {
 }
 
 impl GpuRenderer {
-    /// Builds the primary-ray pipeline (svdag32; the other formats' on first upload).
+    /// Builds the primary-ray pipeline (svdag32's full variant; the others on first use).
     pub fn new(ctx: &Arc<GpuContext>) -> Result<GpuRenderer, GpuError> {
         let renderer = GpuRenderer {
             ctx: Arc::clone(ctx),
             primary: (0..shaders::RENDER_PRIMARY_BY_FORMAT.len())
-                .map(|_| OnceLock::new())
+                .map(|_| Default::default())
                 .collect(),
         };
-        renderer.ensure_pipeline(TraversalFormat::Svdag32)?;
+        renderer.pipeline(TraversalFormat::Svdag32, PrimaryVariant::FULL)?;
         Ok(renderer)
     }
 
-    /// Creates the primary-ray pipeline of `format` unless it exists.
-    fn ensure_pipeline(&self, format: TraversalFormat) -> Result<(), GpuError> {
-        let slot = &self.primary[format.index()];
-        if slot.get().is_none() {
-            let name = format!("primary rays ({})", format.name());
-            let pipeline = self.ctx.create_compute_pipeline(&ComputePipelineDesc {
-                name: &name,
-                spirv: shaders::RENDER_PRIMARY_BY_FORMAT[format.index()],
-                spec_constants: &WORKGROUP,
-                push_constant_size: std::mem::size_of::<PrimaryPush>() as u32,
-                bindings: &[BindingKind::StorageImage, BindingKind::TexelBuffer],
-            })?;
-            // Another thread may have won the race: its pipeline is the same.
-            let _ = slot.set(pipeline);
+    /// The primary-ray pipeline of `format` compiled for `variant`, created unless it exists.
+    fn pipeline(
+        &self,
+        format: TraversalFormat,
+        variant: PrimaryVariant,
+    ) -> Result<&ComputePipeline, GpuError> {
+        let slot = &self.primary[format.index()][variant.index()];
+        if let Some(p) = slot.get() {
+            return Ok(p);
         }
-        Ok(())
+        let name = format!(
+            "primary rays ({}{}{})",
+            format.name(),
+            if variant.colors {
+                ""
+            } else {
+                ", no colour index"
+            },
+            if variant.shadows { "" } else { ", no shadows" },
+        );
+        let spec = [
+            WORKGROUP[0],
+            WORKGROUP[1],
+            variant.colors as u32,
+            variant.shadows as u32,
+        ];
+        let pipeline = self.ctx.create_compute_pipeline(&ComputePipelineDesc {
+            name: &name,
+            spirv: shaders::RENDER_PRIMARY_BY_FORMAT[format.index()],
+            spec_constants: &spec,
+            push_constant_size: std::mem::size_of::<PrimaryPush>() as u32,
+            bindings: &[BindingKind::StorageImage, BindingKind::TexelBuffer],
+        })?;
+        // Another thread may have won the race: its pipeline is the same.
+        Ok(slot.get_or_init(|| pipeline))
     }
 
     /// Uploads `dag.words`, its colours (as one raw chunk, or as lossless chunks when they do not
@@ -315,7 +361,6 @@ impl GpuRenderer {
             ColorSource::Chunked(_) => None,
         };
         let colors = fitted.as_ref().map_or(colors, ColorSource::Chunked);
-        self.ensure_pipeline(dag.format)?;
         let words = self.ctx.upload("dag words", &dag.words)?;
         let node_voxels = self.ctx.upload("dag node voxel counts", &dag.node_voxels)?;
         let pairs: Vec<[u32; 2]> = dag
@@ -486,13 +531,14 @@ impl GpuRenderer {
                 });
             }
         }
-        let pipeline = self.primary[scene.format.index()].get().ok_or_else(|| {
-            GpuError::InvalidArgument(format!(
-                "no pipeline for the {} format (scene not uploaded by this renderer)",
-                scene.format.name()
-            ))
-        })?;
         let params = self.params(scene, settings)?;
+        let pipeline = self.pipeline(
+            scene.format,
+            PrimaryVariant {
+                colors: params.has_colors() || first_hits.is_some(),
+                shadows: params.shadows(),
+            },
+        )?;
         self.ctx
             .write_mapped(&mut frame.params, 0, std::slice::from_ref(&params))?;
         let push = PrimaryPush {

@@ -10,6 +10,12 @@
 // Workgroup size: specialization constants 0 and 1 (8 x 8).
 layout(local_size_x_id = 0, local_size_y_id = 1, local_size_z = 1) in;
 
+// Specialization constants 2 and 3: whether the hit's colour index and the shadow ray are
+// compiled in (`PrimaryVariant` in engine/render/gpu.rs: the colour index where the scene has
+// colours or first hits are written, shadows where `RENDER_FLAG_SHADOWS` is set).
+layout(constant_id = 2) const bool PRIMARY_COLOR_INDEX = true;
+layout(constant_id = 3) const bool PRIMARY_SHADOWS = true;
+
 layout(set = 0, binding = 0, rgba8) uniform writeonly image2D out_image;
 
 #include "shared/render_params.h"
@@ -78,7 +84,7 @@ void main() {
     traverse_begin(p.root_level);
     bool hit;
     Hit h;
-    vec4 color = shade_pixel_hit(pixel, p, hit, h);
+    vec4 color = shade_pixel_hit(pixel, p, PRIMARY_COLOR_INDEX, PRIMARY_SHADOWS, hit, h);
     imageStore(out_image, ivec2(pixel), color);
     uint i = pixel.y * p.width + pixel.x;
     if (push.hits != 0ul) {

@@ -4,8 +4,8 @@
 //   uint dag_color(uint64_t i); // RGBA8 colour i (r | g << 8 | b << 16 | a << 24, sRGB)
 // before including this file; this file includes traverse.glsl and shared/render_params.h.
 // Provides
-//   vec4 shade_pixel(uvec2 pixel, RenderParams p, out bool hit);
-//   vec4 shade_pixel_hit(uvec2 pixel, RenderParams p, out bool hit, out Hit h);
+//   vec4 shade_pixel_hit(uvec2 pixel, RenderParams p, bool want_color, bool shadows,
+//                        out bool hit, out Hit h);
 // returning the sRGB-encoded colour in [0, 1] (alpha 1) and whether the primary ray hit a voxel.
 #ifndef VOXDAG_RENDER_SHADE_GLSL
 #define VOXDAG_RENDER_SHADE_GLSL
@@ -42,17 +42,21 @@ void shade_primary_ray(uvec2 pixel, RenderParams p, out vec3 origin, out vec3 di
     dir = d;
 }
 
-// shade_pixel that also returns the primary ray's hit (valid when `hit`).
-vec4 shade_pixel_hit(uvec2 pixel, RenderParams p, out bool hit, out Hit h) {
+// The shaded colour of `pixel` and the primary ray's hit (valid when `hit`). `want_color`
+// false leaves the hit's colour index out (a scene without colours, no first hits to write)
+// and `shadows` false the shadow ray; pass constants (primary.comp's specialization
+// constants) so that the code left out is compiled out: lavapipe would run it masked.
+vec4 shade_pixel_hit(uvec2 pixel, RenderParams p, bool want_color, bool shadows, out bool hit,
+                     out Hit h) {
     vec3 origin;
     vec3 dir;
     shade_primary_ray(pixel, p, origin, dir);
-    hit = trace_ray(origin, dir, TRAVERSE_T_UNBOUNDED, p.root_level, h);
+    hit = trace_ray_indexed(origin, dir, TRAVERSE_T_UNBOUNDED, p.root_level, want_color, h);
     if (!hit) {
         return shade_encode(shade_sky(dir));
     }
     vec3 albedo = vec3(SHADE_GREY);
-    if ((p.flags & RENDER_FLAG_HAS_COLORS) != 0u) {
+    if (want_color && (p.flags & RENDER_FLAG_HAS_COLORS) != 0u) {
         // Out-of-range indices shade white, like the CPU.
         uint rgba = h.color_index < p.color_count ? dag_color(h.color_index) : 0xffffffffu;
         for (uint k = 0u; k < 3u; k++) {
@@ -64,11 +68,12 @@ vec4 shade_pixel_hit(uvec2 pixel, RenderParams p, out bool hit, out Hit h) {
     vec3 light = p.light_dir.xyz;
     precise float n_dot_l = max(n.x * light.x + n.y * light.y + n.z * light.z, 0.0);
     precise float direct = SHADE_DIFFUSE * n_dot_l;
-    if ((p.flags & RENDER_FLAG_SHADOWS) != 0u && n_dot_l > 0.0) {
+    if (shadows && (p.flags & RENDER_FLAG_SHADOWS) != 0u && n_dot_l > 0.0) {
         // Shadow ray from the hit point, pushed off the face by p.up.w along the normal.
         precise vec3 shadow_origin = (origin + h.t * dir) + n * p.up.w;
         Hit blocker;
-        if (trace_ray(shadow_origin, light, TRAVERSE_T_UNBOUNDED, p.root_level, blocker)) {
+        if (trace_ray_indexed(shadow_origin, light, TRAVERSE_T_UNBOUNDED, p.root_level, false,
+                              blocker)) {
             direct = 0.0;
         }
     }
@@ -78,11 +83,6 @@ vec4 shade_pixel_hit(uvec2 pixel, RenderParams p, out bool hit, out Hit h) {
         c = preview_tint(c, h.voxel, p.preview, p.preview_color, p.preview_shape);
     }
     return shade_encode(c);
-}
-
-vec4 shade_pixel(uvec2 pixel, RenderParams p, out bool hit) {
-    Hit h;
-    return shade_pixel_hit(pixel, p, hit, h);
 }
 
 #endif

@@ -8,8 +8,7 @@
 //   uint dag_info(uint i);            // format info block (unused by svdag32;
 //                                     // render/dag_tables.glsl defines it from a texel buffer)
 // Provides `struct Hit`,
-//   void traverse_begin(uint root_level); // once per invocation, before any trace_ray
-//   bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit);
+//   void traverse_begin(uint root_level); // once per invocation, before any trace
 //   bool trace_ray_indexed(..., bool want_color, out Hit hit); // colour index only if wanted
 // `root_level` is `RenderParams::root_level` (log2(N) - 2); the grid is [0, 4 << root_level)^3.
 //
@@ -673,11 +672,6 @@ bool trace_ray_indexed(vec3 origin, vec3 dir, float t_max, uint root_level, bool
 #endif
     hit.color_index = color + uint64_t(rank);
     return true;
-}
-
-// `trace_ray_indexed` with the colour index.
-bool trace_ray(vec3 origin, vec3 dir, float t_max, uint root_level, out Hit hit) {
-    return trace_ray_indexed(origin, dir, t_max, root_level, true, hit);
 }
 
 #endif
