@@ -99,22 +99,30 @@ impl PtTarget {
 /// traverse.glsl, so each has one variant per format).
 struct PtPipelines {
     generate: ComputePipeline,
-    shade: ComputePipeline,
     shadow: ComputePipeline,
     accumulate: ComputePipeline,
-    /// The megakernel per [`TracingVariant::index`] and the extend pass per colour-index
-    /// variant (specialization constants 2 and 4), made on first use.
+    /// The megakernel per [`TracingVariant::index`], the extend and shade passes per
+    /// colour-index variant (specialization constants 2 and 4), made on first use.
     mega: [OnceLock<ComputePipeline>; 4],
     extend: [OnceLock<ComputePipeline>; 2],
+    shade: [OnceLock<ComputePipeline>; 2],
 }
 
-/// Which code a traversing pipeline compiles in. lavapipe runs both sides of an `if` (masked)
-/// and every loop body at least once, so code that no invocation needs still costs: the
-/// colour index after each traversal, and in the megakernel the sun's shadow-ray traversal
-/// after each hit (docs/pathtracing.md, "Code that no path needs").
+/// The passes made per [`TracingVariant`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum VariantPass {
+    Megakernel,
+    Extend,
+    Shade,
+}
+
+/// Which code a pipeline compiles in. lavapipe runs both sides of an `if` (masked) and every
+/// loop body at least once, so code that no invocation needs still costs: the colour index
+/// after each traversal and the colour decode of each hit, and in the megakernel the sun's
+/// shadow-ray traversal after each hit (docs/pathtracing.md, "Code that no path needs").
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 struct TracingVariant {
-    /// Colour indices computed (specialization constant 2).
+    /// Colour indices computed and voxel colours decoded (specialization constant 2).
     colors: bool,
     /// Shadow rays towards the sun traced (megakernel only: specialization constant 4).
     sun: bool,
@@ -165,11 +173,11 @@ impl GpuPathTracer {
         let make = |pass, spirv| self.make_pipeline(format, pass, spirv, &[]);
         let made = PtPipelines {
             generate: make("generate", shaders::RENDER_PT_GENERATE_BY_FORMAT[i])?,
-            shade: make("shade", shaders::RENDER_PT_SHADE_BY_FORMAT[i])?,
             shadow: make("shadow", shaders::RENDER_PT_SHADOW_BY_FORMAT[i])?,
             accumulate: make("accumulate", shaders::RENDER_PT_ACCUMULATE_BY_FORMAT[i])?,
             mega: Default::default(),
             extend: Default::default(),
+            shade: Default::default(),
         };
         // Another thread may have won the race: its pipelines are the same.
         Ok(slot.get_or_init(|| made))
@@ -192,31 +200,38 @@ impl GpuPathTracer {
         })
     }
 
-    /// The megakernel (`extend` false) or extend pass of `format` compiled for `variant` (the
-    /// extend pass ignores `variant.sun`: shadow rays are the shadow pass's), made on first use.
-    fn traversing<'a>(
+    /// `pass` of `format` compiled for `variant` (only the megakernel reads `variant.sun`:
+    /// the wavefront's shadow rays are the shadow pass's), made on first use.
+    fn variant_pipeline<'a>(
         &'a self,
         pipes: &'a PtPipelines,
         format: TraversalFormat,
-        extend: bool,
+        pass: VariantPass,
         variant: TracingVariant,
     ) -> Result<&'a ComputePipeline, GpuError> {
         let i = format.index();
-        let (slot, spirv) = match extend {
-            false => (
+        let (slot, spirv, name) = match pass {
+            VariantPass::Megakernel => (
                 &pipes.mega[variant.index()],
                 shaders::RENDER_PT_MEGA_BY_FORMAT[i],
+                "megakernel",
             ),
-            true => (
+            VariantPass::Extend => (
                 &pipes.extend[variant.colors as usize],
                 shaders::RENDER_PT_EXTEND_BY_FORMAT[i],
+                "extend",
+            ),
+            VariantPass::Shade => (
+                &pipes.shade[variant.colors as usize],
+                shaders::RENDER_PT_SHADE_BY_FORMAT[i],
+                "shade",
             ),
         };
         if let Some(p) = slot.get() {
             return Ok(p);
         }
-        // Constants 0, 1 and 3 are the megakernel's workgroup and paths per invocation (the
-        // extend pass has none of them: ignored).
+        // Constants 0, 1, 3 and 4 are the megakernel's workgroup, paths per invocation and sun
+        // (the wavefront passes have none of them: ignored).
         let spec = [
             WORKGROUP[0],
             WORKGROUP[1],
@@ -224,19 +239,15 @@ impl GpuPathTracer {
             PT_MEGA_PATHS,
             variant.sun as u32,
         ];
+        let mega = pass == VariantPass::Megakernel;
         let name = format!(
-            "{}{}{}",
-            if extend { "extend" } else { "megakernel" },
+            "{name}{}{}",
             if variant.colors {
                 ""
             } else {
                 ", no colour index"
             },
-            if variant.sun || extend {
-                ""
-            } else {
-                ", no sun"
-            },
+            if variant.sun || !mega { "" } else { ", no sun" },
         );
         let made = self.make_pipeline(format, &name, spirv, &spec)?;
         // Another thread may have won the race: its pipeline is the same.
@@ -385,7 +396,7 @@ impl GpuPathTracer {
                 1,
             ];
             cmd.begin_pass(&mut profiler, "pt megakernel");
-            let mega = self.traversing(pipes, format, false, variant(0))?;
+            let mega = self.variant_pipeline(pipes, format, VariantPass::Megakernel, variant(0))?;
             let r = cmd.dispatch(mega, groups, bytemuck::bytes_of(&push), &tables);
             cmd.end_pass(&mut profiler);
             cmd.barrier();
@@ -412,13 +423,14 @@ impl GpuPathTracer {
             cmd.fill_buffer(&w.flags, 0);
             cmd.fill_buffer(&w.shadow_count, 0);
             cmd.begin_pass(&mut profiler, "pt extend");
-            let extend = self.traversing(pipes, format, true, variant(k))?;
+            let extend = self.variant_pipeline(pipes, format, VariantPass::Extend, variant(k))?;
             let r = cmd.dispatch_indirect(extend, &w.ext_count, 4, push_bytes, &tables);
             cmd.end_pass(&mut profiler);
             r?;
             cmd.barrier();
             cmd.begin_pass(&mut profiler, "pt shade");
-            let r = cmd.dispatch_indirect(&pipes.shade, &w.ext_count, 4, push_bytes, &tables);
+            let shade = self.variant_pipeline(pipes, format, VariantPass::Shade, variant(k))?;
+            let r = cmd.dispatch_indirect(shade, &w.ext_count, 4, push_bytes, &tables);
             cmd.end_pass(&mut profiler);
             r?;
             self.primitives.record_indirect_args(

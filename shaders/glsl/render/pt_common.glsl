@@ -182,12 +182,15 @@ bool pt_needs_color_index(RenderParams p, PtParams pt) {
 }
 
 // Linear albedo of a hit: the uniform albedo (pt.env.w >= 0), the voxel's colour through the
-// sRGB -> linear table, or grey 0.6 without colours (like the raster shading).
+// sRGB -> linear table, or grey 0.6 without colours (like the raster shading). A variant
+// without colour indices (PT_COLOR_INDEX false) serves only renders that read no voxel colour
+// (the host's `needs_color_index`), so it compiles the colour decode out: lavapipe would run
+// its chunk search masked after every hit.
 vec3 pt_albedo(RenderParams p, PtParams pt, uint64_t color_index) {
     if (pt.env.w >= 0.0) {
         return vec3(pt.env.w);
     }
-    if ((p.flags & RENDER_FLAG_HAS_COLORS) == 0u) {
+    if (!PT_COLOR_INDEX || (p.flags & RENDER_FLAG_HAS_COLORS) == 0u) {
         return vec3(uintBitsToFloat(0x3f19999au)); // 0.6
     }
     uint rgba = color_index < p.color_count ? chunk_color(color_index) : 0xffffffffu;
