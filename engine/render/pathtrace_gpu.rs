@@ -111,8 +111,11 @@ struct PtPipelines {
 /// The passes made per [`TracingVariant`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum VariantPass {
+    /// `pt_mega.comp`: per colour index and sun.
     Megakernel,
+    /// `pt_extend.comp`: per colour index.
     Extend,
+    /// `pt_shade.comp`: per colour index (the colour decode of each hit).
     Shade,
 }
 
