@@ -21,7 +21,10 @@ void main() {
     vec3 dir = paths.p[index].dir.xyz;
     traverse_begin(p.root_level);
     Hit h;
-    bool first = push.bounce == 0u && push.sample_index == 0u && pt.first_hits != 0ul;
+    // Sample 0's bounce 0 runs with colour indices (the host's variant): the variant without
+    // them compiles the (masked) first-hit write out.
+    bool first = PT_COLOR_INDEX && push.bounce == 0u && push.sample_index == 0u &&
+                 pt.first_hits != 0ul;
     bool hit = trace_ray_indexed(origin, dir, TRAVERSE_T_UNBOUNDED, p.root_level,
                                  PT_COLOR_INDEX && (first || pt_needs_color_index(p, pt)), h);
     if (first) {

@@ -65,7 +65,9 @@ void main() {
             tracing = true;
         }
         Hit h;
-        bool first = k == 0u && push.sample_index == 0u && pt.first_hits != 0ul;
+        // First hits are written by sample 0, which the host always runs with colour indices:
+        // the variant without them compiles the (masked) write out.
+        bool first = PT_COLOR_INDEX && k == 0u && push.sample_index == 0u && pt.first_hits != 0ul;
         bool hit = trace_ray_indexed(origin, dir, TRAVERSE_T_UNBOUNDED, p.root_level,
                                      PT_COLOR_INDEX && (first || want_color), h);
         if (first) {
