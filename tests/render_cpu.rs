@@ -430,7 +430,8 @@ void main() {
     uvec2 px = gl_GlobalInvocationID.xy;
     if (px.x >= params.width || px.y >= params.height) return;
     bool hit;
-    vec4 c = shade_pixel(px, params, hit);
+    Hit h;
+    vec4 c = shade_pixel_hit(px, params, true, true, hit, h);
     out_rgba[px.y * params.width + px.x] = packUnorm4x8(c);
     out_hits[px.y * params.width + px.x] = hit ? 1u : 0u;
 }
