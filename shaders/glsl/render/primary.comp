@@ -90,7 +90,9 @@ void main() {
     if (push.hits != 0ul) {
         HitsRef(push.hits).h[i] = hit ? 1u : 0u;
     }
-    if (push.first_hits != 0ul) {
+    // Renders that write first hits run with the colour index (the host's variant): the variant
+    // without it compiles the (masked) write out.
+    if (PRIMARY_COLOR_INDEX && push.first_hits != 0ul) {
         FirstHit f;
         f.hit = hit ? 1u : 0u;
         f.t_bits = hit ? floatBitsToUint(h.t) : 0u;
