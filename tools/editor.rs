@@ -185,7 +185,7 @@ pub fn editor(args: &EditorArgs) -> Result<()> {
     if !(args.radius > 0.0 && args.radius <= MAX_RADIUS) {
         bail!("--radius {} out of range (0, {MAX_RADIUS}]", args.radius);
     }
-    PtLighting::new(args.env, args.sun)?;
+    let lighting = PtLighting::new(args.env, args.sun)?;
     for path in [
         &args.status_file,
         &args.save,
@@ -216,6 +216,7 @@ pub fn editor(args: &EditorArgs) -> Result<()> {
     let mut app = App {
         args,
         initial: Some((dag, materials)),
+        lighting,
         steps,
         running: None,
         context: None,
@@ -306,6 +307,8 @@ struct App<'a> {
     args: &'a EditorArgs,
     /// The scene until the window opens.
     initial: Option<(Svdag, Option<Materials>)>,
+    /// Path tracing's light of `--env` / `--sun` (checked before the window opens).
+    lighting: PtLighting,
     steps: record::Playlist,
     running: Option<Running>,
     context: Option<Arc<GpuContext>>,
@@ -435,8 +438,7 @@ impl App<'_> {
             bounces: args.bounces,
             spp: args.spp,
             max_samples: args.max_samples,
-            // Checked in `editor` before the window opened.
-            lighting: PtLighting::new(args.env, args.sun)?,
+            lighting: self.lighting,
             message: None,
             save_path: args
                 .save
