@@ -32,8 +32,8 @@ use super::tool::{self, CopyRegion, Shape, Tool};
 use super::walk::{self, StoredDag};
 use crate::dag::{DagError, Svdag};
 use crate::gpu::{
-    shaders, Buffer, BufferSlice, Commands, ComputePipeline, ComputePipelineDesc, GpuContext,
-    GpuError, MemLocation, Profiler, Readback,
+    made_once, shaders, Buffer, BufferSlice, Commands, ComputePipeline, ComputePipelineDesc,
+    GpuContext, GpuError, MemLocation, Profiler, Readback,
 };
 use crate::hash::claim::{ClaimTable, Claims};
 use crate::hash::dedup::{DedupError, DedupResult, GpuDedup};
@@ -623,7 +623,8 @@ impl GpuHashDag {
     ) -> Result<f64, GpuDagError> {
         let start = std::time::Instant::now();
         let ctx = &self.ctx;
-        let mut kinds: Vec<u32> = (tools.into_iter())
+        let mut kinds: Vec<u32> = tools
+            .into_iter()
             .map(|tool| (ToolKind::of(tool) as u32) << TOOL_SHIFT)
             .collect();
         kinds.sort_unstable();
@@ -2145,18 +2146,16 @@ impl ToolPipelines {
         let cell = self.made.get(tool).ok_or_else(|| {
             GpuError::InvalidArgument(format!("{}: tool kind {tool} out of range", self.name))
         })?;
-        if let Some(pipeline) = cell.get() {
-            return Ok(pipeline);
-        }
-        let spec = [tool as u32, self.materials, self.lanes.unwrap_or(0)];
-        let pipeline = ctx.create_compute_pipeline(&ComputePipelineDesc {
-            name: self.name,
-            spirv: self.spirv,
-            spec_constants: &spec[..2 + self.lanes.is_some() as usize],
-            push_constant_size: self.push_constant_size,
-            bindings: &[],
-        })?;
-        Ok(cell.get_or_init(|| pipeline))
+        made_once(cell, || {
+            let spec = [tool as u32, self.materials, self.lanes.unwrap_or(0)];
+            ctx.create_compute_pipeline(&ComputePipelineDesc {
+                name: self.name,
+                spirv: self.spirv,
+                spec_constants: &spec[..2 + self.lanes.is_some() as usize],
+                push_constant_size: self.push_constant_size,
+                bindings: &[],
+            })
+        })
     }
 }
 

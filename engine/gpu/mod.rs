@@ -43,7 +43,7 @@ pub use commands::{Bound, Commands, Readback, Submission};
 pub use context::{DeviceInfo, DeviceType, GpuContext, GpuOptions, GpuStats, REQUIRED_FEATURES};
 pub use frame::{FrameRing, DEFAULT_FRAMES_IN_FLIGHT};
 pub use memory::{Buffer, BufferSlice, Image, MemLocation, TexelBuffer, WordTexels};
-pub use pipeline::{BindingKind, ComputePipeline, ComputePipelineDesc};
+pub use pipeline::{made_once, BindingKind, ComputePipeline, ComputePipelineDesc};
 pub use profiler::{CpuSpan, PassTiming, Profiler};
 pub use surface::Surface;
 pub use swapchain::{FrameSlot, OverlayFrame, Presenter, PresenterOptions, PresenterStats};

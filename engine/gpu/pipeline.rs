@@ -1,7 +1,7 @@
 //! Compute pipelines from embedded SPIR-V, with specialization and push constants.
 
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 use ash::vk;
 
@@ -47,6 +47,20 @@ impl BindingKind {
             BindingKind::TexelBuffer => vk::DescriptorType::UNIFORM_TEXEL_BUFFER,
         }
     }
+}
+
+/// The value in `slot` (pipelines made on first use), made by `make` unless it is there. Two
+/// threads may both make it: the first one stored is kept and the other dropped, which is right
+/// for anything made from the same description.
+pub fn made_once<T>(
+    slot: &OnceLock<T>,
+    make: impl FnOnce() -> Result<T, GpuError>,
+) -> Result<&T, GpuError> {
+    if let Some(made) = slot.get() {
+        return Ok(made);
+    }
+    let made = make()?;
+    Ok(slot.get_or_init(|| made))
 }
 
 /// A compute pipeline and its layout; released on drop once the GPU is done with it.

@@ -25,7 +25,7 @@ use crate::dag::Svdag;
 use crate::edit::gpu::GpuHashDag;
 use crate::edit::item::{Root, MATERIAL_COUNT, MAX_ITEM_WORDS, MIN_ITEM_WORDS, TABLE_COUNT};
 use crate::gpu::{
-    shaders, BindingKind, Bound, Buffer, Commands, ComputePipeline, ComputePipelineDesc,
+    made_once, shaders, BindingKind, Bound, Buffer, Commands, ComputePipeline, ComputePipelineDesc,
     GpuContext, GpuError, Image, MemLocation, Profiler, TexelBuffer,
 };
 
@@ -234,35 +234,31 @@ impl GpuRenderer {
         format: TraversalFormat,
         variant: PrimaryVariant,
     ) -> Result<&ComputePipeline, GpuError> {
-        let slot = &self.primary[format.index()][variant.index()];
-        if let Some(p) = slot.get() {
-            return Ok(p);
-        }
-        let name = format!(
-            "primary rays ({}{}{})",
-            format.name(),
-            if variant.colors {
-                ""
-            } else {
-                ", no colour index"
-            },
-            if variant.shadows { "" } else { ", no shadows" },
-        );
-        let spec = [
-            WORKGROUP[0],
-            WORKGROUP[1],
-            variant.colors as u32,
-            variant.shadows as u32,
-        ];
-        let pipeline = self.ctx.create_compute_pipeline(&ComputePipelineDesc {
-            name: &name,
-            spirv: shaders::RENDER_PRIMARY_BY_FORMAT[format.index()],
-            spec_constants: &spec,
-            push_constant_size: std::mem::size_of::<PrimaryPush>() as u32,
-            bindings: &[BindingKind::StorageImage, BindingKind::TexelBuffer],
-        })?;
-        // Another thread may have won the race: its pipeline is the same.
-        Ok(slot.get_or_init(|| pipeline))
+        made_once(&self.primary[format.index()][variant.index()], || {
+            let name = format!(
+                "primary rays ({}{}{})",
+                format.name(),
+                if variant.colors {
+                    ""
+                } else {
+                    ", no colour index"
+                },
+                if variant.shadows { "" } else { ", no shadows" },
+            );
+            let spec = [
+                WORKGROUP[0],
+                WORKGROUP[1],
+                variant.colors as u32,
+                variant.shadows as u32,
+            ];
+            self.ctx.create_compute_pipeline(&ComputePipelineDesc {
+                name: &name,
+                spirv: shaders::RENDER_PRIMARY_BY_FORMAT[format.index()],
+                spec_constants: &spec,
+                push_constant_size: std::mem::size_of::<PrimaryPush>() as u32,
+                bindings: &[BindingKind::StorageImage, BindingKind::TexelBuffer],
+            })
+        })
     }
 
     /// Uploads `dag.words`, its colours (as one raw chunk, or as lossless chunks when they do not

@@ -23,7 +23,7 @@ use super::pathtrace::{srgb_lut, PathTraceError, PtImage, PtSettings};
 use crate::compute::{Primitives, ScanScratch, COUNT_ARGS_BYTES};
 use crate::dag::Svdag;
 use crate::gpu::{
-    shaders, BindingKind, Bound, Buffer, Commands, ComputePipeline, ComputePipelineDesc,
+    made_once, shaders, BindingKind, Bound, Buffer, Commands, ComputePipeline, ComputePipelineDesc,
     GpuContext, GpuError, MemLocation, Profiler,
 };
 
@@ -168,22 +168,18 @@ impl GpuPathTracer {
 
     /// The pipelines of `format`, created unless they exist.
     fn pipelines(&self, format: TraversalFormat) -> Result<&PtPipelines, GpuError> {
-        let slot = &self.pipelines[format.index()];
-        if let Some(p) = slot.get() {
-            return Ok(p);
-        }
         let i = format.index();
-        let make = |pass, spirv| self.make_pipeline(format, pass, spirv, &[]);
-        let made = PtPipelines {
-            generate: make("generate", shaders::RENDER_PT_GENERATE_BY_FORMAT[i])?,
-            shadow: make("shadow", shaders::RENDER_PT_SHADOW_BY_FORMAT[i])?,
-            accumulate: make("accumulate", shaders::RENDER_PT_ACCUMULATE_BY_FORMAT[i])?,
-            mega: Default::default(),
-            extend: Default::default(),
-            shade: Default::default(),
-        };
-        // Another thread may have won the race: its pipelines are the same.
-        Ok(slot.get_or_init(|| made))
+        made_once(&self.pipelines[i], || {
+            let make = |pass, spirv| self.make_pipeline(format, pass, spirv, &[]);
+            Ok(PtPipelines {
+                generate: make("generate", shaders::RENDER_PT_GENERATE_BY_FORMAT[i])?,
+                shadow: make("shadow", shaders::RENDER_PT_SHADOW_BY_FORMAT[i])?,
+                accumulate: make("accumulate", shaders::RENDER_PT_ACCUMULATE_BY_FORMAT[i])?,
+                mega: Default::default(),
+                extend: Default::default(),
+                shade: Default::default(),
+            })
+        })
     }
 
     /// A pipeline of pass `pass` of `format`'s traversal variant.
@@ -230,31 +226,28 @@ impl GpuPathTracer {
                 "shade",
             ),
         };
-        if let Some(p) = slot.get() {
-            return Ok(p);
-        }
-        // Constants 0, 1, 3 and 4 are the megakernel's workgroup, paths per invocation and sun
-        // (the wavefront passes have none of them: ignored).
-        let spec = [
-            WORKGROUP[0],
-            WORKGROUP[1],
-            variant.colors as u32,
-            PT_MEGA_PATHS,
-            variant.sun as u32,
-        ];
-        let mega = pass == VariantPass::Megakernel;
-        let name = format!(
-            "{name}{}{}",
-            if variant.colors {
-                ""
-            } else {
-                ", no colour index"
-            },
-            if variant.sun || !mega { "" } else { ", no sun" },
-        );
-        let made = self.make_pipeline(format, &name, spirv, &spec)?;
-        // Another thread may have won the race: its pipeline is the same.
-        Ok(slot.get_or_init(|| made))
+        made_once(slot, || {
+            // Constants 0, 1, 3 and 4 are the megakernel's workgroup, paths per invocation and
+            // sun (the wavefront passes have none of them: ignored).
+            let spec = [
+                WORKGROUP[0],
+                WORKGROUP[1],
+                variant.colors as u32,
+                PT_MEGA_PATHS,
+                variant.sun as u32,
+            ];
+            let mega = pass == VariantPass::Megakernel;
+            let name = format!(
+                "{name}{}{}",
+                if variant.colors {
+                    ""
+                } else {
+                    ", no colour index"
+                },
+                if variant.sun || !mega { "" } else { ", no sun" },
+            );
+            self.make_pipeline(format, &name, spirv, &spec)
+        })
     }
 
     /// Allocates the accumulation of a `settings`-sized render of `scene` for `mode` and writes

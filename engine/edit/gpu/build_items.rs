@@ -13,7 +13,7 @@
 use std::sync::{Arc, OnceLock};
 
 use crate::gpu::{
-    shaders, BindingKind, Bound, Buffer, Commands, ComputePipeline, ComputePipelineDesc,
+    made_once, shaders, BindingKind, Bound, Buffer, Commands, ComputePipeline, ComputePipelineDesc,
     GpuContext, GpuError, MemLocation, WordTexels,
 };
 
@@ -101,11 +101,7 @@ impl BuildItemsPipelines {
         if texels {
             return Ok(&self.by_texels);
         }
-        if let Some(pipeline) = self.by_address.get() {
-            return Ok(pipeline);
-        }
-        let pipeline = Self::make(ctx, self.materials, false)?;
-        Ok(self.by_address.get_or_init(|| pipeline))
+        made_once(&self.by_address, || Self::make(ctx, self.materials, false))
     }
 
     fn make(
