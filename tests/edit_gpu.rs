@@ -1105,7 +1105,8 @@ fn random_tool_sequences_match_the_cpu_editor_and_brute_force() {
 
 /// Fixed cases the random sequences rarely hit: a fill walled in on one side (and one started
 /// on a solid voxel), paint over full nodes of another material, a copy with a mirror onto a
-/// partly solid destination, in a 32^3 scene with materials.
+/// partly solid destination, leaves of several materials edited in part, in a 32^3 scene with
+/// materials.
 #[test]
 fn fixed_tool_cases_match_the_cpu_editor_and_brute_force() {
     let ctx = common::gpu();
@@ -1155,6 +1156,28 @@ fn fixed_tool_cases_match_the_cpu_editor_and_brute_force() {
         })),
         Step::Undo,
         Step::Redo,
+        // Leaves of three materials, then edits that keep part of a leaf: the kept voxels take
+        // their materials by rank in the stored leaf.
+        Step::Edit(Tool::Paint {
+            center: [5.0, 5.0, 5.0],
+            radius: 2.0,
+            material: 4,
+        }),
+        Step::Edit(Tool::Paint {
+            center: [6.5, 6.5, 6.5],
+            radius: 1.5,
+            material: 6,
+        }),
+        Step::Edit(Tool::Remove {
+            shape: Shape::Sphere,
+            center: [4.0, 4.0, 4.0],
+            radius: 1.2,
+        }),
+        Step::Edit(Tool::Paint {
+            center: [7.0, 4.0, 4.0],
+            radius: 2.0,
+            material: 9,
+        }),
         Step::Edit(Tool::Paint {
             center: [16.0, 16.0, 16.0],
             radius: 100.0,

@@ -28,42 +28,64 @@ void main() {
         EditItem old_leaf;
         uint old_lo = 0u;
         uint old_hi = 0u;
+        // The stored leaf's material words (as many as it has), read once for its 64 voxels: a
+        // read at a per-lane address is a loop over the lanes on lavapipe, which the 64 voxels'
+        // reads of their own words each ran.
+        uvec4 mats_lo = uvec4(0u);
+        uvec4 mats_hi = uvec4(0u);
         if (stored) {
             old_leaf = edit_item(e.w);
             old_lo = edit_item_read(old_leaf, 0u);
             old_hi = edit_item_read(old_leaf, 1u);
+            if (materials) {
+                [[unroll]] for (uint k = 0u; k < 4u; ++k) {
+                    if (2u + k < old_leaf.words) mats_lo[k] = edit_item_read(old_leaf, 2u + k);
+                    if (6u + k < old_leaf.words) mats_hi[k] = edit_item_read(old_leaf, 6u + k);
+                }
+            }
         }
         uint lo = 0u;
         uint hi = 0u;
-        // Left to the compiler (Mesa unrolls the inner loop): unrolled by hand, the 64 voxels'
-        // code took lavapipe ~40 ms more to compile, on the first edit with each tool.
+        // Voxel v = 8 w + k: its coordinates' low bits are k's, their high bits w's. The eight
+        // voxels of a w are unrolled (their coordinates, bits and shifts then constants or
+        // uniform; left to Mesa, the loop stayed a loop of ~385 instructions per voxel on
+        // lavapipe), the eight w are not (unrolling all 64 cost ~40 ms more compile per tool).
+        // `rank` counts the stored leaf's voxels before v, the index of v's material.
+        uint rank = 0u;
         for (uint w = 0u; w < 8u; ++w) {
+            uint old_bits = ((w < 4u ? old_lo : old_hi) >> (8u * (w & 3u))) & 0xffu;
+            uvec3 high = uvec3(w & 1u, w >> 1u & 1u, w >> 2u & 1u) << 1u;
+            uint new_bits = 0u;
             uint mats = 0u;
-            for (uint k = 0u; k < 8u; ++k) {
-                uint v = w * 8u + k;
-                uvec3 local = uvec3(v & 1u | (v >> 2u & 2u), v >> 1u & 1u | (v >> 3u & 2u), v >> 2u & 1u | (v >> 4u & 2u));
+            [[unroll]] for (uint k = 0u; k < 8u; ++k) {
+                uvec3 local = high | uvec3(k & 1u, k >> 1u & 1u, k >> 2u & 1u);
+                bool was_set = (old_bits >> k & 1u) != 0u;
                 uint old;
                 if (!stored) {
                     old = e.w == EDIT_EMPTY ? EDIT_EMPTY : e.w & 15u;
-                } else if (((v < 32u ? old_lo >> v : old_hi >> (v - 32u)) & 1u) == 0u) {
+                } else if (!was_set) {
                     old = EDIT_EMPTY;
                 } else if (!materials) {
                     old = 0u;
                 } else {
                     // Materials are packed by rank among the set bits (item.rs `Leaf`).
-                    uint rank = v < 32u ? bitCount(old_lo & ((1u << v) - 1u))
-                                        : bitCount(old_lo) + bitCount(old_hi & ((1u << (v - 32u)) - 1u));
-                    old = edit_item_read(old_leaf, 2u + rank / 8u) >> (4u * (rank % 8u)) & 15u;
+                    uint r = rank / 8u;
+                    uvec4 quad = r < 4u ? mats_lo : mats_hi;
+                    uint word = (r & 2u) != 0u ? ((r & 1u) != 0u ? quad.w : quad.z)
+                                                : ((r & 1u) != 0u ? quad.y : quad.x);
+                    old = word >> (4u * (rank % 8u)) & 15u;
                 }
+                rank += was_set ? 1u : 0u;
                 uint state = edit_new_voxel(e.xyz + local, old);
                 if (state != EDIT_EMPTY) {
-                    if (v < 32u) {
-                        lo |= 1u << v;
-                    } else {
-                        hi |= 1u << (v - 32u);
-                    }
+                    new_bits |= 1u << k;
                     mats |= state << (4u * k);
                 }
+            }
+            if (w < 4u) {
+                lo |= new_bits << (8u * w);
+            } else {
+                hi |= new_bits << (8u * (w - 4u));
             }
             if (materials) leaves.w[i * rec + 2u + w] = mats;
         }
