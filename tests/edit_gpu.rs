@@ -1118,6 +1118,13 @@ fn fixed_tool_cases_match_the_cpu_editor_and_brute_force() {
             material,
         })
     };
+    let paint = |center, radius, material| {
+        Step::Edit(Tool::Paint {
+            center,
+            radius,
+            material,
+        })
+    };
     let steps = vec![
         add(Shape::Cube, [16.0, 16.0, 16.0], 40.0, 2),
         Step::Edit(Tool::Remove {
@@ -1137,11 +1144,7 @@ fn fixed_tool_cases_match_the_cpu_editor_and_brute_force() {
             radius: 3.0,
             material: 9,
         }),
-        Step::Edit(Tool::Paint {
-            center: [24.0, 8.0, 8.0],
-            radius: 11.0,
-            material: 3,
-        }),
+        paint([24.0, 8.0, 8.0], 11.0, 3),
         Step::Edit(Tool::Remove {
             shape: Shape::Sphere,
             center: [24.0, 24.0, 24.0],
@@ -1158,31 +1161,15 @@ fn fixed_tool_cases_match_the_cpu_editor_and_brute_force() {
         Step::Redo,
         // Leaves of three materials, then edits that keep part of a leaf: the kept voxels take
         // their materials by rank in the stored leaf.
-        Step::Edit(Tool::Paint {
-            center: [5.0, 5.0, 5.0],
-            radius: 2.0,
-            material: 4,
-        }),
-        Step::Edit(Tool::Paint {
-            center: [6.5, 6.5, 6.5],
-            radius: 1.5,
-            material: 6,
-        }),
+        paint([5.0, 5.0, 5.0], 2.0, 4),
+        paint([6.5, 6.5, 6.5], 1.5, 6),
         Step::Edit(Tool::Remove {
             shape: Shape::Sphere,
             center: [4.0, 4.0, 4.0],
             radius: 1.2,
         }),
-        Step::Edit(Tool::Paint {
-            center: [7.0, 4.0, 4.0],
-            radius: 2.0,
-            material: 9,
-        }),
-        Step::Edit(Tool::Paint {
-            center: [16.0, 16.0, 16.0],
-            radius: 100.0,
-            material: 1,
-        }),
+        paint([7.0, 4.0, 4.0], 2.0, 9),
+        paint([16.0, 16.0, 16.0], 100.0, 1),
     ];
     for (name, materials, variant, word_views) in [
         (
