@@ -3,11 +3,6 @@
 // reads of the level's inputs: input_word(i), input_pair(k), below_result(j) and
 // below_resolve(level, slots, j, r) (see edit/build_items.comp).
 
-// Leaf voxels 8g..8g+7 (a 2^3 sub-block) of the masks lo (voxels 0-31) and hi (32-63).
-uint leaf_byte(uint lo, uint hi, uint g) {
-    return ((g < 4u ? lo : hi) >> (8u * (g & 3u))) & 0xffu;
-}
-
 // Builds the items of nodes start, start + stride, ... of the level (`push`).
 void edit_build_items_pass(uint start, uint stride) {
     Words results = Words(push.dst);

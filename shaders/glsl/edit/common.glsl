@@ -287,6 +287,11 @@ bool edit_cube_all_outside(uvec3 p, uint side) {
 
 // ---- reading the scene before the edit ----
 
+// Leaf voxels 8g..8g+7 (a 2^3 sub-block) of the masks lo (voxels 0-31) and hi (32-63).
+uint leaf_byte(uint lo, uint hi, uint g) {
+    return ((g < 4u ? lo : hi) >> (8u * (g & 3u))) & 0xffu;
+}
+
 // State of voxel p (grid coordinates) under the stored value v of a level-`level` cube that
 // contains it: EDIT_EMPTY, or the voxel's material.
 uint edit_lookup(uint v, uint level, uvec3 p) {

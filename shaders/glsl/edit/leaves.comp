@@ -53,7 +53,7 @@ void main() {
         // `rank` counts the stored leaf's voxels before v, the index of v's material.
         uint rank = 0u;
         for (uint w = 0u; w < 8u; ++w) {
-            uint old_bits = ((w < 4u ? old_lo : old_hi) >> (8u * (w & 3u))) & 0xffu;
+            uint old_bits = leaf_byte(old_lo, old_hi, w);
             uvec3 high = uvec3(w & 1u, w >> 1u & 1u, w >> 2u & 1u) << 1u;
             uint new_bits = 0u;
             uint mats = 0u;
