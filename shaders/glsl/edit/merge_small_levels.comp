@@ -74,13 +74,14 @@ void main() {
         edit_level = EditLevels(chain.edit_levels).level[l];
         edit_build_items_pass(lane, lanes);
         pass_done();
+        // The batch's entries and counts read once for both passes (the claim changes no
+        // count). Every item of a mixed batch takes its size's entry (hash_select), so the
+        // insert needs no fresh copy of the batch's parameters.
         push = batches.entry[l];
-        hash_claim_pass();
+        uint batch_count = hash_count();
+        hash_claim_pass(batch_count);
         pass_done();
-        // The insert starts from the batch's parameters again, as its own dispatch would.
-        push = batches.entry[l];
-        ITEM_WORDS = SPEC_ITEM_WORDS;
-        hash_insert_pass();
+        hash_insert_pass(batch_count);
         pass_done();
         l += 1u;
         if (l >= chain.levels) break;

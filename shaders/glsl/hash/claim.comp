@@ -19,5 +19,5 @@
 #include "hash/claim_pass.glsl"
 
 void main() {
-    hash_claim_pass();
+    hash_claim_pass(hash_count());
 }

@@ -21,12 +21,14 @@
 #include "hash/insert_pass.glsl"
 
 void main() {
-    hash_claim_pass();
+    // Both passes take the batch's items as counted here (the claim changes no count).
+    uint batch_count = hash_count();
+    hash_claim_pass(batch_count);
     // Every claim (handles, representatives, claim-table copies) before any insert reads them.
     memoryBarrierBuffer();
     barrier();
     // The insert starts from the push constants again, as its own dispatch would.
     push = pc.batch;
     ITEM_WORDS = SPEC_ITEM_WORDS;
-    hash_insert_pass();
+    hash_insert_pass(batch_count);
 }

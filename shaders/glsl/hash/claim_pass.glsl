@@ -2,10 +2,9 @@
 // hash/claim_insert.comp). The includer includes shared/hash_layout.h, hash/common.glsl,
 // hash/slab.glsl and hash/claims.glsl first.
 
-// The pass: every item of the batch (grid stride), single lanes.
-void hash_claim_pass() {
+// The pass: every item of the batch (grid stride), single lanes; `batch_count` from hash_count.
+void hash_claim_pass(uint batch_count) {
     // Single lanes only (TEAM == 1): the host makes this pipeline for no other team size.
-    uint batch_count = hash_count();
     // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
     uint k = team_index();
     if (k < batch_count) for (;;) {

@@ -71,7 +71,18 @@ uint hash_count() {
     HashEntries entries = HashEntries(push.mixed);
     [[unroll]] for (uint s = 0u; s < HASH_MIXED_SIZES; ++s) {
         g_mixed_counts[s] = counts.w[s];
+#ifdef HASH_PARAMS_IN_MEMORY
+        // With params in memory (edit/merge_small_levels.comp) this runs inside the includer's
+        // loop, where lavapipe reads every field lane by lane, skipping masked lanes: the `if`
+        // saves the reads of the sizes without items (hash_select never picks them). At the
+        // top of main (push constants) a read is one load for all lanes, but inside an `if`
+        // it would go lane by lane.
+        if (g_mixed_counts[s] != 0u) {
+            g_mixed_entries[s] = entries.entry[s];
+        }
+#else
         g_mixed_entries[s] = entries.entry[s];
+#endif
         total += g_mixed_counts[s];
     }
     return total;

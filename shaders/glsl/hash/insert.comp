@@ -24,5 +24,5 @@
 #include "hash/insert_pass.glsl"
 
 void main() {
-    hash_insert_pass();
+    hash_insert_pass(hash_count());
 }

@@ -235,14 +235,13 @@ void insert_batch_item(uint i) {
     }
 }
 
-// The pass: every item of the batch (grid stride), one per team.
-void hash_insert_pass() {
+// The pass: every item of the batch (grid stride), one per team; `batch_count` from hash_count.
+void hash_insert_pass(uint batch_count) {
     if (!team_size_ok()) {
         HashStatus(push.status).subgroup_mismatch = gl_SubgroupSize;
         return;
     }
     uint stride = team_count();
-    uint batch_count = hash_count();
     // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe").
     uint k = team_index();
     if (k < batch_count) for (;;) {
