@@ -43,16 +43,14 @@ void edit_build_items_pass(uint start, uint stride) {
                     mats[g] = input_word(i * rec + 2u + g);
                 }
                 first = mats[0] & 15u;
-                // The set voxels whose material differs from voxel 0's: a nibble-wise compare.
+                // The set voxels whose material differs from voxel 0's: a nibble-wise compare,
+                // each voxel's bit of the mask moved to bit 0 of its nibble.
                 uint differ = 0u;
                 [[unroll]] for (uint g = 0u; g < 8u; ++g) {
                     uint x = mats[g] ^ (first * 0x11111111u);
                     x = (x | (x >> 1u)) & 0x55555555u;
                     x = (x | (x >> 2u)) & 0x11111111u;
-                    uint set = leaf_byte(lo, hi, g);
-                    [[unroll]] for (uint b = 0u; b < 8u; ++b) {
-                        differ |= (x >> (4u * b)) & (set >> b) & 1u;
-                    }
+                    differ |= x & leaf_byte_nibbles(leaf_byte(lo, hi, g));
                 }
                 one_material = differ == 0u;
                 words = 2u + (uint(bitCount(lo)) + uint(bitCount(hi)) + 7u) / 8u;

@@ -292,6 +292,13 @@ uint leaf_byte(uint lo, uint hi, uint g) {
     return ((g < 4u ? lo : hi) >> (8u * (g & 3u))) & 0xffu;
 }
 
+// Bit b of a leaf byte moved to bit 4b (bit 0 of voxel b's material nibble).
+uint leaf_byte_nibbles(uint byte) {
+    uint s = (byte | (byte << 12u)) & 0x000F000Fu;
+    s = (s | (s << 6u)) & 0x03030303u;
+    return (s | (s << 3u)) & 0x11111111u;
+}
+
 // State of voxel p (grid coordinates) under the stored value v of a level-`level` cube that
 // contains it: EDIT_EMPTY, or the voxel's material.
 uint edit_lookup(uint v, uint level, uvec3 p) {
