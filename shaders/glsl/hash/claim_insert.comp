@@ -21,14 +21,13 @@
 #include "hash/insert_pass.glsl"
 
 void main() {
-    // Both passes take the batch's items as counted here (the claim changes no count).
+    // Both passes take the batch's items as counted here (the claim changes no count). Every
+    // item of a mixed batch takes its size's entry (hash_select), so the insert needs no fresh
+    // copy of the push constants (as in edit/merge_small_levels.comp).
     uint batch_count = hash_count();
     hash_claim_pass(batch_count);
     // Every claim (handles, representatives, claim-table copies) before any insert reads them.
     memoryBarrierBuffer();
     barrier();
-    // The insert starts from the push constants again, as its own dispatch would.
-    push = pc.batch;
-    ITEM_WORDS = SPEC_ITEM_WORDS;
     hash_insert_pass(batch_count);
 }
