@@ -44,6 +44,9 @@ pub struct Buffer {
     pub(crate) raw: vk::Buffer,
     allocation: Option<Allocation>,
     size: u64,
+    /// Bytes of the Vulkan buffer: `size`, rounded up to the size class, plus the slack of
+    /// [`texel_view_slack`].
+    capacity: u64,
     address: u64,
     name: String,
     location: MemLocation,
@@ -64,6 +67,36 @@ const RECYCLE_MIN_BYTES: u64 = 256;
 /// The size class of a `size`-byte buffer, `None` when it is too large to be reused.
 pub(crate) fn size_class(size: u64) -> Option<u64> {
     (size <= RECYCLE_MAX_BYTES).then(|| size.next_power_of_two().max(RECYCLE_MIN_BYTES))
+}
+
+/// Slack after a buffer's `base` bytes (its size class, or its size when it has none) in the
+/// Vulkan buffer: at least [`TEXEL_VIEW_SLACK`] (room for [`texel_view_range`]) and such that
+/// the Vulkan buffer's size is never a power of two. llvmpipe (lavapipe) compiles a pipeline's
+/// native code per combination of its bound texel views' static state, which includes whether
+/// the buffer's size is a power of two and whether bits 8-15 of the view's byte range are all
+/// zero (`lp_sampler_static_texture_state` reads them as the view's last mip level), so views
+/// of buffers of varying sizes made the edit's `build_items` compile anew (~0.1 s each) in
+/// the middle of loads and first edits (docs/gpu.md, "One native variant per texel binding").
+fn texel_view_slack(base: u64) -> u64 {
+    if (base + TEXEL_VIEW_SLACK).is_power_of_two() {
+        2 * TEXEL_VIEW_SLACK
+    } else {
+        TEXEL_VIEW_SLACK
+    }
+}
+
+/// Bytes a texel view may reach past the buffer's own size ([`texel_view_range`]).
+const TEXEL_VIEW_SLACK: u64 = 256;
+
+/// The byte range of a texel view of a buffer's first `bytes` bytes: `bytes`, or with bit 8
+/// set where its bits 8-15 are all zero (see [`texel_view_slack`]), so every view has the
+/// same static state on llvmpipe.
+fn texel_view_range(bytes: u64) -> u64 {
+    if (bytes >> 8) & 0xff == 0 {
+        bytes | 0x100
+    } else {
+        bytes
+    }
 }
 
 impl std::fmt::Debug for Buffer {
@@ -275,7 +308,7 @@ impl GpuContext {
         let texels = buffer.size / 4;
         self.check_texels(&format!("word view of '{}'", buffer.name), texels)?;
         Ok(WordTexels {
-            view: self.texel_view(buffer, vk::Format::R32_UINT, texels * 4)?,
+            view: self.texel_view(buffer, vk::Format::R32_UINT, texels)?,
             ctx: Arc::clone(self),
             texels,
         })
@@ -293,14 +326,30 @@ impl GpuContext {
         Ok(())
     }
 
-    /// A uniform texel buffer view of the first `range` bytes of `buffer` in `format` (a
-    /// format whose uniform texel buffer support Vulkan requires), named after the buffer.
+    /// A uniform texel buffer view of the first `texels` texels of `buffer` in `format` (a
+    /// format whose uniform texel buffer support Vulkan requires: 4 or 8 bytes a texel),
+    /// named after the buffer. Its range reaches into the buffer's slack where
+    /// [`texel_view_range`] asks for it and the device takes the texels.
     fn texel_view(
         &self,
         buffer: &Buffer,
         format: vk::Format,
-        range: u64,
+        texels: u64,
     ) -> Result<vk::BufferView, GpuError> {
+        let texel_bytes = if format == vk::Format::R32G32_UINT {
+            8
+        } else {
+            4
+        };
+        let bytes = texels * texel_bytes;
+        let stable = texel_view_range(bytes);
+        let range = if stable <= buffer.capacity
+            && stable / texel_bytes <= self.info().max_texel_buffer_elements as u64
+        {
+            stable
+        } else {
+            bytes
+        };
         let info = vk::BufferViewCreateInfo::default()
             .buffer(buffer.raw)
             .format(format)
@@ -386,6 +435,8 @@ impl GpuContext {
             });
         }
         let class = size_class(size);
+        let base = class.unwrap_or(size);
+        let capacity = (base + texel_view_slack(base)).min(max);
         let (raw, allocation, address) = match class.and_then(|c| self.reuse_buffer(c, location)) {
             Some(free) => {
                 // Renamed only where validation messages quote names: naming costs as much
@@ -396,7 +447,7 @@ impl GpuContext {
                 free
             }
             None => {
-                let new = self.raw_buffer(name, class.unwrap_or(size), location.to_allocator())?;
+                let new = self.raw_buffer(name, capacity, location.to_allocator())?;
                 self.set_name(new.0, name);
                 new
             }
@@ -405,6 +456,7 @@ impl GpuContext {
             raw,
             allocation: Some(allocation),
             size,
+            capacity,
             address,
             name: name.to_string(),
             location,
@@ -522,7 +574,7 @@ impl GpuContext {
         self.check_texels(&format!("texel buffer '{name}'"), texels.len() as u64)?;
         let buffer = self.upload(name, texels)?;
         Ok(TexelBuffer {
-            view: self.texel_view(&buffer, vk::Format::R32G32_UINT, buffer.size)?,
+            view: self.texel_view(&buffer, vk::Format::R32G32_UINT, texels.len() as u64)?,
             buffer,
             texels: texels.len() as u64,
         })
@@ -645,5 +697,39 @@ pub(crate) fn color_range() -> vk::ImageSubresourceRange {
         level_count: 1,
         base_array_layer: 0,
         layer_count: 1,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every Vulkan buffer size and every texel view range of it have the same llvmpipe static
+    /// state (size not a power of two, range bits 8-15 not all zero), and the view covers the
+    /// buffer's bytes without leaving the Vulkan buffer.
+    #[test]
+    fn texel_views_of_every_size_share_one_static_state() {
+        let sizes = (1..=70_000u64)
+            .step_by(4)
+            .chain((8..32).flat_map(|k| [(1u64 << k) - 4, 1 << k, (1 << k) + 4]));
+        for size in sizes {
+            let base = size_class(size).unwrap_or(size);
+            let capacity = base + texel_view_slack(base);
+            assert!(
+                !capacity.is_power_of_two(),
+                "size {size}: capacity {capacity}"
+            );
+            let range = texel_view_range(size);
+            assert_ne!((range >> 8) & 0xff, 0, "size {size}: range {range}");
+            assert!(
+                range >= size && range <= capacity,
+                "size {size}: {range}, {capacity}"
+            );
+            assert_eq!(
+                range % 8,
+                size % 8,
+                "size {size}: the texel size still divides it"
+            );
+        }
     }
 }
