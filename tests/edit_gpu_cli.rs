@@ -216,10 +216,10 @@ fn bench_edit_times_unprofiled_and_profiles_a_second_run() {
         ],
     );
     let rows = report["replays"].as_array().unwrap();
-    let cpu_total = |replay: &serde_json::Value| {
+    let cpu = |replay: &serde_json::Value, field: &str| {
         rows.iter()
             .find(|r| r["engine"] == "cpu" && r["replay"] == *replay)
-            .unwrap()["edit_ms_total"]
+            .unwrap()[field]
             .as_f64()
             .unwrap()
     };
@@ -254,10 +254,19 @@ fn bench_edit_times_unprofiled_and_profiles_a_second_run() {
         assert!(kernels > 0.0, "{r}");
         assert!(r["per_edit"][2].as_f64().unwrap() >= 1.0, "{r}");
         let ratio = r["vs_cpu"].as_f64().unwrap();
-        let expected = total / cpu_total(&r["replay"]).max(1e-9);
+        let expected = total / cpu(&r["replay"], "edit_ms_total").max(1e-9);
+        assert!((ratio - expected).abs() <= 1e-9 * expected.max(1.0), "{r}");
+        // The median edit: above 0, at most the largest; its ratio is to the CPU row's median.
+        let median = r["edit_ms_median"].as_f64().unwrap();
+        assert!(
+            median > 0.0 && median <= r["edit_ms_max"].as_f64().unwrap(),
+            "{r}"
+        );
+        let ratio = r["median_vs_cpu"].as_f64().unwrap();
+        let expected = median / cpu(&r["replay"], "edit_ms_median").max(1e-9);
         assert!((ratio - expected).abs() <= 1e-9 * expected.max(1.0), "{r}");
     }
-    assert!(md.contains("profiled ms total"));
+    assert!(md.contains("profiled ms total") && md.contains("median / CPU's"));
 }
 
 /// `voxdag bench edit --materials 4` on the bundled Avocado (colours quantized into 4

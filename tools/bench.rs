@@ -149,6 +149,13 @@ fn check_outputs(paths: &[&Path]) -> Result<()> {
 }
 
 /// Resolves a scene name of the shared data set, or takes the argument as a path.
+/// The middle value of `v` (the upper one of an even count; 0 for none).
+fn median(v: &[f64]) -> f64 {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    s.get(s.len() / 2).copied().unwrap_or(0.0)
+}
+
 fn scene_path(data: &Path, name: &str) -> Result<PathBuf> {
     let known = match name {
         "bunny" | "dragon" | "buddha" | "horse" | "teapot" | "sponza-dabrovic" => {

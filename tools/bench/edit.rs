@@ -20,7 +20,7 @@ use voxdag::edit::tool::{CopyParams, Shape, Tool};
 use voxdag::gpu::{GpuContext, GpuOptions, Profiler};
 use voxdag::scene::{self, morton, ImportOptions};
 
-use super::{scene_path, write_outputs};
+use super::{median, scene_path, write_outputs};
 use crate::commands::quantize_materials;
 use crate::edit::{tool_name, TableArg, TeamArg};
 
@@ -120,6 +120,9 @@ struct ReplayRow {
     /// Whole-edit wall time, summed and largest, timed without the profiler.
     edit_ms_total: f64,
     edit_ms_max: f64,
+    /// The median edit's wall time: what an edit costs once the first edits' one-time work
+    /// (the CPU tables' first growth, first touches of fresh memory) is out of the picture.
+    edit_ms_median: f64,
     /// GPU: making the edit pipelines of the replay's tools, before the timed edits (lavapipe
     /// compiles one in ~10-30 ms; each would otherwise be made by the first edit with its tool).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -137,6 +140,8 @@ struct ReplayRow {
     dag_bytes_after: u64,
     /// This engine's total edit time over the CPU reference's on the same replay.
     vs_cpu: Option<f64>,
+    /// This engine's median edit time over the CPU reference's.
+    median_vs_cpu: Option<f64>,
     /// GPU runs, per edit on average: queue submissions, host waits and profiled passes
     /// (dispatches), from `GpuContext::stats` and the profiler; None for the CPU.
     per_edit: Option<[f64; 3]>,
@@ -327,6 +332,7 @@ fn run_cpu(
         status: "ok".into(),
         edit_ms_total: times.iter().sum(),
         edit_ms_max: times.iter().cloned().fold(0.0, f64::max),
+        edit_ms_median: median(&times),
         pipelines_ms: None,
         profiled_ms_total: None,
         kernels_ms: BTreeMap::new(),
@@ -334,6 +340,7 @@ fn run_cpu(
         dag_bytes_before: before,
         dag_bytes_after: editor.dag().item_bytes(),
         vs_cpu: Some(1.0),
+        median_vs_cpu: Some(1.0),
         per_edit: None,
     })
 }
@@ -418,6 +425,7 @@ fn replay_gpu(
         status: "ok".into(),
         edit_ms_total: 0.0,
         edit_ms_max: 0.0,
+        edit_ms_median: 0.0,
         pipelines_ms: Some(pipelines_ms),
         profiled_ms_total: None,
         kernels_ms: GROUPS.iter().map(|g| (*g, 0.0)).collect(),
@@ -425,9 +433,11 @@ fn replay_gpu(
         dag_bytes_before: before,
         dag_bytes_after: 0,
         vs_cpu: None,
+        median_vs_cpu: None,
         per_edit: None,
     };
     let stats = ctx.stats();
+    let mut times = Vec::with_capacity(replay.tools.len());
     let mut passes = 0;
     for tool in &replay.tools {
         let from = profiler.as_ref().map_or(0, |p| p.passes().len());
@@ -444,6 +454,7 @@ fn replay_gpu(
         row.edits += 1;
         row.edit_ms_total += ms;
         row.edit_ms_max = row.edit_ms_max.max(ms);
+        times.push(ms);
         if let Some(profiler) = profiler.as_deref() {
             for p in &profiler.passes()[from..] {
                 *row.kernels_ms.entry(group_of(&p.name)).or_insert(0.0) += p.gpu_ms;
@@ -458,6 +469,7 @@ fn replay_gpu(
             .sum();
         row.temp_svo_bytes_max = row.temp_svo_bytes_max.max(temp);
     }
+    row.edit_ms_median = median(&times);
     let stats = ctx.stats().since(stats);
     let edits = row.edits.max(1) as f64;
     row.per_edit = Some([
@@ -570,7 +582,7 @@ pub fn bench_edit(args: &BenchEditArgs) -> Result<()> {
         let palette = materials.as_ref().map(|m| m.palette.len() as u32);
         for replay in replays(&codes, svdag.resolution, args.long_replay, palette) {
             let cpu = run_cpu(name, &svdag, materials.as_ref(), &replay)?;
-            let cpu_ms = cpu.edit_ms_total;
+            let (cpu_ms, cpu_median) = (cpu.edit_ms_total, cpu.edit_ms_median);
             report.replays.push(cpu);
             let engines = args.teams.iter().flat_map(|&team| {
                 args.tables
@@ -582,6 +594,7 @@ pub fn bench_edit(args: &BenchEditArgs) -> Result<()> {
                 let mut row = run_gpu(&ctx, name, &svdag, materials.as_ref(), engine, &replay)?;
                 if row.status == "ok" {
                     row.vs_cpu = Some(row.edit_ms_total / cpu_ms.max(1e-9));
+                    row.median_vs_cpu = Some(row.edit_ms_median / cpu_median.max(1e-9));
                 }
                 report.replays.push(row);
             }
@@ -600,7 +613,7 @@ pub fn bench_edit(args: &BenchEditArgs) -> Result<()> {
 
 fn markdown(report: &Report) -> String {
     let mut md = format!(
-        "GPU: {}; CPU reference editor on {} threads; resolution {}^3; {}.\n\n| scene | replay | engine | edits | edit ms total | max | profiled ms total | {} | temp SVO max KiB | DAG KiB before | after | / CPU | per edit: submits / waits / passes |\n|---|---|---|---|---|---|---|{}---|---|---|---|---|\n",
+        "GPU: {}; CPU reference editor on {} threads; resolution {}^3; {}.\n\n| scene | replay | engine | edits | edit ms total | max | median | profiled ms total | {} | temp SVO max KiB | DAG KiB before | after | / CPU | median / CPU's | per edit: submits / waits / passes |\n|---|---|---|---|---|---|---|---|{}---|---|---|---|---|---|\n",
         report.device,
         report.cpu_threads,
         report.resolution,
@@ -620,7 +633,7 @@ fn markdown(report: &Report) -> String {
                 r.engine,
                 r.edits,
                 r.status,
-                " |".repeat(GROUPS.len() + 7)
+                " |".repeat(GROUPS.len() + 9)
             );
             continue;
         }
@@ -633,13 +646,14 @@ fn markdown(report: &Report) -> String {
             })
             .collect();
         md += &format!(
-            "| {} | {} | {} | {} | {:.1} | {:.1} | {} | {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {} | {} | {:.1} | {:.1} | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
             r.scene,
             r.replay,
             r.engine,
             r.edits,
             r.edit_ms_total,
             r.edit_ms_max,
+            r.edit_ms_median,
             r.profiled_ms_total
                 .map_or("-".into(), |ms| format!("{ms:.1}")),
             kernels.join(" | "),
@@ -651,6 +665,7 @@ fn markdown(report: &Report) -> String {
             r.dag_bytes_before / 1024,
             r.dag_bytes_after / 1024,
             r.vs_cpu.map_or("-".into(), |x| format!("{x:.2}x")),
+            r.median_vs_cpu.map_or("-".into(), |x| format!("{x:.2}x")),
             r.per_edit
                 .map_or("-".into(), |[s, w, p]| format!("{s:.1} / {w:.1} / {p:.0}"))
         );

@@ -28,7 +28,7 @@ use voxdag::render::{Camera, RenderSettings};
 use voxdag::scene::{self, ImportOptions};
 
 use super::render_formats::{encode, FORMAT_NAMES};
-use super::{scene_path, write_outputs};
+use super::{median, scene_path, write_outputs};
 use crate::commands::progress_bar;
 
 /// Arguments of `voxdag bench pathtrace`.
@@ -164,12 +164,6 @@ fn mean_abs_diff(a: &PtImage, b: &PtImage) -> f64 {
         .map(|(x, y)| (x - y).abs() as f64)
         .sum::<f64>()
         / la.len().max(1) as f64
-}
-
-fn median(v: &[f64]) -> f64 {
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    s[s.len() / 2]
 }
 
 /// The scene's SVDAG at `resolution` (voxelized, or loaded from the cache).

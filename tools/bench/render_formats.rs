@@ -105,9 +105,7 @@ fn time_frames(
                 .sum(),
         );
     }
-    let mut sorted = times.clone();
-    sorted.sort_by(f64::total_cmp);
-    Ok((sorted[sorted.len() / 2], times, hits))
+    Ok((super::median(&times), times, hits))
 }
 
 /// Times every format of `names` (svdag32 first, always) on `dag` with `settings`.
