@@ -1,7 +1,7 @@
 #version 460
 // The merge of an edit's small top levels in ONE dispatch of ONE workgroup (engine/edit/gpu/
 // small_levels.rs): per level bottom-up, build_items, the mixed batch's search and claim, and
-// its claimed insert round, a workgroup barrier after each; then the root level's resolve.
+// its claimed insert round, a subgroup barrier after each; then the root level's resolve.
 // Each pass's body is the one its own dispatch runs (edit/build_items_pass.glsl,
 // hash/claim_pass.glsl, hash/insert_pass.glsl, edit/resolve_pass.glsl), reading its
 // parameters from the chain's records instead of push constants. On lavapipe every dispatch
@@ -12,6 +12,7 @@
 #extension GL_EXT_buffer_reference : require
 #extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
 #extension GL_EXT_shader_atomic_int64 : require
+#extension GL_KHR_shader_subgroup_basic : require
 #extension GL_KHR_shader_subgroup_ballot : require
 #extension GL_KHR_shader_subgroup_vote : require
 #extension GL_KHR_shader_subgroup_arithmetic : require
@@ -57,10 +58,13 @@ uint below_resolve(EditLevelHandles level, Words slots, uint j, uint r) {
 layout(push_constant, std430) uniform Push { SMALL_LEVELS_PUSH_MEMBERS } chain;
 
 // Every write of a pass (items, counters, handles, representatives, results) before the next
-// pass of the workgroup reads them.
+// pass of the workgroup reads them. The workgroup is one subgroup, so a subgroup barrier
+// orders them: lavapipe compiles a workgroup barrier into a coroutine suspension (every value
+// live across it saved and restored, a return to the driver and a resumption), a subgroup one
+// into a fence (docs/gpu.md, "Subgroup barriers in one-subgroup workgroups").
 void pass_done() {
-    memoryBarrierBuffer();
-    barrier();
+    subgroupMemoryBarrierBuffer();
+    subgroupBarrier();
 }
 
 void main() {

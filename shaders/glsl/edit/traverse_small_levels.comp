@@ -2,7 +2,7 @@
 // The traversal's small levels in ONE dispatch of ONE SIMD group (engine/edit/gpu.rs
 // `GpuHashDag::traverse`): the first level of a submission (its count known to the host) and
 // then each next inner level of the submission while its entries, counted on the GPU by the
-// level above, are at most chain.max_entries; a workgroup barrier between levels. A level
+// level above, are at most chain.max_entries; a subgroup barrier between levels. A level
 // done here gets zero workgroups in its own indirect dispatch's arguments (recorded after this
 // one), which lavapipe then runs without handing it to its worker threads; the levels after
 // the first too large keep their dispatches. Each level's parameters are the push constants
@@ -11,6 +11,7 @@
 // the workers' wake-ups), more than the few entries of an edit's top levels; the workgroup is
 // one SIMD group because lavapipe runs every SIMD group of a workgroup as a coroutine that each
 // barrier suspends (docs/editing-gpu.md, "Speed, rounds 15 and 16").
+#extension GL_KHR_shader_subgroup_basic : require
 #define EDIT_PARAMS_IN_MEMORY
 #include "edit/common.glsl"
 #include "edit/traverse_level.glsl"
@@ -30,8 +31,9 @@ void main() {
     for (;;) {
         push = levels.level[k];
         edit_traverse_level(lane, lanes, edit_count());
-        memoryBarrierBuffer();
-        barrier();
+        // (One subgroup: a subgroup barrier orders the levels, as in merge_small_levels.)
+        subgroupMemoryBarrierBuffer();
+        subgroupBarrier();
         if (k > 0u && lane == 0u) {
             // Done here: the level's own dispatch finds zero workgroups.
             Words(push.count_at).w[1] = 0u;
