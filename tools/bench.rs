@@ -148,7 +148,6 @@ fn check_outputs(paths: &[&Path]) -> Result<()> {
     Ok(())
 }
 
-/// Resolves a scene name of the shared data set, or takes the argument as a path.
 /// The middle value of `v` (the upper one of an even count; 0 for none).
 fn median(v: &[f64]) -> f64 {
     let mut s = v.to_vec();
@@ -156,6 +155,7 @@ fn median(v: &[f64]) -> f64 {
     s.get(s.len() / 2).copied().unwrap_or(0.0)
 }
 
+/// Resolves a scene name of the shared data set, or takes the argument as a path.
 fn scene_path(data: &Path, name: &str) -> Result<PathBuf> {
     let known = match name {
         "bunny" | "dragon" | "buddha" | "horse" | "teapot" | "sponza-dabrovic" => {

@@ -6,8 +6,8 @@
 //! [`crate::hash::mixed`]), and on lavapipe each dispatch costs a hand-off to the driver's worker
 //! threads that outweighs the work. Where every level from some level up to the root has at
 //! most [`MAX_NODES`] nodes, one dispatch runs those levels' passes in turn, bottom-up, with a
-//! subgroup barrier after each (the workgroup is one subgroup), then the root level's resolve: the same pass bodies, their
-//! parameters read from records in memory.
+//! subgroup barrier after each (the workgroup is one subgroup), then the root level's resolve:
+//! the same pass bodies, their parameters read from records in memory.
 //!
 //! Its workgroup is one SIMD group (the subgroup size): lavapipe runs each SIMD group of a
 //! workgroup as a coroutine that every barrier suspends, so with the mixed passes' 64 lanes
