@@ -210,9 +210,12 @@ fn emit_const(generated: &mut String, name: &str, rel_str: &str, what: &str, byt
     generated.push_str("];\n\n");
 }
 
-/// One field of a shared struct: its GLSL declaration and doc lines.
+/// One field of a shared struct: its GLSL declaration, element type and count (1 unless an
+/// array), and doc lines.
 struct SharedField {
     decl: String,
+    ty: &'static str,
+    count: usize,
     doc: Vec<&'static str>,
 }
 
@@ -237,6 +240,8 @@ macro_rules! gpu_shared {
             doc: vec![$($doc),*],
             fields: vec![$(SharedField {
                 decl: glsl_decl!($field, $ty),
+                ty: glsl_elem!($ty).0,
+                count: glsl_elem!($ty).1,
                 doc: vec![$($fdoc),*],
             }),*],
         }),*]
@@ -251,6 +256,76 @@ macro_rules! glsl_decl {
     ($field:ident, $t:tt) => {
         format!("{} {}", stringify!($t), stringify!($field))
     };
+}
+
+/// `[uint; 2]` -> `("uint", 2)`; `vec4` -> `("vec4", 1)`.
+macro_rules! glsl_elem {
+    ([$t:tt; $n:literal]) => {
+        (stringify!($t), $n)
+    };
+    ($t:tt) => {
+        (stringify!($t), 1)
+    };
+}
+
+/// std430 size and alignment in 32-bit words of a field type of `gpu_shared!`.
+fn std430_words(ty: &str) -> (usize, usize) {
+    match ty {
+        "uint" | "int" | "float" => (1, 1),
+        "uint64_t" | "vec2" | "uvec2" => (2, 2),
+        "vec4" | "uvec4" => (4, 4),
+        other => panic!("gpu_shared: no std430 layout for field type {other}"),
+    }
+}
+
+/// GLSL expression of a value of type `ty` whose first word is word `w` of a struct held in
+/// `uvec4 T[]` (std430 keeps a `uint64_t` or a `vec2` within one `uvec4`).
+fn from_uvec4s(ty: &str, w: usize) -> String {
+    const LANES: [&str; 4] = ["x", "y", "z", "w"];
+    let word = |k: usize| format!("T[{}].{}", k / 4, LANES[k % 4]);
+    let pair = || format!("T[{}].{}{}", w / 4, LANES[w % 4], LANES[(w + 1) % 4]);
+    match ty {
+        "uint" => word(w),
+        "int" => format!("int({})", word(w)),
+        "float" => format!("uintBitsToFloat({})", word(w)),
+        "uint64_t" => format!("packUint2x32({})", pair()),
+        "uvec2" => pair(),
+        "vec2" => format!("uintBitsToFloat({})", pair()),
+        "uvec4" => format!("T[{}]", w / 4),
+        "vec4" => format!("uintBitsToFloat(T[{}])", w / 4),
+        other => panic!("gpu_shared: no std430 layout for field type {other}"),
+    }
+}
+
+/// `#define NAME_UVEC4S n` and `#define NAME_FROM_UVEC4S(T) ...`: the struct's size in `uvec4`s
+/// and its constructor's arguments from `uvec4 T[n]` holding its std430 bytes, so that a shader
+/// can read a record as whole texels (`Struct(NAME_FROM_UVEC4S(t))`; docs/gpu.md, "Records read
+/// as texels").
+fn write_from_uvec4s(text: &mut String, name: &str, fields: &[SharedField]) {
+    let mut offset = 0usize;
+    let mut align_max = 1;
+    let mut args = Vec::new();
+    for f in fields {
+        let (size, align) = std430_words(f.ty);
+        align_max = align_max.max(align);
+        offset = offset.div_ceil(align) * align;
+        let values: Vec<String> = (0..f.count)
+            .map(|i| from_uvec4s(f.ty, offset + i * size))
+            .collect();
+        args.push(match f.count {
+            1 => values[0].clone(),
+            n => format!("{}[{n}]({})", f.ty, values.join(", ")),
+        });
+        offset += f.count * size;
+    }
+    let words = offset.div_ceil(align_max) * align_max;
+    let _ = writeln!(text, "#define {name}_UVEC4S {}", words.div_ceil(4));
+    let _ = write!(text, "#define {name}_FROM_UVEC4S(T)");
+    for (i, arg) in args.iter().enumerate() {
+        let sep = if i + 1 < args.len() { "," } else { "" };
+        let _ = write!(text, " \\\n    {arg}{sep}");
+    }
+    text.push('\n');
 }
 
 /// Writes `gen/<room>.glsl` for every room's `gpu_shared.rs` (only when the text changed).
@@ -311,6 +386,7 @@ fn write_shared_layouts(manifest: &Path, gen_dir: &Path) {
                 }
             }
             text.push('\n');
+            write_from_uvec4s(&mut text, &screaming_snake(s.name), &s.fields);
         }
         text.push_str("\n#endif\n");
         let path = gen_dir.join(format!("{room}.glsl"));

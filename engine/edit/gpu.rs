@@ -32,8 +32,8 @@ use super::tool::{self, CopyRegion, Shape, Tool};
 use super::walk::{self, StoredDag};
 use crate::dag::{DagError, Svdag};
 use crate::gpu::{
-    made_once, shaders, Buffer, BufferSlice, Commands, ComputePipeline, ComputePipelineDesc,
-    GpuContext, GpuError, MemLocation, Profiler, Readback,
+    made_once, shaders, BindingKind, Buffer, BufferSlice, Commands, ComputePipeline,
+    ComputePipelineDesc, GpuContext, GpuError, MemLocation, Profiler, Readback,
 };
 use crate::hash::claim::{ClaimTable, Claims};
 use crate::hash::dedup::{DedupError, DedupResult, GpuDedup};
@@ -45,7 +45,7 @@ use crate::hash::{
 };
 use crate::scene::Voxels;
 use build_items::{BuildItemsPipelines, LevelTexels};
-use small_levels::{SmallLevel, SmallLevelsPass};
+use small_levels::{ChainRecords, SmallLevel, SmallLevelsPass};
 
 /// Child value: empty cube (GLSL `EDIT_EMPTY`).
 const VALUE_EMPTY: u32 = 0xFFFF_FFFF;
@@ -267,6 +267,8 @@ pub struct GpuHashDag {
     traverse: ToolPipelines,
     /// The traversal's small top levels in one dispatch (`traverse_small_levels`).
     traverse_chain: ToolPipelines,
+    /// Records bound to the chains' warm-ups (the same native variant as real ones).
+    records_stand_in: ChainRecords,
     leaves: ToolPipelines,
     fill_init: ComputePipeline,
     fill_flood: ComputePipeline,
@@ -507,6 +509,11 @@ impl GpuHashDag {
             resolve: pipeline("edit resolve", shaders::EDIT_RESOLVE)?,
             traverse: ToolPipelines::new("edit traverse", shaders::EDIT_TRAVERSE, materials),
             traverse_chain: ToolPipelines::traverse_chain(materials, ctx.info().subgroup_size),
+            records_stand_in: ChainRecords::new(
+                ctx,
+                "edit chain records (stand-in)",
+                std::mem::size_of::<EditPush>(),
+            )?,
             leaves: ToolPipelines::new("edit leaves", shaders::EDIT_LEAVES, materials),
             fill_init: pipeline("edit fill init", shaders::EDIT_FILL_INIT)?,
             fill_flood: pipeline("edit fill flood", shaders::EDIT_FILL_FLOOD)?,
@@ -631,9 +638,11 @@ impl GpuHashDag {
         kinds.dedup();
         let mut cmd = ctx.begin_commands("edit warm pipelines")?;
         for &flags in &kinds {
-            for pipelines in [&self.traverse, &self.traverse_chain, &self.leaves] {
+            for pipelines in [&self.traverse, &self.leaves] {
                 cmd.warm(pipelines.get(ctx, flags)?, &[])?;
             }
+            let chain = self.traverse_chain.get(ctx, flags)?;
+            cmd.warm(chain, &self.records_stand_in.bound())?;
             if flags == (ToolKind::Fill as u32) << TOOL_SHIFT {
                 cmd.warm(&self.fill_init, &[])?;
                 cmd.warm(&self.fill_flood, &[])?;
@@ -646,7 +655,7 @@ impl GpuHashDag {
                 cmd.warm(pipeline, &[])?;
             }
             if let Some(small) = &self.small_levels {
-                cmd.warm(small.pipeline(), &[])?;
+                cmd.warm(small.pipeline(), &self.records_stand_in.bound())?;
             }
         }
         cmd.submit()?;
@@ -1055,10 +1064,10 @@ impl GpuHashDag {
             let inner = segment.iter().filter(|&&(l, _)| l > 0).count();
             let chained = level > 0 && counts[level] <= TRAVERSE_CHAIN_ENTRIES;
             let chain = match chained {
-                true => Some(ctx.create_buffer(
+                true => Some(ChainRecords::new(
+                    ctx,
                     "edit traverse small levels",
-                    (inner * std::mem::size_of::<EditPush>()) as u64,
-                    MemLocation::GpuOnly,
+                    inner * std::mem::size_of::<EditPush>(),
                 )?),
                 false => None,
             };
@@ -1071,10 +1080,9 @@ impl GpuHashDag {
                 cmd.upload(&carry, 0, &[0u32, 0, 0, root_value][..])?;
                 cmd.upload(&blocks, 0, &blocks_init)?;
             }
-            if let Some(chain) = &chain {
-                cmd.upload(chain, 0, &pushes[..inner])?;
+            if let Some(records) = &chain {
+                cmd.upload(records.buffer(), 0, &pushes[..inner])?;
                 let push = TraverseChainPush {
-                    levels_at: chain.address(),
                     levels: inner as u32,
                     max_entries: TRAVERSE_CHAIN_ENTRIES,
                 };
@@ -1083,7 +1091,7 @@ impl GpuHashDag {
                     self.traverse_chain.get(ctx, base.flags)?,
                     [1, 1, 1],
                     bytemuck::bytes_of(&push),
-                    &[],
+                    &records.bound(),
                 )?;
                 cmd.end_pass(profiler);
                 cmd.barrier();
@@ -1934,7 +1942,7 @@ impl GpuHashDag {
                     .map(|(level, p)| {
                         let batch =
                             MixedPasses::batch(&p.entry_buf, &p.buffers.counters, 0, level.count);
-                        (p.buffers.push, batch)
+                        (p.buffers.push, batch, p.entries)
                     })
                     .collect();
                 small.record(&mut cmd, records, &chain, &mut profiler)?;
@@ -2110,6 +2118,7 @@ struct ToolPipelines {
     /// `traverse_small_levels`).
     lanes: Option<u32>,
     push_constant_size: u32,
+    bindings: &'static [BindingKind],
     made: [OnceLock<ComputePipeline>; TOOL_KINDS],
 }
 
@@ -2122,16 +2131,18 @@ impl ToolPipelines {
             materials,
             lanes: None,
             push_constant_size: std::mem::size_of::<EditPush>() as u32,
+            bindings: &[],
             made: Default::default(),
         }
     }
 
     /// `traverse_small_levels` for a scene with or without materials, its workgroup `lanes`
-    /// invocations (one SIMD group).
+    /// invocations (one SIMD group), its levels' records a `uvec4` view.
     fn traverse_chain(materials: u32, lanes: u32) -> ToolPipelines {
         ToolPipelines {
             lanes: Some(lanes),
             push_constant_size: std::mem::size_of::<TraverseChainPush>() as u32,
+            bindings: &[BindingKind::TexelBuffer],
             ..ToolPipelines::new(
                 "edit traverse small levels",
                 shaders::EDIT_TRAVERSE_SMALL_LEVELS,
@@ -2153,7 +2164,7 @@ impl ToolPipelines {
                 spirv: self.spirv,
                 spec_constants: &spec[..2 + self.lanes.is_some() as usize],
                 push_constant_size: self.push_constant_size,
-                bindings: &[],
+                bindings: self.bindings,
             })
         })
     }

@@ -50,24 +50,15 @@ gpu_shared! {
     /// levels in one dispatch (`engine/edit/gpu/small_levels.rs`).
     #[derive(Default)]
     pub(crate) struct SmallLevelsPush {
-        /// Address of the levels' `EditPush` (build_items' parameters), bottom-up.
-        pub(crate) edit_levels: uint64_t,
-        /// Address of the levels' mixed batches (a `HashPush` each: bound, counts, entries).
-        pub(crate) hash_levels: uint64_t,
         /// Levels in the chain (the last one is the root's, which the dispatch also resolves).
         pub(crate) levels: uint,
-        /// Padding to a multiple of 8 bytes.
-        pub(crate) pad: uint,
     }
 
     /// Push constants of `edit/traverse_small_levels.comp`: the traversal's small top levels
     /// in one dispatch (`GpuHashDag::traverse`).
     #[derive(Default)]
     pub(crate) struct TraverseChainPush {
-        /// Address of the levels' `EditPush` (each as its own traverse dispatch would have it),
-        /// top-down.
-        pub(crate) levels_at: uint64_t,
-        /// Levels recorded there (the first is always traversed).
+        /// Levels recorded in the bound records (the first is always traversed).
         pub(crate) levels: uint,
         /// A later level is traversed here only with at most this many entries.
         pub(crate) max_entries: uint,

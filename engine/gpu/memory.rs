@@ -272,8 +272,9 @@ impl Drop for TexelBuffer {
     }
 }
 
-/// An `R32_UINT` uniform texel view of a buffer's words, bound per dispatch
-/// ([`super::Bound::Words`]): passes read its words with `texelFetch`, which lavapipe runs for
+/// A uniform texel view of a buffer's words, bound per dispatch ([`super::Bound::Words`]):
+/// `R32_UINT`, one word a texel ([`GpuContext::word_texels`]), or `R32G32B32A32_UINT`, four
+/// ([`GpuContext::record_texels`]). Passes read it with `texelFetch`, which lavapipe runs for
 /// all SIMD lanes at once where a load through an address is a loop over them.
 pub struct WordTexels {
     pub(crate) view: vk::BufferView,
@@ -290,7 +291,7 @@ impl std::fmt::Debug for WordTexels {
 }
 
 impl WordTexels {
-    /// Number of texels (words).
+    /// Number of texels (words, or groups of four of a record view).
     pub fn texels(&self) -> u64 {
         self.texels
     }
@@ -314,6 +315,19 @@ impl GpuContext {
         })
     }
 
+    /// A view of all of `buffer` as `uvec4` texels (`R32G32B32A32_UINT`, at most
+    /// `maxTexelBufferElements`): records of 16-byte multiples read whole (a shared struct's
+    /// `NAME_FROM_UVEC4S`, docs/gpu.md "Records read as texels").
+    pub fn record_texels(self: &Arc<Self>, buffer: &Buffer) -> Result<WordTexels, GpuError> {
+        let texels = buffer.size / 16;
+        self.check_texels(&format!("record view of '{}'", buffer.name), texels)?;
+        Ok(WordTexels {
+            view: self.texel_view(buffer, vk::Format::R32G32B32A32_UINT, texels)?,
+            ctx: Arc::clone(self),
+            texels,
+        })
+    }
+
     /// Errors unless a texel buffer view of `texels` texels fits the device (1 to
     /// `maxTexelBufferElements`); `what` names the view in the error.
     fn check_texels(&self, what: &str, texels: u64) -> Result<(), GpuError> {
@@ -327,7 +341,7 @@ impl GpuContext {
     }
 
     /// A uniform texel buffer view of the first `texels` texels of `buffer` in `format` (a
-    /// format whose uniform texel buffer support Vulkan requires: 4 or 8 bytes a texel),
+    /// format whose uniform texel buffer support Vulkan requires: 4, 8 or 16 bytes a texel),
     /// named after the buffer. Its range reaches into the buffer's slack where
     /// [`texel_view_range`] asks for it and the device takes the texels.
     fn texel_view(
@@ -336,10 +350,10 @@ impl GpuContext {
         format: vk::Format,
         texels: u64,
     ) -> Result<vk::BufferView, GpuError> {
-        let texel_bytes = if format == vk::Format::R32G32_UINT {
-            8
-        } else {
-            4
+        let texel_bytes = match format {
+            vk::Format::R32G32B32A32_UINT => 16,
+            vk::Format::R32G32_UINT => 8,
+            _ => 4,
         };
         let bytes = texels * texel_bytes;
         let stable = texel_view_range(bytes);

@@ -7,7 +7,10 @@
 //! threads that outweighs the work. Where every level from some level up to the root has at
 //! most [`MAX_NODES`] nodes, one dispatch runs those levels' passes in turn, bottom-up, with a
 //! subgroup barrier after each (the workgroup is one subgroup), then the root level's resolve:
-//! the same pass bodies, their parameters read from records in memory.
+//! the same pass bodies, their parameters read from records in memory: per level its
+//! build_items parameters, its mixed batch and the batch's entries, read as `uvec4` texels
+//! (lavapipe reads memory through an address inside the level loop one lane at a time, a loop
+//! per field; docs/gpu.md, "Records read as texels").
 //!
 //! Its workgroup is one SIMD group (the subgroup size): lavapipe runs each SIMD group of a
 //! workgroup as a coroutine that every barrier suspends, so with the mixed passes' 64 lanes
@@ -18,10 +21,11 @@ use std::sync::Arc;
 
 use super::super::gpu_shared::{EditPush, SmallLevelsPush};
 use crate::gpu::{
-    shaders, Buffer, Commands, ComputePipeline, ComputePipelineDesc, GpuContext, GpuError,
-    MemLocation, Profiler,
+    shaders, BindingKind, Bound, Buffer, Commands, ComputePipeline, ComputePipelineDesc,
+    GpuContext, GpuError, MemLocation, Profiler, WordTexels,
 };
 use crate::hash::layout::HashPush;
+use crate::hash::mixed::MIXED_SIZES;
 use crate::hash::GpuHashTable;
 
 /// The largest level (temporary nodes) the chain takes: a level of more gets its own passes,
@@ -35,8 +39,38 @@ pub(super) struct SmallLevelsPass {
 }
 
 /// What the dispatch does for one level: build_items' parameters (those of its own dispatch),
-/// then the level's mixed batch ([`crate::hash::mixed::MixedPasses::batch`]).
-pub(super) type SmallLevel = (EditPush, HashPush);
+/// the level's mixed batch ([`crate::hash::mixed::MixedPasses::batch`]) and the batch's entries.
+pub(super) type SmallLevel = (EditPush, HashPush, [HashPush; MIXED_SIZES]);
+
+/// Records of a chain (this one's or the traversal's, `edit/traverse_small_levels.comp`) and
+/// their `uvec4` view, binding 0 of its dispatch.
+pub(super) struct ChainRecords {
+    buffer: Buffer,
+    view: WordTexels,
+}
+
+impl ChainRecords {
+    /// Records of `bytes` bytes (a multiple of 16), named `name`.
+    pub(super) fn new(
+        ctx: &Arc<GpuContext>,
+        name: &str,
+        bytes: usize,
+    ) -> Result<ChainRecords, GpuError> {
+        let buffer = ctx.create_buffer(name, bytes as u64, MemLocation::GpuOnly)?;
+        let view = ctx.record_texels(&buffer)?;
+        Ok(ChainRecords { buffer, view })
+    }
+
+    /// The buffer (the host uploads the records into it).
+    pub(super) fn buffer(&self) -> &Buffer {
+        &self.buffer
+    }
+
+    /// The dispatch's binding.
+    pub(super) fn bound(&self) -> [Bound<'_>; 1] {
+        [Bound::Words(&self.view)]
+    }
+}
 
 impl SmallLevelsPass {
     /// The pass for tables shaped like `table` (its variant; single lanes), for a scene with or
@@ -62,7 +96,7 @@ impl SmallLevelsPass {
                 materials,
             ],
             push_constant_size: std::mem::size_of::<SmallLevelsPush>() as u32,
-            bindings: &[],
+            bindings: &[BindingKind::TexelBuffer],
         })?;
         Ok(SmallLevelsPass { pipeline })
     }
@@ -77,14 +111,11 @@ impl SmallLevelsPass {
         nodes <= MAX_NODES
     }
 
-    /// A buffer for the records of `levels` levels.
-    pub(super) fn records(ctx: &Arc<GpuContext>, levels: usize) -> Result<Buffer, GpuError> {
-        let bytes = levels * (std::mem::size_of::<EditPush>() + std::mem::size_of::<HashPush>());
-        ctx.create_buffer(
-            "edit small levels records",
-            bytes as u64,
-            MemLocation::GpuOnly,
-        )
+    /// Records for `levels` levels.
+    pub(super) fn records(ctx: &Arc<GpuContext>, levels: usize) -> Result<ChainRecords, GpuError> {
+        let per_level =
+            std::mem::size_of::<EditPush>() + (1 + MIXED_SIZES) * std::mem::size_of::<HashPush>();
+        ChainRecords::new(ctx, "edit small levels records", levels * per_level)
     }
 
     /// Records the upload of `levels`' records into `records` ([`SmallLevelsPass::records`])
@@ -94,7 +125,7 @@ impl SmallLevelsPass {
     pub(super) fn record<'a>(
         &'a self,
         cmd: &mut Commands<'a>,
-        records: &'a Buffer,
+        records: &'a ChainRecords,
         levels: &[SmallLevel],
         profiler: &mut Option<&mut Profiler>,
     ) -> Result<(), GpuError> {
@@ -103,19 +134,26 @@ impl SmallLevelsPass {
                 "merge of small levels without a level".into(),
             ));
         }
+        // The shader's layout: every level's EditPush, then every level's batch, then every
+        // level's entries (merge_small_levels.comp, hash_level_entry).
         let edits: Vec<EditPush> = levels.iter().map(|l| l.0).collect();
         let batches: Vec<HashPush> = levels.iter().map(|l| l.1).collect();
-        let batches_at = (edits.len() * std::mem::size_of::<EditPush>()) as u64;
-        cmd.upload(records, 0, &edits)?;
-        cmd.upload(records, batches_at, &batches)?;
+        let entries: Vec<HashPush> = levels.iter().flat_map(|l| l.2).collect();
+        let batches_at = std::mem::size_of_val(edits.as_slice()) as u64;
+        let entries_at = batches_at + std::mem::size_of_val(batches.as_slice()) as u64;
+        cmd.upload(&records.buffer, 0, &edits)?;
+        cmd.upload(&records.buffer, batches_at, &batches)?;
+        cmd.upload(&records.buffer, entries_at, &entries)?;
         let push = SmallLevelsPush {
-            edit_levels: records.address(),
-            hash_levels: records.address() + batches_at,
             levels: levels.len() as u32,
-            ..SmallLevelsPush::default()
         };
         cmd.begin_pass(profiler, "edit merge small levels");
-        cmd.dispatch(&self.pipeline, [1, 1, 1], bytemuck::bytes_of(&push), &[])?;
+        cmd.dispatch(
+            &self.pipeline,
+            [1, 1, 1],
+            bytemuck::bytes_of(&push),
+            &records.bound(),
+        )?;
         cmd.end_pass(profiler);
         cmd.barrier();
         Ok(())

@@ -9,13 +9,23 @@
 
 // The pass's parameters: push constants, or (EDIT_PARAMS_IN_MEMORY, a shader that runs the
 // passes of several levels: edit/merge_small_levels.comp, edit/traverse_small_levels.comp) a
-// variable the includer sets per level from the levels' records (EditLevels).
+// variable the includer sets per level from the levels' records (edit_record).
 struct EditParams { EDIT_PUSH_MEMBERS };
 #ifdef EDIT_PARAMS_IN_MEMORY
 EditParams push;
-layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer EditLevels {
-    EditParams level[];
-};
+// The chains' records as uvec4 texels (binding 0): inside the chains' level loop lavapipe
+// reads memory through an address one lane at a time, a loop per field, but fetches a texel
+// for all lanes at once (docs/gpu.md, "Records read as texels").
+layout(set = 0, binding = 0) uniform usamplerBuffer edit_records;
+
+// The EditParams whose record starts at texel `at`.
+EditParams edit_record(uint at) {
+    uvec4 t[EDIT_PUSH_UVEC4S];
+    [[unroll]] for (uint k = 0u; k < EDIT_PUSH_UVEC4S; ++k) {
+        t[k] = texelFetch(edit_records, int(at + k));
+    }
+    return EditParams(EDIT_PUSH_FROM_UVEC4S(t));
+}
 #else
 layout(push_constant, std430) uniform Push { EDIT_PUSH_MEMBERS } push;
 #endif

@@ -57,6 +57,23 @@ uint below_resolve(EditLevelHandles level, Words slots, uint j, uint r) {
 
 layout(push_constant, std430) uniform Push { SMALL_LEVELS_PUSH_MEMBERS } chain;
 
+// The records (engine/edit/gpu/small_levels.rs), in uvec4 texels: the levels' EditParams, then
+// their batches' HashParams, then per level its batch's HASH_MIXED_SIZES entries.
+uint g_level;
+
+HashParams hash_record(uint at) {
+    uvec4 t[HASH_PUSH_UVEC4S];
+    [[unroll]] for (uint k = 0u; k < HASH_PUSH_UVEC4S; ++k) {
+        t[k] = texelFetch(edit_records, int(at + k));
+    }
+    return HashParams(HASH_PUSH_FROM_UVEC4S(t));
+}
+
+HashParams hash_level_entry(uint s) {
+    uint entries_at = chain.levels * (EDIT_PUSH_UVEC4S + HASH_PUSH_UVEC4S);
+    return hash_record(entries_at + (g_level * HASH_MIXED_SIZES + s) * HASH_PUSH_UVEC4S);
+}
+
 // Every write of a pass (items, counters, handles, representatives, results) before the next
 // pass of the workgroup reads them. The workgroup is one subgroup, so a subgroup barrier
 // orders them: lavapipe compiles a workgroup barrier into a coroutine suspension (every value
@@ -70,18 +87,18 @@ void pass_done() {
 void main() {
     uint lane = gl_LocalInvocationID.x;
     uint lanes = gl_WorkGroupSize.x;
-    HashEntries batches = HashEntries(chain.hash_levels);
     // The exit test at the loop's end (docs/gpu.md, "Loops on lavapipe"); the host records at
     // least one level.
     uint l = 0u;
     for (;;) {
-        edit_level = EditLevels(chain.edit_levels).level[l];
+        g_level = l;
+        edit_level = edit_record(l * EDIT_PUSH_UVEC4S);
         edit_build_items_pass(lane, lanes);
         pass_done();
         // The batch's entries and counts read once for both passes (the claim changes no
         // count). Every item of a mixed batch takes its size's entry (hash_select), so the
         // insert needs no fresh copy of the batch's parameters.
-        push = batches.entry[l];
+        push = hash_record(chain.levels * EDIT_PUSH_UVEC4S + l * HASH_PUSH_UVEC4S);
         uint batch_count = hash_count();
         hash_claim_pass(batch_count);
         pass_done();

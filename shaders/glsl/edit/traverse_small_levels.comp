@@ -24,12 +24,11 @@ layout(push_constant, std430) uniform Push { TRAVERSE_CHAIN_PUSH_MEMBERS } chain
 void main() {
     uint lane = gl_LocalInvocationID.x;
     uint lanes = gl_WorkGroupSize.x;
-    EditLevels levels = EditLevels(chain.levels_at);
     // The exit tests at the loop's end (docs/gpu.md, "Loops on lavapipe"); the counts they read
     // were written before the barrier and are the same in every lane.
     uint k = 0u;
     for (;;) {
-        push = levels.level[k];
+        push = edit_record(k * EDIT_PUSH_UVEC4S);
         edit_traverse_level(lane, lanes, edit_count());
         // (One subgroup: a subgroup barrier orders the levels, as in merge_small_levels.)
         subgroupMemoryBarrierBuffer();
@@ -40,7 +39,7 @@ void main() {
         }
         k += 1u;
         if (k >= chain.levels) break;
-        push = levels.level[k];
+        push = edit_record(k * EDIT_PUSH_UVEC4S);
         if (edit_count() > chain.max_entries) break;
     }
 }

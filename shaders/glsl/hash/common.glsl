@@ -53,6 +53,11 @@ layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer Has
     HashParams entry[];
 };
 
+#ifdef HASH_PARAMS_IN_MEMORY
+// The current batch's entry of item size index `s`, defined by the includer (its records).
+HashParams hash_level_entry(uint s);
+#endif
+
 // A mixed batch's per-size counts and entries, read once by hash_count: a read through a
 // buffer address is a loop over the SIMD lanes on lavapipe unless the address is the same
 // for every lane (here: push constants and constant indices, at the top of main), and
@@ -68,17 +73,19 @@ uint hash_count() {
     }
     HashWords counts = HashWords(push.count_at);
     uint total = 0u;
+#ifndef HASH_PARAMS_IN_MEMORY
     HashEntries entries = HashEntries(push.mixed);
+#endif
     [[unroll]] for (uint s = 0u; s < HASH_MIXED_SIZES; ++s) {
         g_mixed_counts[s] = counts.w[s];
 #ifdef HASH_PARAMS_IN_MEMORY
         // With params in memory (edit/merge_small_levels.comp) this runs inside the includer's
-        // loop, where lavapipe reads every field lane by lane, skipping masked lanes: the `if`
-        // saves the reads of the sizes without items (hash_select never picks them). At the
-        // top of main (push constants) a read is one load for all lanes, but inside an `if`
+        // loop, where the entries come from its records (texels); the `if` saves the fetches
+        // of the sizes without items (hash_select never picks them). At the top of main (push
+        // constants) a read through the address is one load for all lanes, but inside an `if`
         // it would go lane by lane.
         if (g_mixed_counts[s] != 0u) {
-            g_mixed_entries[s] = entries.entry[s];
+            g_mixed_entries[s] = hash_level_entry(s);
         }
 #else
         g_mixed_entries[s] = entries.entry[s];
